@@ -1,0 +1,12 @@
+# Third-party dependencies, all from Debian packages (scripts/install-deps.sh).
+find_package(Eigen3 3.3 REQUIRED NO_MODULE)
+find_package(Threads REQUIRED)
+find_package(OpenCV REQUIRED COMPONENTS core imgproc imgcodecs)
+find_package(CLI11 REQUIRED)
+find_package(nlohmann_json 3 REQUIRED)
+if(SEGMATCH_BUILD_TESTS)
+  find_package(GTest REQUIRED)
+endif()
+if(SEGMATCH_BUILD_BENCH)
+  find_package(benchmark QUIET)
+endif()
