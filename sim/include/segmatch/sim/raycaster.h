@@ -26,7 +26,8 @@ class RayCaster {
   RayCaster& operator=(RayCaster&&) noexcept;
 
   // Nearest hit along origin + t * direction for t in [min_range_m, max_range_m];
-  // direction must be unit length. Thread-safe (const, no shared mutable state).
+  // direction must be unit length. A ray that starts inside a solid primitive hits its far
+  // side. Thread-safe (const, no shared mutable state).
   bool cast(const Eigen::Vector3f& origin, const Eigen::Vector3f& direction, float min_range_m,
             float max_range_m, RayHit* hit) const;
 
