@@ -1,7 +1,8 @@
 # Third-party dependencies, all from Debian packages (scripts/install-deps.sh).
 find_package(Eigen3 3.3 REQUIRED NO_MODULE)
 find_package(Threads REQUIRED)
-find_package(OpenCV REQUIRED COMPONENTS core imgproc imgcodecs)
+find_package(OpenCV REQUIRED COMPONENTS core imgproc imgcodecs ml)
+find_package(flann REQUIRED)
 find_package(CLI11 REQUIRED)
 find_package(nlohmann_json 3 REQUIRED)
 if(SEGMATCH_BUILD_TESTS)
