@@ -1,0 +1,456 @@
+// segmatch-bench: the time of ONE localization query, module by module (median and p90), on a
+// simulated HDL-64E local cloud (60 m radius) against a map of a few km, and on real local
+// clouds accumulated from the riverside02 keyframes (OS1-64). The stock PCL stages the
+// original SegMatch ran (VoxelGrid, EuclideanClusterExtraction, ESFEstimation) are timed on
+// the same clouds. Target (issue): whole query <= 100 ms median on one core; the paper
+// (Dube et al., ICRA 2017) needed 0.8-1.2 s per query. Queries run one after the other on the
+// calling thread; the CPU column shows whether a query used more than one core.
+#include "pcl_stages.h"
+#include "segmatch/cli/progress.h"
+#include "segmatch/core/localizer.h"
+#include "segmatch/core/segment_map.h"
+#include "segmatch/core/training.h"
+#include "segmatch/io/sequence.h"
+#include "segmatch/sim/dataset.h"
+#include "segmatch/sim/local_clouds.h"
+
+#include <CLI/CLI.hpp>
+
+#include <time.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <memory>
+#include <optional>
+#include <set>
+#include <string>
+#include <thread>
+#include <vector>
+
+using namespace segmatch;
+using Clock = std::chrono::steady_clock;
+using bench::median;
+using bench::ms_since;
+using bench::quantile;
+
+namespace {
+
+constexpr double kTargetMs = 100.0;
+// Queries only after this much driving (the simulator's and the end-to-end test's warm-up).
+constexpr double kQueryWarmupM = 30.0;
+
+struct Options {
+  std::string preset = "demo";
+  uint64_t seed = 1;
+  int queries = 15;
+  double map_every_m = 5.0;
+  double map_km = 0.0;  // 0: the preset's first traversal
+  std::string real_dir;
+  bool real_dir_given = false, skip_real = false, skip_pcl = false;
+  int threads = 0;
+  int pcl_clouds = 5;
+};
+
+double cpu_ms() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+// n indices spread evenly over 0..count-1 (all of them if count <= n).
+std::vector<size_t> spread(size_t count, size_t n) {
+  std::vector<size_t> out;
+  if (count == 0 || n == 0) return out;
+  if (count <= n) n = count;
+  for (size_t k = 0; k < n; ++k) out.push_back(n == 1 ? count / 2 : (k * (count - 1) + (n - 1) / 2) / (n - 1));
+  return out;
+}
+
+// Up to --queries of `eligible` frames spread evenly, and --pcl-clouds of those for PCL.
+void pick_queries(const std::vector<size_t>& eligible, const Options& o, std::set<size_t>* selected,
+                  std::set<size_t>* compared) {
+  const std::vector<size_t> picks = spread(eligible.size(), static_cast<size_t>(o.queries));
+  for (size_t i : picks) selected->insert(eligible[i]);
+  for (size_t i : spread(picks.size(), o.skip_pcl ? 0 : static_cast<size_t>(o.pcl_clouds)))
+    compared->insert(eligible[picks[i]]);
+}
+
+PointCloud transformed(PointCloud cloud, const Pose3d& T) {
+  const Eigen::Isometry3f Tf = T.cast<float>();
+  for (Point& p : cloud) {
+    const Eigen::Vector3f q = Tf * p.xyz();
+    p.x = q.x(), p.y = q.y(), p.z = q.z();
+  }
+  return cloud;
+}
+
+struct ModuleField {
+  const char* name;
+  double ModuleTimings::*ms;
+};
+const ModuleField kModules[] = {
+    {"voxel", &ModuleTimings::voxel_ms},       {"ground", &ModuleTimings::ground_ms},
+    {"segment", &ModuleTimings::segment_ms},   {"describe", &ModuleTimings::describe_ms},
+    {"retrieve", &ModuleTimings::retrieve_ms}, {"classify", &ModuleTimings::classify_ms},
+    {"verify", &ModuleTimings::verify_ms},     {"refine", &ModuleTimings::refine_ms},
+    {"total", &ModuleTimings::total_ms}};
+
+// Per-query figures of one data set.
+struct QueryLog {
+  std::vector<ModuleTimings> timings;
+  std::vector<double> cpu, points, segments, candidates, matches;
+  size_t localized = 0, accurate = 0, wrong = 0;
+
+  // truth: T_map_sensor expected; T_query_sensor: the sensor in the query frame.
+  void add(const LocalizationResult& r, double cpu_used_ms, size_t cloud_points, const Pose3d& T_query_sensor,
+           const Pose3d& truth) {
+    timings.push_back(r.timings);
+    cpu.push_back(cpu_used_ms);
+    points.push_back(static_cast<double>(cloud_points));
+    segments.push_back(static_cast<double>(r.query_segments));
+    candidates.push_back(static_cast<double>(r.candidates));
+    matches.push_back(static_cast<double>(r.matches));
+    if (!r.localized()) return;
+    ++localized;
+    const Pose3d T_map_sensor = r.T_map_query * T_query_sensor;
+    const double err_m = (T_map_sensor.translation() - truth.translation()).norm();
+    const double err_deg = Eigen::AngleAxisd(T_map_sensor.linear().transpose() * truth.linear()).angle() * 180.0 / M_PI;
+    accurate += err_m <= 0.2 && err_deg <= 1.0;
+    wrong += err_m > 1.0 || err_deg > 3.0;
+  }
+  double total_median() const {
+    std::vector<double> v;
+    for (const ModuleTimings& t : timings) v.push_back(t.total_ms);
+    return median(v);
+  }
+  void print(const char* title) const {
+    std::printf("\n%s: %zu queries, one at a time on the calling thread\n", title, timings.size());
+    if (timings.empty()) return;
+    std::printf("  %-10s %10s %10s\n", "module", "median ms", "p90 ms");
+    for (const ModuleField& m : kModules) {
+      std::vector<double> v;
+      for (const ModuleTimings& t : timings) v.push_back(t.*m.ms);
+      std::printf("  %-10s %10.1f %10.1f\n", m.name, median(v), quantile(v, 0.9));
+    }
+    std::printf("  %-10s %10.1f %10.1f   (process CPU time; > total means more than one core)\n", "total CPU",
+                median(cpu), quantile(cpu, 0.9));
+    std::printf("  per query (median / p90): %.0f / %.0f points, %.0f / %.0f segments, %.0f / %.0f candidates, "
+                "%.0f / %.0f matches\n",
+                median(points), quantile(points, 0.9), median(segments), quantile(segments, 0.9), median(candidates),
+                quantile(candidates, 0.9), median(matches), quantile(matches, 0.9));
+    std::printf("  localized %zu / %zu (%zu within 0.2 m and 1 deg of the reference pose, %zu off by > 1 m or > 3 deg)\n",
+                localized, timings.size(), accurate, wrong);
+  }
+};
+
+// ---------------------------------------------------------------------------------------------
+// Simulated city.
+
+struct City {
+  sim::World world, changed;
+  sim::Traversal first, second;
+};
+
+// The world and traversals segmatch-sim generates for the same configuration.
+City make_city(const sim::DatasetConfig& c) {
+  City city{sim::generate_world(c.world), {}, {}, {}};
+  city.changed = sim::change_world(city.world, c.change);
+  Rng rng(mix_seed(c.world.seed, 0x7a5e));
+  const sim::Route first = sim::plan_route(city.world.streets, c.first_length_m, rng);
+  const sim::Route second = sim::plan_revisit_route(city.world.streets, first, c.second_length_m, rng);
+  city.first = sim::drive(city.world, first, c.drive_first);
+  city.second = sim::drive(city.changed, second, c.drive_second);
+  return city;
+}
+
+// World-frame segments of local clouds every `every_m` along `t` (merged as a map, or all).
+Segments segments_along(const sim::World& world, const sim::Traversal& t, double every_m,
+                        const SegmentationConfig& config, uint64_t seed, bool merge, bool labels, int threads,
+                        const std::string& what) {
+  const sim::RayCaster caster(world.scene());
+  SegmentMap map;
+  Segments all;
+  sim::LocalCloudSchedule schedule;
+  schedule.every_m = every_m;
+  schedule.seed = seed;
+  schedule.threads = threads;
+  cli::Progress bar(what, t.size(), "scans");
+  sim::for_each_local_cloud(caster, sim::hdl64e(), t, LocalCloudConfig{}, schedule,
+                            [&](const sim::SimulatedLocalCloud& lc) {
+                              Segments s = extract_segments(lc.cloud, lc.T_world_sensor.translation().cast<float>(),
+                                                            config, labels ? &lc.labels : nullptr);
+                              if (merge) map.add(std::move(s));
+                              else std::move(s.begin(), s.end(), std::back_inserter(all));
+                              bar.update(lc.frame + 1);
+                            });
+  bar.update(t.size());
+  bar.finish();
+  return merge ? map.segments() : all;
+}
+
+// Trained as the end-to-end test does, on another (tiny) city than the one queried.
+std::shared_ptr<RandomForestMatcher> train_classifier(uint64_t seed, const LocalizerConfig& config, int threads) {
+  const auto start = Clock::now();
+  const City city = make_city(sim::dataset_preset("tiny", seed));
+  const Segments targets =
+      segments_along(city.world, city.first, 5.0, config.segmentation, 11, true, true, threads, "training map");
+  const Segments queries =
+      segments_along(city.changed, city.second, 10.0, config.segmentation, 12, false, true, threads, "training queries");
+  FeatureIndex index;
+  index.build(targets);
+  const TrainingPairs p = label_pairs_by_instance(queries, targets, index, TrainingPairConfig{});
+  auto rf = std::make_shared<RandomForestMatcher>(config.matcher);
+  rf->train(p.pairs, p.same_object);
+  std::printf("classifier: random forest trained on tiny city seed %llu: %zu positives, %zu negatives (%.1f s)\n",
+              static_cast<unsigned long long>(seed), p.positives, p.negatives, ms_since(start) / 1000.0);
+  return rf;
+}
+
+// Frames at which sim::for_each_local_cloud hands out a local cloud (mirrors its schedule).
+std::vector<size_t> scheduled_frames(const sim::Traversal& t, const LocalCloudConfig& lc,
+                                     const sim::LocalCloudSchedule& s) {
+  std::vector<size_t> out;
+  if (t.size() == 0) return out;
+  size_t last_kept = 0;
+  bool any = false;
+  double next = t.odometer_m[s.first_frame] + s.warmup_m;
+  for (size_t i = s.first_frame; i <= std::min(s.last_frame, t.size() - 1); ++i) {
+    if (any && (t.T_world_lidar[i].translation() - t.T_world_lidar[last_kept].translation()).norm() <
+                   lc.min_travel_between_scans_m)
+      continue;
+    any = true;
+    last_kept = i;
+    if (t.odometer_m[i] < next) continue;
+    next = t.odometer_m[i] + s.every_m;
+    out.push_back(i);
+  }
+  return out;
+}
+
+// The preset, its first traversal cut to --map-km. Throws std::invalid_argument.
+sim::DatasetConfig sim_config(const Options& o) {
+  sim::DatasetConfig c = sim::dataset_preset(o.preset, o.seed);
+  if (o.map_km > 0) c.first_length_m = o.map_km * 1000.0;
+  c.threads = o.threads;
+  c.validate();
+  return c;
+}
+
+double run_sim(const Options& o) {
+  const sim::DatasetConfig c = sim_config(o);
+  const LocalizerConfig config;  // the paper's parameters (KITTI HDL-64E)
+  std::printf("== simulated: preset %s, seed %llu, HDL-64E, local cloud radius %.0f m\n", o.preset.c_str(),
+              static_cast<unsigned long long>(o.seed), LocalCloudConfig{}.radius_m);
+  auto start = Clock::now();
+  const City city = make_city(c);
+  std::printf("world: %.1f km of streets, %zu objects; first traversal %.2f km (map), second %.2f km (queries)\n",
+              city.world.streets.total_length_m() / 1000.0, city.world.objects.size(), city.first.length_m() / 1000.0,
+              city.second.length_m() / 1000.0);
+  const auto classifier = train_classifier(o.seed + 100, config, o.threads);
+
+  start = Clock::now();
+  Segments map = segments_along(city.world, city.first, o.map_every_m, config.segmentation, mix_seed(o.seed, 21),
+                                true, false, o.threads, "map");
+  std::printf("map: %zu segments from local clouds every %.1f m along %.2f km (%.1f s)\n", map.size(),
+              o.map_every_m, city.first.length_m() / 1000.0, ms_since(start) / 1000.0);
+  const Localizer localizer(config, std::move(map), classifier);
+
+  // Queries: local clouds of the revisit (changed world, other lane) on mapped streets.
+  const std::vector<sim::RevisitMatch> revisits = sim::match_revisits(city.first, city.second);
+  std::vector<double> to_map(city.second.size(), INFINITY);
+  for (const sim::RevisitMatch& m : revisits) to_map[m.frame] = m.distance_m;
+  // One local cloud every 10 m (as the end-to-end test), closer on short revisits so that
+  // there are about 1.5 candidates per requested query.
+  double revisit_m = 0;
+  for (size_t f = 1; f < city.second.size(); ++f)
+    if (to_map[f] <= 5.0 && city.second.odometer_m[f] >= kQueryWarmupM)
+      revisit_m += city.second.odometer_m[f] - city.second.odometer_m[f - 1];
+  sim::LocalCloudSchedule schedule;
+  schedule.every_m = std::clamp(revisit_m / (1.5 * o.queries), 1.0, 10.0);
+  schedule.warmup_m = kQueryWarmupM;
+  schedule.seed = mix_seed(o.seed, 31);
+  schedule.threads = o.threads;
+  std::vector<size_t> eligible;
+  for (size_t f : scheduled_frames(city.second, LocalCloudConfig{}, schedule))
+    if (to_map[f] <= 5.0) eligible.push_back(f);
+  std::set<size_t> selected, compared;
+  pick_queries(eligible, o, &selected, &compared);
+  std::printf("queries: %zu local clouds of the second traversal within 5 m of the first (%.0f m of it), one "
+              "every %.1f m after >= %.0f m of driving (%zu candidates), in the odometry frame of its first pose\n",
+              selected.size(), revisit_m, schedule.every_m, kQueryWarmupM, eligible.size());
+  if (selected.size() < static_cast<size_t>(o.queries))
+    std::printf("note: fewer queries than the %d requested: the second traversal is too short\n", o.queries);
+
+  QueryLog log;
+  bench::StageComparison comparison;
+  const Pose3d T_query_world = city.second.T_world_lidar.front().inverse();
+  const sim::RayCaster caster(city.changed.scene());
+  cli::Progress bar("queries", city.second.size(), "scans");
+  sim::for_each_local_cloud(caster, sim::hdl64e(), city.second, LocalCloudConfig{}, schedule,
+                            [&](const sim::SimulatedLocalCloud& lc) {
+                              bar.update(lc.frame + 1);
+                              if (!selected.count(lc.frame)) return;
+                              const PointCloud cloud = transformed(lc.cloud, T_query_world);
+                              const Pose3d T_query_sensor = T_query_world * lc.T_world_sensor;
+                              const Eigen::Vector3f sensor = T_query_sensor.translation().cast<float>();
+                              const double cpu0 = cpu_ms();
+                              const LocalizationResult r = localizer.localize(cloud, sensor);
+                              log.add(r, cpu_ms() - cpu0, cloud.size(), T_query_sensor, lc.T_world_sensor);
+                              if (compared.count(lc.frame)) comparison.run(cloud, sensor, config.segmentation);
+                            });
+  bar.update(city.second.size());
+  bar.finish();
+  if (log.timings.size() != selected.size())
+    std::printf("warning: %zu of %zu selected local clouds were produced (schedule mismatch)\n", log.timings.size(),
+                selected.size());
+  log.print("simulated (random forest matcher, classifier trained in-process)");
+  if (!o.skip_pcl) comparison.print("simulated", config.segmentation);
+  return log.timings.empty() ? NAN : log.total_median();
+}
+
+// ---------------------------------------------------------------------------------------------
+// Real keyframes (PCD, sensor frame, poses T_world_sensor).
+
+double run_real(const Options& o, const io::Sequence& seq) {
+  const std::string& dir = seq.folder();
+  const Poses& poses = seq.poses();
+  if (seq.size() < 8) throw std::runtime_error(dir + ": too few keyframes (" + std::to_string(seq.size()) + ")");
+  // Parameters for these pre-downsampled keyframes (../shared/data/README.md).
+  LocalizerConfig config;
+  config.segmentation.voxel.leaf_m = 0.2f;
+  config.segmentation.voxel.min_points_per_voxel = 1;
+  config.segmentation.segmenter.cluster_distance_m = 0.4f;
+  config.segmentation.segmenter.min_points = 30;
+  config.matcher.type = MatcherType::kL2;  // no labels to train a classifier on
+  config.validate();
+  const LocalCloudConfig lc_config;
+  std::printf("\n== real: %s, %zu keyframes; map from even keyframes, queries from odd ones\n", dir.c_str(),
+              seq.size());
+  std::printf("parameters: voxel %.1f m (>= %d point), cluster distance %.1f m, >= %d points, L2 matcher on "
+              "eigen features (ESF still computed), local cloud radius %.0f m\n",
+              config.segmentation.voxel.leaf_m, config.segmentation.voxel.min_points_per_voxel,
+              config.segmentation.segmenter.cluster_distance_m, config.segmentation.segmenter.min_points,
+              lc_config.radius_m);
+
+  auto start = Clock::now();
+  LocalCloud map_cloud(lc_config);
+  SegmentMap map;
+  double map_m = 0;
+  {
+    cli::Progress bar("real map", (seq.size() + 1) / 2, "keyframes");
+    for (size_t i = 0; i < seq.size(); i += 2) {
+      if (i >= 2) map_m += (poses[i].translation() - poses[i - 2].translation()).norm();
+      map_cloud.add_scan(seq.scan(i).points, poses[i]);
+      const PointCloud cloud = map_cloud.crop(poses[i]);
+      map.add(extract_segments(cloud, poses[i].translation().cast<float>(), config.segmentation));
+      bar.update(i / 2 + 1);
+    }
+  }
+  std::printf("map: %zu segments from %zu local clouds along %.2f km (%.1f s)\n", map.size(), (seq.size() + 1) / 2,
+              map_m / 1000.0, ms_since(start) / 1000.0);
+  const Localizer localizer(config, map.segments());
+
+  std::vector<size_t> eligible;
+  double driven = 0;
+  for (size_t k = 3; k < seq.size(); k += 2) {
+    driven += (poses[k].translation() - poses[k - 2].translation()).norm();
+    if (driven >= kQueryWarmupM) eligible.push_back(k);
+  }
+  std::set<size_t> selected, compared;
+  pick_queries(eligible, o, &selected, &compared);
+  std::printf("queries: %zu local clouds of odd keyframes after >= %.0f m of driving, in the frame of keyframe 1\n",
+              selected.size(), kQueryWarmupM);
+
+  QueryLog log;
+  bench::StageComparison comparison;
+  LocalCloud query_cloud(lc_config);
+  const Pose3d T_query_world = poses[1].inverse();
+  const size_t last = selected.empty() ? 0 : *selected.rbegin();
+  cli::Progress bar("real queries", last / 2 + 1, "keyframes");
+  for (size_t k = 1; k <= last; k += 2) {
+    query_cloud.add_scan(seq.scan(k).points, poses[k]);
+    bar.update(k / 2 + 1);
+    if (!selected.count(k)) continue;
+    const PointCloud cloud = transformed(query_cloud.crop(poses[k]), T_query_world);
+    const Pose3d T_query_sensor = T_query_world * poses[k];
+    const Eigen::Vector3f sensor = T_query_sensor.translation().cast<float>();
+    const double cpu0 = cpu_ms();
+    const LocalizationResult r = localizer.localize(cloud, sensor);
+    log.add(r, cpu_ms() - cpu0, cloud.size(), T_query_sensor, poses[k]);
+    if (compared.count(k)) comparison.run(cloud, sensor, config.segmentation);
+  }
+  bar.update(last / 2 + 1);
+  bar.finish();
+  log.print("real riverside02 (L2 matcher; reference = the SLAM poses of poses.txt)");
+  if (!o.skip_pcl) comparison.print("real riverside02", config.segmentation);
+  return log.timings.empty() ? NAN : log.total_median();
+}
+
+std::string cpu_model() {
+  std::ifstream in("/proc/cpuinfo");
+  for (std::string line; std::getline(in, line);)
+    if (line.rfind("model name", 0) == 0) return line.substr(line.find(':') + 2);
+  return "unknown CPU";
+}
+
+void verdict(const char* what, double ms) {
+  if (std::isnan(ms)) return;
+  std::printf("whole query, %s: median %.1f ms vs target %.0f ms on one core: %s\n", what, ms, kTargetMs,
+              ms <= kTargetMs ? "met" : "NOT met");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Per-module timing of one SegMatch localization query (simulated and real), vs stock PCL stages"};
+  Options o;
+  app.add_option("--preset", o.preset, "simulated world; its first traversal builds the map (tiny, demo, city)");
+  app.add_option("--seed", o.seed, "world seed (the classifier's tiny city uses seed + 100)");
+  app.add_option("--queries", o.queries, "queries per data set")->check(CLI::Range(1, 100000));
+  app.add_option("--map-every-m", o.map_every_m, "map: one local cloud every this many metres")
+      ->check(CLI::Range(0.5, 1000.0));
+  app.add_option("--map-km", o.map_km, "cut the first traversal (the map) to this length, e.g. city with 3")
+      ->check(CLI::Range(0.05, 200.0));
+  auto* real_opt = app.add_option("--real-dir", o.real_dir, "real PCD keyframe folder (default: shared riverside02)");
+  app.add_flag("--skip-real", o.skip_real, "skip the real data set");
+  app.add_flag("--skip-pcl", o.skip_pcl, "skip the PCL comparison");
+  app.add_option("--pcl-clouds", o.pcl_clouds, "query clouds per data set timed with PCL")->check(CLI::Range(1, 1000));
+  app.add_option("--threads", o.threads, "scan simulation threads (0: one per core); queries always run on one")
+      ->check(CLI::Range(0, 256));
+  CLI11_PARSE(app, argc, argv);
+  o.real_dir_given = real_opt->count() > 0;
+  if (!o.real_dir_given) o.real_dir = std::string(SEGMATCH_SHARED_DATA_DIR) + "/real/riverside02";
+
+  try {
+    if (o.real_dir_given && !o.skip_real && !std::filesystem::is_directory(o.real_dir)) {
+      std::fprintf(stderr, "segmatch-bench: error: --real-dir %s: no such folder\n", o.real_dir.c_str());
+      return 2;
+    }
+    sim_config(o);  // bad options fail before any output
+    // Open the real sequence first: a broken folder fails before minutes of simulation.
+    std::optional<io::Sequence> real;
+    if (!o.skip_real && std::filesystem::is_directory(o.real_dir)) real = io::Sequence::open(o.real_dir);
+    std::printf("segmatch-bench on %s, %u hardware threads; target: whole query <= %.0f ms median on one core "
+                "(paper: 0.8-1.2 s per query)\n",
+                cpu_model().c_str(), std::thread::hardware_concurrency(), kTargetMs);
+    const double sim_ms = run_sim(o);
+    double real_ms = NAN;
+    if (o.skip_real) std::printf("\n== real: skipped (--skip-real)\n");
+    else if (!real)
+      std::printf("\n== real: skipped, %s not found (the shared data is not part of a fresh clone)\n",
+                  o.real_dir.c_str());
+    else real_ms = run_real(o, *real);
+    std::printf("\n");
+    verdict("simulated HDL-64E", sim_ms);
+    verdict("real riverside02", real_ms);
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "segmatch-bench: error: %s\n", e.what());
+    return 1;
+  }
+}

@@ -1,0 +1,166 @@
+// segmatch-bench-storage: size and speed of the SQLite segment map (issue: map database).
+// Writes a synthetic city map (default 100k segments of 300-1500 points, full eigen + ESF
+// descriptors) to a temporary folder, then times a full load and a segments_near() query,
+// median over several runs with the file in the page cache. Target: full load well under 2 s.
+#include <segmatch/storage/map_reader.h>
+#include <segmatch/storage/map_writer.h>
+
+#include <CLI/CLI.hpp>
+
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <random>
+#include <vector>
+
+using namespace segmatch;
+using Clock = std::chrono::steady_clock;
+namespace fs = std::filesystem;
+
+namespace {
+
+double seconds_since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+// User + system CPU time of the whole process: unlike wall time, barely affected by other
+// programs competing for the cores.
+double cpu_seconds() {
+  struct rusage usage;
+  getrusage(RUSAGE_SELF, &usage);
+  const auto sec = [](const timeval& t) { return double(t.tv_sec) + 1e-6 * double(t.tv_usec); };
+  return sec(usage.ru_utime) + sec(usage.ru_stime);
+}
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+// An object-sized segment (0.5-8 m wide, 0.5-12 m tall) somewhere in a city of `area_m`.
+Segment synthetic_segment(std::mt19937& rng, uint64_t id, float area_m, size_t points) {
+  std::uniform_real_distribution<float> where(-area_m / 2, area_m / 2), unit(0.f, 1.f);
+  std::uniform_real_distribution<float> width(0.5f, 8.f), height(0.5f, 12.f);
+  const Eigen::Vector3f base(where(rng), where(rng), unit(rng) * 20.f);
+  const Eigen::Vector3f size(width(rng), width(rng), height(rng));
+  Segment s;
+  s.id = id;
+  s.label = static_cast<uint32_t>(rng() % 30);
+  s.points.resize(points);
+  Eigen::Vector3f sum = Eigen::Vector3f::Zero();
+  for (Point& p : s.points) {
+    const Eigen::Vector3f xyz = base + size.cwiseProduct(Eigen::Vector3f(unit(rng), unit(rng), unit(rng)));
+    p = {xyz.x(), xyz.y(), xyz.z(), unit(rng)};
+    sum += xyz;
+  }
+  s.centroid = sum / float(points);
+  for (float& v : s.eigen) v = unit(rng);
+  for (float& v : s.esf) v = unit(rng) / 64.f;
+  s.has_eigen = s.has_esf = true;
+  return s;
+}
+
+struct WriteResult {
+  double seconds = 0;
+  double commit_seconds = 0;  // COMMIT + fsync + rename, part of seconds
+  size_t points = 0;
+  std::vector<Eigen::Vector3f> centroids;
+};
+
+WriteResult write_map(const std::string& path, int segments, float area_m) {
+  storage::MapMetadata metadata;
+  metadata.name = "storage bench";
+  metadata.tool_version = "segmatch-bench-storage";
+  metadata.parameters_json = "{\"synthetic\": true}";
+  std::mt19937 rng(42);
+  std::uniform_int_distribution<size_t> point_count(300, 1500);
+  WriteResult result;
+  storage::MapWriter writer = storage::MapWriter::create(path, metadata, true);
+  for (int first = 0; first < segments; first += 1000) {
+    Segments batch;
+    std::vector<uint32_t> keyframes;
+    for (int i = first; i < std::min(segments, first + 1000); ++i) {
+      batch.push_back(synthetic_segment(rng, uint64_t(i), area_m, point_count(rng)));
+      keyframes.push_back(uint32_t(i / 50));
+      result.points += batch.back().points.size();
+      result.centroids.push_back(batch.back().centroid);
+    }
+    const auto t = Clock::now();  // time the storage, not the synthetic data
+    writer.add_segments(batch, keyframes);
+    result.seconds += seconds_since(t);
+  }
+  std::vector<storage::Keyframe> trajectory(size_t(segments / 50 + 1));
+  for (size_t k = 0; k < trajectory.size(); ++k) {
+    trajectory[k].index = uint32_t(k);
+    trajectory[k].time_s = 0.1 * double(k);
+    trajectory[k].T_map_sensor.translation() = Eigen::Vector3d(double(k), 0.0, 0.0);
+  }
+  const auto t = Clock::now();
+  writer.set_trajectory(trajectory);
+  writer.set_classifier({"opencv-rtrees-yaml", std::string(2 << 20, 'm')});
+  const auto c = Clock::now();
+  writer.commit();
+  result.commit_seconds = seconds_since(c);
+  result.seconds += seconds_since(t);
+  return result;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Benchmark the SQLite segment map: size, write, load and spatial query"};
+  int segments = 100000, runs = 5;
+  float area_m = 3000.f, radius_m = 50.f;
+  std::string folder = (fs::temp_directory_path() / ("segmatch_bench_storage_" + std::to_string(::getpid()))).string();
+  app.add_option("--segments", segments, "segments in the map")->check(CLI::Range(1, 10000000));
+  app.add_option("--runs", runs, "timed runs (median reported)")->check(CLI::Range(1, 100));
+  app.add_option("--area", area_m, "side of the square city in metres");
+  app.add_option("--radius", radius_m, "segments_near() radius in metres");
+  app.add_option("--dir", folder, "scratch folder (removed afterwards)");
+  CLI11_PARSE(app, argc, argv);
+
+  fs::create_directories(folder);
+  const std::string path = (fs::path(folder) / "bench.segmap").string();
+  const WriteResult written = write_map(path, segments, area_m);
+  const double size_mb = double(fs::file_size(path)) / 1e6;
+  std::printf("map: %d segments, %zu points (%.0f per segment), %.0f x %.0f m\n", segments,
+              written.points, double(written.points) / segments, area_m, area_m);
+  std::printf("file size: %.1f MB (%.1f MB per 100k segments, %.2f bytes per point all-in)\n",
+              size_mb, size_mb * 1e5 / segments, size_mb * 1e6 / double(written.points));
+  std::printf("write (add_segments + trajectory + classifier + commit): %.2f s, of which commit "
+              "(COMMIT + fsync + rename) %.2f s\n",
+              written.seconds, written.commit_seconds);
+
+  std::vector<double> open_s, load_s, load_cpu_s, near_s;
+  std::vector<size_t> near_counts;
+  std::mt19937 rng(7);
+  for (int run = 0; run < runs; ++run) {
+    auto t = Clock::now();
+    const storage::MapReader reader = storage::MapReader::open(path);
+    open_s.push_back(seconds_since(t));
+    t = Clock::now();
+    const double cpu = cpu_seconds();
+    const Segments all = reader.load_segments();
+    load_s.push_back(seconds_since(t));
+    load_cpu_s.push_back(cpu_seconds() - cpu);
+    if (all.size() != size_t(segments)) return 1;
+    const Eigen::Vector3f center = written.centroids[rng() % written.centroids.size()];
+    t = Clock::now();
+    near_counts.push_back(reader.segments_near(center, radius_m).size());
+    near_s.push_back(seconds_since(t));
+  }
+  std::printf("open: median %.2f ms\n", median(open_s) * 1e3);
+  std::printf("full load_segments(): median %.3f s over %d runs (min %.3f, max %.3f) [page cache warm]\n",
+              median(load_s), runs, *std::min_element(load_s.begin(), load_s.end()),
+              *std::max_element(load_s.begin(), load_s.end()));
+  std::printf("full load CPU time (all threads): median %.3f s\n", median(load_cpu_s));
+  std::printf("segments_near(r = %.0f m): median %.2f ms, %zu segments on median\n", radius_m,
+              median(near_s) * 1e3, size_t(median(std::vector<double>(near_counts.begin(), near_counts.end()))));
+  std::error_code ec;
+  fs::remove_all(folder, ec);
+  return 0;
+}

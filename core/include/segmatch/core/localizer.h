@@ -1,0 +1,106 @@
+// Localization against a prior segment map: the SegMatch pipeline of the paper (section III)
+// in one place. A query local cloud is voxelized, its ground removed, segmented, described;
+// its segments are matched to the map's by k-NN in feature space and a classifier, and the
+// matches are verified geometrically, giving the 6DOF pose of the query in the map.
+#pragma once
+
+#include "segmatch/core/descriptors.h"
+#include "segmatch/core/matcher.h"
+#include "segmatch/core/preprocess.h"
+#include "segmatch/core/retrieval.h"
+#include "segmatch/core/segment.h"
+#include "segmatch/core/segmenter.h"
+#include "segmatch/core/support.h"
+#include "segmatch/core/verification.h"
+
+#include <memory>
+#include <string>
+
+namespace segmatch {
+
+// Cloud -> described segments (paper III-B and III-C).
+struct SegmentationConfig {
+  VoxelGridConfig voxel;
+  GroundConfig ground;
+  SegmenterConfig segmenter;
+  DescriptorConfig descriptors;
+  void validate() const;
+};
+
+struct LocalizerConfig {
+  SegmentationConfig segmentation;
+  RetrievalConfig retrieval;
+  MatcherConfig matcher;
+  VerificationConfig verification;
+  RefineConfig refine;
+  // Beyond the paper: each verified hypothesis is ranked by its support (support.h), the
+  // number of query segments that land within support_radius_m of a map segment under it.
+  // The best must have at least min_support, and no other distinct hypothesis may reach
+  // max_ambiguity times its support (a street of repeated poles or trees, seen too briefly
+  // to tell which stretch it is, is refused rather than guessed).
+  float support_radius_m = 1.0f;
+  int min_support = 10;
+  float max_ambiguity = 0.8f;
+  bool refine_pose = true;        // beyond the paper: ICP on the supporting segments' points
+  // Refined poses whose point fitness falls below this are reported as not localized: the
+  // centroids agreed but the surfaces do not.
+  float min_refine_fitness = 0.5f;
+  void validate() const;
+};
+
+enum class LocalizationStatus { kLocalized, kNotLocalized };
+const char* to_string(LocalizationStatus status);
+
+// Wall-clock time of each module for one query (milliseconds).
+struct ModuleTimings {
+  double voxel_ms = 0, ground_ms = 0, segment_ms = 0, describe_ms = 0, retrieve_ms = 0,
+         classify_ms = 0, verify_ms = 0, refine_ms = 0, total_ms = 0;
+};
+
+struct LocalizationResult {
+  LocalizationStatus status = LocalizationStatus::kNotLocalized;
+  std::string reason;                               // why not localized (empty if localized)
+  Pose3d T_map_query = Pose3d::Identity();          // maps query-frame points into the map frame
+  Matches inliers;                                  // query index -> map segment index
+  float confidence = 0.0f;                          // 0..1
+  float refine_fitness = 0.0f;                      // fraction of query points on map surfaces
+  float refine_rmse_m = 0.0f;
+  size_t query_segments = 0, candidates = 0, matches = 0;
+  size_t hypotheses = 0;                            // distinct verified poses considered
+  size_t support = 0, runner_up_support = 0;        // of the chosen and the next-best pose
+  Segments query;                                   // the query's described segments (query frame)
+  ModuleTimings timings;
+  bool localized() const { return status == LocalizationStatus::kLocalized; }
+};
+
+// Voxel grid, ground removal, segmentation and description of one cloud. sensor_position
+// is in the cloud's frame (the height threshold needs it). Labels, if given, mark each
+// segment with its majority ground-truth label.
+Segments extract_segments(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
+                          const SegmentationConfig& config,
+                          const std::vector<uint32_t>* labels = nullptr,
+                          ModuleTimings* timings = nullptr);
+
+class Localizer {
+ public:
+  // targets: the map's described segments (map frame). classifier: required for the random
+  // forest matcher, ignored for L2.
+  Localizer(const LocalizerConfig& config, Segments targets,
+            std::shared_ptr<const RandomForestMatcher> classifier = nullptr);
+
+  // cloud: local cloud in the query (vehicle odometry) frame; sensor_position: the sensor in
+  // that frame. Thread-safe: many queries may run at once.
+  LocalizationResult localize(const PointCloud& cloud, const Eigen::Vector3f& sensor_position) const;
+
+  const Segments& targets() const { return targets_; }
+  const LocalizerConfig& config() const { return config_; }
+
+ private:
+  LocalizerConfig config_;
+  Segments targets_;
+  FeatureIndex index_;
+  CentroidIndex centroids_;
+  std::shared_ptr<const RandomForestMatcher> classifier_;
+};
+
+}  // namespace segmatch

@@ -1,0 +1,125 @@
+// Local cloud accumulation and cylindrical crop (paper III-A, IV-A).
+#include "segmatch/core/local_cloud.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "seg_grid.h"
+
+namespace segmatch {
+namespace {
+
+// Keeps the first point of every occupied cube of edge leaf_m (input order preserved).
+std::vector<uint32_t> subsample_indices(const PointCloud& scan, double leaf_m) {
+  std::vector<uint32_t> keep;
+  keep.reserve(scan.size());
+  if (leaf_m <= 0.0) {
+    for (size_t i = 0; i < scan.size(); ++i) {
+      if (detail::is_finite(scan[i])) keep.push_back(static_cast<uint32_t>(i));
+    }
+    return keep;
+  }
+  const detail::GridFrame frame =
+      detail::GridFrame::fit(scan, leaf_m, false, "LocalCloudConfig.subsample_leaf_m");
+  detail::FlatHashMap seen(scan.size() / 4 + 1);
+  for (size_t i = 0; i < scan.size(); ++i) {
+    if (!detail::is_finite(scan[i])) continue;
+    const uint32_t id = static_cast<uint32_t>(keep.size());
+    if (seen.insert(frame.key_of(scan[i]), id) == id) keep.push_back(static_cast<uint32_t>(i));
+  }
+  return keep;
+}
+
+}  // namespace
+
+void LocalCloudConfig::validate() const {
+  if (!(radius_m > 0.0) || !std::isfinite(radius_m)) {
+    throw std::invalid_argument("LocalCloudConfig.radius_m must be positive");
+  }
+  if (!(min_travel_between_scans_m >= 0.0) || !std::isfinite(min_travel_between_scans_m)) {
+    throw std::invalid_argument("LocalCloudConfig.min_travel_between_scans_m must be >= 0");
+  }
+  if (!(subsample_leaf_m >= 0.0) || !std::isfinite(subsample_leaf_m)) {
+    throw std::invalid_argument("LocalCloudConfig.subsample_leaf_m must be >= 0");
+  }
+}
+
+LocalCloud::LocalCloud(const LocalCloudConfig& config) : config_(config) { config_.validate(); }
+
+bool LocalCloud::add_scan(const PointCloud& scan_sensor, const Pose3d& T_world_sensor,
+                          const std::vector<uint32_t>* labels) {
+  if (labels && labels->size() != scan_sensor.size()) {
+    throw std::invalid_argument("LocalCloud::add_scan: labels size differs from scan size");
+  }
+  const Eigen::Vector3d position = T_world_sensor.translation();
+  if (has_last_ && (position - last_position_).norm() < config_.min_travel_between_scans_m) {
+    return false;
+  }
+  has_last_ = true;
+  last_position_ = position;
+
+  Scan scan;
+  const std::vector<uint32_t> keep = subsample_indices(scan_sensor, config_.subsample_leaf_m);
+  scan.points.reserve(keep.size());
+  if (labels) scan.labels.reserve(keep.size());
+  const Eigen::Matrix3d R = T_world_sensor.linear();
+  scan.min_xy[0] = scan.min_xy[1] = std::numeric_limits<float>::max();
+  scan.max_xy[0] = scan.max_xy[1] = std::numeric_limits<float>::lowest();
+  for (uint32_t i : keep) {
+    const Point& p = scan_sensor[i];
+    const Eigen::Vector3d w = R * Eigen::Vector3d(p.x, p.y, p.z) + position;
+    const Point q{float(w.x()), float(w.y()), float(w.z()), p.intensity};
+    scan.points.push_back(q);
+    if (labels) scan.labels.push_back((*labels)[i]);
+    scan.min_xy[0] = std::min(scan.min_xy[0], q.x);
+    scan.min_xy[1] = std::min(scan.min_xy[1], q.y);
+    scan.max_xy[0] = std::max(scan.max_xy[0], q.x);
+    scan.max_xy[1] = std::max(scan.max_xy[1], q.y);
+  }
+  scans_.push_back(std::move(scan));
+  return true;
+}
+
+PointCloud LocalCloud::crop(const Pose3d& T_world_sensor, std::vector<uint32_t>* labels_out) {
+  const double cx = T_world_sensor.translation().x();
+  const double cy = T_world_sensor.translation().y();
+  const double r2 = config_.radius_m * config_.radius_m;
+  // Drop scans whose bounding box lies wholly outside the cylinder (nearest box point).
+  const auto outside = [&](const Scan& s) {
+    if (s.points.empty()) return true;
+    const double nx = std::clamp(cx, double(s.min_xy[0]), double(s.max_xy[0]));
+    const double ny = std::clamp(cy, double(s.min_xy[1]), double(s.max_xy[1]));
+    return (nx - cx) * (nx - cx) + (ny - cy) * (ny - cy) > r2;
+  };
+  scans_.erase(std::remove_if(scans_.begin(), scans_.end(), outside), scans_.end());
+
+  PointCloud out;
+  out.reserve(point_count());
+  if (labels_out) {
+    labels_out->clear();
+    labels_out->reserve(point_count());
+  }
+  for (const Scan& s : scans_) {
+    for (size_t i = 0; i < s.points.size(); ++i) {
+      const double dx = s.points[i].x - cx, dy = s.points[i].y - cy;
+      if (dx * dx + dy * dy > r2) continue;
+      out.push_back(s.points[i]);
+      if (labels_out) labels_out->push_back(s.labels.empty() ? 0u : s.labels[i]);
+    }
+  }
+  return out;
+}
+
+size_t LocalCloud::point_count() const {
+  size_t n = 0;
+  for (const Scan& s : scans_) n += s.points.size();
+  return n;
+}
+
+void LocalCloud::clear() {
+  scans_.clear();
+  has_last_ = false;
+}
+
+}  // namespace segmatch

@@ -1,0 +1,202 @@
+#include "segmatch/core/localizer.h"
+
+#include <chrono>
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace segmatch {
+namespace {
+
+class Stopwatch {
+ public:
+  // Milliseconds since the last call (or construction).
+  double lap() {
+    const auto now = std::chrono::steady_clock::now();
+    const double ms = std::chrono::duration<double, std::milli>(now - last_).count();
+    last_ = now;
+    return ms;
+  }
+
+ private:
+  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+};
+
+LocalizationResult refuse(LocalizationResult r, std::string why) {
+  r.status = LocalizationStatus::kNotLocalized;
+  r.reason = std::move(why);
+  return r;
+}
+
+// The hypothesis with the most support, and the runner-up's support.
+struct Ranked {
+  size_t best = 0;
+  Support support;
+  size_t runner_up = 0;
+};
+Ranked rank_by_support(const std::vector<PoseHypothesis>& hypotheses, const Segments& query,
+                       const CentroidIndex& map, float radius_m) {
+  Ranked r;
+  for (size_t h = 0; h < hypotheses.size(); ++h) {
+    Support s = support_of(query, map, hypotheses[h].T_target_query, radius_m);
+    if (h == 0 || s.count() > r.support.count()) {
+      if (h > 0) r.runner_up = std::max(r.runner_up, r.support.count());
+      r.best = h;
+      r.support = std::move(s);
+    } else {
+      r.runner_up = std::max(r.runner_up, s.count());
+    }
+  }
+  return r;
+}
+
+// Points of the segments on one side of the matches, for the refinement.
+PointCloud gather(const Segments& segments, const Matches& inliers, bool query_side) {
+  PointCloud out;
+  std::vector<bool> taken(segments.size(), false);
+  for (const Match& m : inliers) {
+    const int i = query_side ? m.query : m.target;
+    if (taken[i]) continue;
+    taken[i] = true;
+    out.insert(out.end(), segments[i].points.begin(), segments[i].points.end());
+  }
+  return out;
+}
+
+// Confidence in 0..1: grows with the number of query segments that agree with the pose
+// beyond the minimum (each extra independent agreement makes a coincidence much less
+// likely) and is scaled by how well the surfaces agree after refinement.
+float confidence_of(size_t support, int min_support, float fitness) {
+  const double extra = static_cast<double>(support) - min_support + 1.0;
+  return static_cast<float>((1.0 - std::exp(-extra / 3.0)) * fitness);
+}
+
+}  // namespace
+
+const char* to_string(LocalizationStatus status) {
+  return status == LocalizationStatus::kLocalized ? "localized" : "not_localized";
+}
+
+void SegmentationConfig::validate() const {
+  voxel.validate();
+  ground.validate();
+  segmenter.validate();
+  descriptors.validate();
+}
+
+void LocalizerConfig::validate() const {
+  segmentation.validate();
+  retrieval.validate();
+  matcher.validate();
+  verification.validate();
+  refine.validate();
+  if (!(min_refine_fitness >= 0.0f && min_refine_fitness <= 1.0f))
+    throw std::invalid_argument("min_refine_fitness must be in 0..1");
+  if (!(support_radius_m > 0.0f) || !std::isfinite(support_radius_m))
+    throw std::invalid_argument("support_radius_m must be finite and > 0");
+  if (min_support < verification.min_inliers)
+    throw std::invalid_argument("min_support must be at least verification.min_inliers");
+  if (!(max_ambiguity > 0.0f && max_ambiguity <= 1.0f)) throw std::invalid_argument("max_ambiguity must be in (0, 1]");
+  if (matcher.use_shapes && !segmentation.descriptors.compute_esf)
+    throw std::invalid_argument("matcher.use_shapes needs segmentation.descriptors.compute_esf");
+}
+
+Segments extract_segments(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
+                          const SegmentationConfig& config, const std::vector<uint32_t>* labels,
+                          ModuleTimings* timings) {
+  ModuleTimings local;
+  ModuleTimings& t = timings ? *timings : local;
+  Stopwatch clock;
+  std::vector<uint32_t> voxel_labels, foreground_labels;
+  const PointCloud voxels =
+      voxel_filter(cloud, config.voxel, labels, labels ? &voxel_labels : nullptr);
+  t.voxel_ms = clock.lap();
+  const PointCloud foreground =
+      remove_ground(voxels, config.ground, sensor_position, labels ? &voxel_labels : nullptr,
+                    labels ? &foreground_labels : nullptr);
+  t.ground_ms = clock.lap();
+  Segments segments = segment_cloud(foreground, config.segmenter, labels ? &foreground_labels : nullptr);
+  t.segment_ms = clock.lap();
+  describe_segments(segments, config.descriptors);
+  t.describe_ms = clock.lap();
+  return segments;
+}
+
+Localizer::Localizer(const LocalizerConfig& config, Segments targets,
+                     std::shared_ptr<const RandomForestMatcher> classifier)
+    : config_(config), targets_(std::move(targets)), classifier_(std::move(classifier)) {
+  config_.validate();
+  centroids_ = CentroidIndex(targets_, config_.support_radius_m);
+  if (config_.matcher.type == MatcherType::kRandomForest && !(classifier_ && classifier_->trained()))
+    throw std::invalid_argument("the random forest matcher needs a trained classifier");
+  for (const Segment& s : targets_) {
+    if (!s.has_eigen) throw std::invalid_argument("map segment " + std::to_string(s.id) + " has no eigen features");
+    if (config_.matcher.use_shapes && !s.has_esf)
+      throw std::invalid_argument("map segment " + std::to_string(s.id) + " has no ESF descriptor");
+  }
+  index_.build(targets_);
+}
+
+LocalizationResult Localizer::localize(const PointCloud& cloud, const Eigen::Vector3f& sensor_position) const {
+  LocalizationResult r;
+  Stopwatch total, clock;
+  auto finish = [&](LocalizationResult res) {
+    res.timings.total_ms = total.lap();
+    return res;
+  };
+  const int min_inliers = config_.verification.min_inliers;
+  r.query = extract_segments(cloud, sensor_position, config_.segmentation, nullptr, &r.timings);
+  clock.lap();
+  r.query_segments = r.query.size();
+  if (targets_.empty()) return finish(refuse(std::move(r), "the map has no segments"));
+  if (r.query.size() < static_cast<size_t>(min_inliers))
+    return finish(refuse(std::move(r), "only " + std::to_string(r.query.size()) +
+                                           " segments in the query cloud (at least " +
+                                           std::to_string(min_inliers) + " needed)"));
+  // Paper III-D: k-NN candidates in feature space, then the classifier.
+  const Matches candidates = retrieve_candidates(r.query, index_, config_.retrieval);
+  r.candidates = candidates.size();
+  r.timings.retrieve_ms = clock.lap();
+  const Matches matches = filter_matches(r.query, targets_, candidates, config_.matcher, classifier_.get());
+  r.matches = matches.size();
+  r.timings.classify_ms = clock.lap();
+  // Paper III-E: geometric verification on the segment centroids.
+  const VerificationResult v = verify_matches(r.query, targets_, matches, config_.verification);
+  r.timings.verify_ms = clock.lap();
+  if (!v.found)
+    return finish(refuse(std::move(r), "no geometrically consistent set of " + std::to_string(min_inliers) +
+                                           " matches among " + std::to_string(matches.size())));
+  // Beyond the paper: the hypothesis that explains most of the query wins, if unambiguous.
+  const Ranked ranked = rank_by_support(v.hypotheses, r.query, centroids_, config_.support_radius_m);
+  const PoseHypothesis& best = v.hypotheses[ranked.best];
+  r.hypotheses = v.hypotheses.size();
+  r.support = ranked.support.count();
+  r.runner_up_support = ranked.runner_up;
+  r.inliers = best.inliers;
+  r.T_map_query = best.T_target_query;
+  r.timings.verify_ms += clock.lap();
+  if (r.support < static_cast<size_t>(config_.min_support))
+    return finish(refuse(std::move(r), "only " + std::to_string(r.support) + " query segments agree with the best pose (at least " +
+                                           std::to_string(config_.min_support) + " needed)"));
+  if (static_cast<float>(r.runner_up_support) >= config_.max_ambiguity * static_cast<float>(r.support))
+    return finish(refuse(std::move(r), "ambiguous: two distinct poses are supported by " + std::to_string(r.support) +
+                                           " and " + std::to_string(r.runner_up_support) + " query segments"));
+  r.refine_fitness = 1.0f;
+  if (config_.refine_pose) {
+    const RefineResult refined = refine_alignment(gather(r.query, ranked.support.pairs, true),
+                                                  gather(targets_, ranked.support.pairs, false), r.T_map_query,
+                                                  config_.refine);
+    r.timings.refine_ms = clock.lap();
+    r.refine_fitness = refined.fitness;
+    r.refine_rmse_m = refined.rmse_m;
+    if (refined.fitness < config_.min_refine_fitness)
+      return finish(refuse(std::move(r), "matched segments' surfaces disagree (fitness " +
+                                             std::to_string(refined.fitness) + ")"));
+    r.T_map_query = refined.T_target_query;
+  }
+  r.confidence = confidence_of(r.support, config_.min_support, r.refine_fitness);
+  r.status = LocalizationStatus::kLocalized;
+  return finish(std::move(r));
+}
+
+}  // namespace segmatch

@@ -1,0 +1,133 @@
+// Private helpers shared by the voxel grid, ground removal and the segmenters: integer
+// grid keys, a stable LSD radix sort of 64-bit keys, a flat open-addressing hash map and a
+// sparse 3D cell grid for fixed-radius neighbour queries. Nothing here allocates per point
+// beyond a few flat arrays, which is what keeps the pipeline inside its time budget.
+// Implemented in voxel_grid.cpp.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "segmatch/core/types.h"
+
+namespace segmatch {
+namespace detail {
+
+inline bool is_finite(const Point& p) {
+  return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
+}
+
+// Stable LSD radix sort of `keys` (only the lowest `key_bits` bits are significant),
+// permuting `values` alongside. 11-bit digits: a 31-bit key (a 60 m local cloud at 0.1 m)
+// takes three passes.
+void radix_sort(std::vector<uint64_t>& keys, std::vector<uint32_t>& values, int key_bits);
+
+// Maps 64-bit keys to 32-bit values. Linear probing, power-of-two capacity, no erase.
+class FlatHashMap {
+ public:
+  static constexpr uint32_t kMissing = std::numeric_limits<uint32_t>::max();
+
+  explicit FlatHashMap(size_t expected_size = 0) { reserve(expected_size); }
+  void reserve(size_t expected_size);
+  // Inserts key -> value unless present; returns the stored value.
+  uint32_t insert(uint64_t key, uint32_t value);
+  uint32_t find(uint64_t key) const {
+    size_t slot = hash(key) & mask_;
+    while (true) {
+      const uint32_t v = values_[slot];
+      if (v == kMissing) return kMissing;
+      if (keys_[slot] == key) return v;
+      slot = (slot + 1) & mask_;
+    }
+  }
+  size_t size() const { return size_; }
+
+ private:
+  static uint64_t hash(uint64_t k) {  // MurmurHash3 fmix64: every key bit reaches the slot
+    k ^= k >> 33;
+    k *= 0xff51afd7ed558ccdull;
+    k ^= k >> 33;
+    k *= 0xc4ceb9fe1a85ec53ull;
+    k ^= k >> 33;
+    return k;
+  }
+  std::vector<uint64_t> keys_;
+  std::vector<uint32_t> values_;
+  size_t mask_ = 0;
+  size_t size_ = 0;
+};
+
+// Integer cell coordinates of points on a regular grid aligned with the world origin
+// (cell i spans [i, i + 1) * cell_m, as in PCL), offset by the cell of the minimum corner of
+// the (finite) points, packed into one key with just enough bits per axis; keys therefore
+// sort lexicographically by (x, y, z). With `planar` the z axis is ignored (columns).
+struct GridFrame {
+  double cell_m = 1.0;
+  int64_t base[3] = {0, 0, 0};    // cell coordinate of the minimum corner
+  int64_t extent[3] = {1, 1, 1};  // cells per axis
+  int bits[3] = {1, 1, 0};
+  int total_bits = 2;
+
+  // Throws std::invalid_argument naming `field` if the cloud does not fit into 64 bits.
+  static GridFrame fit(const PointCloud& cloud, double cell_m, bool planar, const char* field);
+  int64_t coord(float v, int axis) const {
+    return static_cast<int64_t>(std::floor(double(v) / cell_m)) - base[axis];
+  }
+  bool inside(int64_t ix, int64_t iy, int64_t iz) const {
+    return ix >= 0 && iy >= 0 && iz >= 0 && ix < extent[0] && iy < extent[1] && iz < extent[2];
+  }
+  uint64_t pack(int64_t ix, int64_t iy, int64_t iz) const {
+    return (static_cast<uint64_t>(ix) << (bits[1] + bits[2])) |
+           (static_cast<uint64_t>(iy) << bits[2]) | static_cast<uint64_t>(iz);
+  }
+  uint64_t key_of(const Point& p) const {
+    return pack(coord(p.x, 0), coord(p.y, 1), bits[2] ? coord(p.z, 2) : 0);
+  }
+};
+
+// Points bucketed into cells: `order` lists point indices grouped by cell (cells sorted by
+// key, points of a cell in input order), cell c spans order[begin[c] .. begin[c + 1]).
+// Non-finite points are left out.
+struct CellGrid {
+  GridFrame frame;
+  std::vector<uint32_t> order;
+  std::vector<uint32_t> begin;       // size cells + 1
+  std::vector<uint64_t> cell_key;    // size cells
+  std::vector<uint32_t> point_cell;  // cell of each input point (kMissing if non-finite)
+  FlatHashMap lookup;                // key -> cell index
+
+  // with_lookup = false skips the hash map (cell_at() is then unusable).
+  static CellGrid build(const PointCloud& cloud, double cell_m, bool planar, const char* field,
+                        bool with_lookup = true);
+  size_t cell_count() const { return cell_key.size(); }
+  // Cell index at integer coordinates or kMissing.
+  uint32_t cell_at(int64_t ix, int64_t iy, int64_t iz) const {
+    if (!frame.inside(ix, iy, iz)) return FlatHashMap::kMissing;
+    return lookup.find(frame.pack(ix, iy, iz));
+  }
+  void cell_coords(uint32_t cell, int64_t* ix, int64_t* iy, int64_t* iz) const {
+    const uint64_t k = cell_key[cell];
+    *iz = static_cast<int64_t>(k & ((uint64_t{1} << frame.bits[2]) - 1));
+    *iy = static_cast<int64_t>((k >> frame.bits[2]) & ((uint64_t{1} << frame.bits[1]) - 1));
+    *ix = static_cast<int64_t>(k >> (frame.bits[1] + frame.bits[2]));
+  }
+};
+
+// For every cell of a 3D grid, the indices of its 27 neighbour cells (itself included;
+// kMissing if empty): entry c * 27 + (dx + 1) * 9 + (dy + 1) * 3 + (dz + 1). Built by one
+// sweep over the sorted cells with a cursor per neighbour column, no hashing. Entries
+// above 13 are the neighbours lexicographically after the cell itself.
+constexpr int kNeighbourCells = 27;
+constexpr int kSelfCell = 13;
+std::vector<uint32_t> neighbour_table(const CellGrid& grid);
+
+// Most frequent non-zero label among `labels[indices]`; ties go to the smaller label; 0 if
+// none. `scratch` is reused between calls.
+uint32_t majority_label(const std::vector<uint32_t>& labels, const uint32_t* indices, size_t count,
+                        std::vector<uint32_t>* scratch);
+
+}  // namespace detail
+}  // namespace segmatch

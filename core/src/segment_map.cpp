@@ -1,0 +1,70 @@
+#include "segmatch/core/segment_map.h"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace segmatch {
+
+void SegmentMapConfig::validate() const {
+  if (!(duplicate_distance_m > 0.0f && duplicate_distance_m < 100.0f))
+    throw std::invalid_argument("duplicate_distance_m must be in (0, 100)");
+}
+
+SegmentMap::SegmentMap(const SegmentMapConfig& config) : config_(config) { config_.validate(); }
+
+SegmentMap::CellKey SegmentMap::cell_of(const Eigen::Vector3f& p) const {
+  // 21 bits per axis (offset so negative coordinates map to positive cells).
+  auto axis = [&](float v) {
+    return static_cast<uint64_t>(static_cast<int64_t>(std::floor(v / config_.duplicate_distance_m)) + (1 << 20)) &
+           0x1FFFFF;
+  };
+  return axis(p.x()) | (axis(p.y()) << 21) | (axis(p.z()) << 42);
+}
+
+int SegmentMap::find_duplicate(const Eigen::Vector3f& c) const {
+  const float d = config_.duplicate_distance_m;
+  int best = -1;
+  float best_dist = d;
+  for (int dx = -1; dx <= 1; ++dx)
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dz = -1; dz <= 1; ++dz) {
+        const auto range = grid_.equal_range(cell_of(c + Eigen::Vector3f(dx * d, dy * d, dz * d)));
+        for (auto it = range.first; it != range.second; ++it) {
+          const float dist = (segments_[it->second].centroid - c).norm();
+          if (dist < best_dist) {
+            best_dist = dist;
+            best = it->second;
+          }
+        }
+      }
+  return best;
+}
+
+size_t SegmentMap::add(Segments segments) {
+  size_t added = 0;
+  for (Segment& s : segments) {
+    const int dup = find_duplicate(s.centroid);
+    if (dup < 0) {
+      s.id = next_id_++;
+      grid_.emplace(cell_of(s.centroid), static_cast<int>(segments_.size()));
+      segments_.push_back(std::move(s));
+      ++added;
+      continue;
+    }
+    Segment& old = segments_[dup];
+    if (s.points.size() <= old.points.size()) continue;
+    // The more complete view wins; it keeps the object's id. Re-file it under its new cell.
+    auto range = grid_.equal_range(cell_of(old.centroid));
+    for (auto it = range.first; it != range.second; ++it)
+      if (it->second == dup) {
+        grid_.erase(it);
+        break;
+      }
+    s.id = old.id;
+    old = std::move(s);
+    grid_.emplace(cell_of(old.centroid), dup);
+  }
+  return added;
+}
+
+}  // namespace segmatch

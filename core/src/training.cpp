@@ -1,0 +1,54 @@
+#include "segmatch/core/training.h"
+
+#include "segmatch/core/random.h"
+
+#include <stdexcept>
+
+namespace segmatch {
+
+void TrainingPairConfig::validate() const {
+  if (k < 1) throw std::invalid_argument("k must be at least 1");
+  if (negatives_per_positive < 1) throw std::invalid_argument("negatives_per_positive must be at least 1");
+  if (!(max_centroid_distance_m >= 0.f)) throw std::invalid_argument("max_centroid_distance_m must be >= 0");
+}
+
+TrainingPairs label_pairs_by_instance(const Segments& queries, const Segments& targets,
+                                      const FeatureIndex& index, const TrainingPairConfig& config) {
+  config.validate();
+  TrainingPairs out;
+  std::vector<std::pair<int, int>> negatives;
+  for (size_t q = 0; q < queries.size(); ++q) {
+    const uint16_t inst = label_instance(queries[q].label);
+    if (inst == 0) continue;
+    // Positives and negatives both come from the k-NN candidates, the only pairs the
+    // classifier sees at run time. (Taking positives from anywhere would teach it that
+    // pairs far apart in feature space are the same object.)
+    for (const auto& [t, dist] : index.knn(queries[q].eigen, config.k)) {
+      const uint16_t other = label_instance(targets[t].label);
+      if (other == 0) continue;
+      if (other == inst && config.max_centroid_distance_m > 0.f &&
+          (queries[q].centroid - targets[t].centroid).norm() > config.max_centroid_distance_m)
+        continue;  // same object, different part: ambiguous, left out
+      if (other == inst) {
+        out.pairs.emplace_back(&queries[q], &targets[t]);
+        out.same_object.push_back(true);
+        ++out.positives;
+      } else {
+        negatives.emplace_back(static_cast<int>(q), t);
+      }
+    }
+  }
+  // Keep a random subset of negatives at the configured ratio (deterministic by seed).
+  Rng rng(config.seed);
+  const size_t keep = std::min(negatives.size(), out.positives * static_cast<size_t>(config.negatives_per_positive));
+  for (size_t i = 0; i < keep; ++i) {
+    const size_t j = i + rng.index(negatives.size() - i);
+    std::swap(negatives[i], negatives[j]);
+    out.pairs.emplace_back(&queries[negatives[i].first], &targets[negatives[i].second]);
+    out.same_object.push_back(false);
+    ++out.negatives;
+  }
+  return out;
+}
+
+}  // namespace segmatch

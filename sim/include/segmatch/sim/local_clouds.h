@@ -1,0 +1,34 @@
+// Local clouds along a simulated traversal, as a vehicle builds them (paper III-A): scans
+// accumulated in the world frame, one every metre travelled, cropped to a cylinder.
+#pragma once
+
+#include "segmatch/core/local_cloud.h"
+#include "segmatch/sim/lidar.h"
+#include "segmatch/sim/traversal.h"
+
+#include <functional>
+
+namespace segmatch::sim {
+
+struct SimulatedLocalCloud {
+  size_t frame = 0;                 // traversal scan index at which the cloud was taken
+  Pose3d T_world_sensor;            // sensor pose at that scan
+  PointCloud cloud;                 // world frame
+  std::vector<uint32_t> labels;     // per point, SemanticKITTI
+};
+
+struct LocalCloudSchedule {
+  double every_m = 10.0;            // one local cloud each time the vehicle drove this far
+  double warmup_m = 30.0;           // first local cloud only after this much accumulation
+  size_t first_frame = 0, last_frame = SIZE_MAX;
+  int threads = 0;                  // scan simulation threads (0: one per core)
+  uint64_t seed = 1;                // noise seed of the scans
+};
+
+// Simulates the scans the local cloud keeps and calls `visit` for each scheduled local
+// cloud, in order. Scans are simulated in parallel; accumulation is sequential.
+void for_each_local_cloud(const RayCaster& caster, const LidarModel& model, const Traversal& traversal,
+                          const LocalCloudConfig& local_config, const LocalCloudSchedule& schedule,
+                          const std::function<void(const SimulatedLocalCloud&)>& visit);
+
+}  // namespace segmatch::sim

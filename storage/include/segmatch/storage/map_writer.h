@@ -1,0 +1,81 @@
+// Writes a segment map into one SQLite file, all or nothing.
+//
+// The writer builds the map in "<target>.tmp-<pid>-<n>" next to the target, inside one
+// transaction; commit() finishes the transaction, closes and fsyncs the file and renames it
+// over the target (then fsyncs the folder). A writer destroyed before commit() deletes its
+// temporary file, and a crashed or killed process leaves at most that temporary file behind:
+// the target path never holds a half-written map, and a map it held before stays intact.
+// A MapWriter is used from one thread at a time.
+//
+// File layout (schema version 1; application_id 'SgMp', user_version = schema version):
+//   map_info       one row: metadata, the parameters JSON, descriptor sizes and row counts
+//   segments       one row per segment, in insertion order: id, keyframe, label, centroid,
+//                  axis-aligned bounding box of the points, point count and three BLOBs
+//                  (eigen: 7 float32, esf: 640 float32, both NULL when not described;
+//                  points: see below) plus an XXH64 checksum over the row
+//   segment_rtree  R*Tree over the centroids (SQLite rtree module), for segments_near()
+//   trajectory     one row per keyframe: index, time, T_map_sensor as 12 doubles
+//                  (rotation row-major r00..r22, then tx ty tz), exact
+//   classifier     at most one row: format string, opaque bytes, checksum
+// All numbers in BLOBs are little-endian.
+//
+// Point precision. Each segment's points are stored as four int16 per point (8 bytes):
+// x, y, z and intensity each decode to offset + q * scale, with the offsets at the centre of
+// the segment's range (a 36-byte header holds offsets and scales):
+//   - x y z in 2 mm steps when every point lies within 65 m of the box centre (error <= 1 mm
+//     per axis), else in 1 cm steps when within 327 m (error <= 5 mm per axis),
+//   - intensity in 65534 steps between the segment's min and max (error <= (max - min) /
+//     131068; exact when all are equal),
+//   - the exact float32 points (16 bytes a point) when a segment is wider still or holds a
+//     non-finite value.
+// Decoding runs in float, so add float rounding: about 0.01 mm for coordinates below 100 m,
+// 0.5 mm at 10 km.
+// Everything else (ids, centroids, eigen, ESF, labels, keyframes, poses, times, metadata,
+// classifier bytes) round-trips exactly.
+#pragma once
+
+#include <segmatch/core/segment.h>
+#include <segmatch/storage/map_types.h>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace segmatch {
+namespace storage {
+
+class MapWriter {
+ public:
+  // Refuses (StorageError, before touching anything) when `path` exists and overwrite is
+  // false, or when its folder does not exist. metadata.eigen_dims / esf_dims must match this
+  // build (std::invalid_argument otherwise).
+  static MapWriter create(const std::string& path, const MapMetadata& metadata, bool overwrite);
+
+  MapWriter(MapWriter&&) noexcept;
+  MapWriter& operator=(MapWriter&&) noexcept;
+  MapWriter(const MapWriter&) = delete;
+  MapWriter& operator=(const MapWriter&) = delete;
+  // Without commit(): rolls back and deletes the temporary file.
+  ~MapWriter();
+
+  // Appends segments (may be called many times). keyframe_of_segment is empty (keyframes
+  // unknown) or holds one keyframe index per segment. Every segment needs a finite centroid.
+  void add_segments(const Segments& segments, const std::vector<uint32_t>& keyframe_of_segment);
+  // Replaces the trajectory. Keyframe indices must be unique.
+  void set_trajectory(const std::vector<Keyframe>& keyframes);
+  // Replaces the classifier model.
+  void set_classifier(const ClassifierBlob& classifier);
+  // Makes the map visible at the target path. The writer is finished afterwards.
+  void commit();
+
+  const std::string& path() const;            // the target
+  const std::string& temporary_path() const;  // where the map is being built
+
+ private:
+  struct Impl;
+  explicit MapWriter(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace storage
+}  // namespace segmatch

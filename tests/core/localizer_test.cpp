@@ -1,0 +1,127 @@
+// The Localizer on synthetic scenes with exact answers: a street of distinct objects is
+// localized at the true pose; a street of identical, evenly spaced poles is refused as
+// ambiguous (any shift by the spacing explains it as well); bad input is refused, not thrown.
+#include "segmatch/core/localizer.h"
+#include "segmatch/core/random.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+namespace segmatch {
+namespace {
+
+// Dense surface samples (spacing 3 cm, so 0.1 m voxels get their >= 2 points).
+void add_cylinder(PointCloud& cloud, float x, float y, float radius, float height) {
+  const int around = static_cast<int>(2 * M_PI * radius / 0.03f);
+  for (float z = 0.f; z < height; z += 0.03f)
+    for (int k = 0; k < around; ++k) {
+      const float a = 2.f * static_cast<float>(M_PI) * k / around;
+      cloud.push_back(Point{x + radius * std::cos(a), y + radius * std::sin(a), z, 0.f});
+    }
+}
+
+void add_box(PointCloud& cloud, float x, float y, float sx, float sy, float sz) {
+  for (float u = 0.f; u <= sx; u += 0.03f)
+    for (float w = 0.f; w <= sz; w += 0.03f) {
+      cloud.push_back(Point{x + u, y, w, 0.f});
+      cloud.push_back(Point{x + u, y + sy, w, 0.f});
+    }
+  for (float v = 0.f; v <= sy; v += 0.03f)
+    for (float w = 0.f; w <= sz; w += 0.03f) {
+      cloud.push_back(Point{x, y + v, w, 0.f});
+      cloud.push_back(Point{x + sx, y + v, w, 0.f});
+    }
+}
+
+PointCloud pole_street(bool with_distinct_objects) {
+  PointCloud cloud;
+  for (int i = 0; i < 10; ++i) add_cylinder(cloud, 6.f * i, 4.f, 0.15f, 4.f);
+  if (with_distinct_objects) {
+    add_box(cloud, 3.f, -6.f, 4.2f, 1.8f, 1.5f);   // a car
+    add_box(cloud, 15.f, -7.f, 2.f, 2.f, 2.5f);    // a kiosk
+    add_box(cloud, 26.f, -5.f, 1.f, 3.f, 1.f);     // a bench
+    add_box(cloud, 35.f, 8.f, 6.f, 0.4f, 2.f);     // a wall
+    add_cylinder(cloud, 47.f, -6.f, 0.6f, 1.2f);   // a bin
+    add_cylinder(cloud, 20.f, 9.f, 1.2f, 0.9f);    // a planter
+    add_box(cloud, 52.f, 9.f, 1.5f, 1.5f, 3.2f);   // a cabinet
+  }
+  return cloud;
+}
+
+PointCloud transformed(const PointCloud& cloud, const Pose3d& T) {
+  PointCloud out = cloud;
+  for (Point& p : out) {
+    const Eigen::Vector3f q = T.cast<float>() * p.xyz();
+    p.x = q.x(), p.y = q.y(), p.z = q.z();
+  }
+  return out;
+}
+
+LocalizerConfig config() {
+  LocalizerConfig c;
+  c.segmentation.ground.method = GroundRemoval::kNone;  // no ground in these scenes
+  c.segmentation.descriptors.compute_esf = false;
+  c.matcher.type = MatcherType::kL2;
+  c.matcher.use_shapes = false;
+  c.matcher.l2_threshold = 0.6f;
+  c.min_support = 6;
+  return c;
+}
+
+Pose3d T_query_map() {
+  Pose3d T = Pose3d::Identity();
+  T.linear() = Eigen::AngleAxisd(0.7, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  T.translation() = Eigen::Vector3d(-12.0, 30.0, 0.5);
+  return T;
+}
+
+TEST(Localizer, LocalizesAStreetOfDistinctObjectsAtTheTruePose) {
+  const LocalizerConfig c = config();
+  const PointCloud map_cloud = pole_street(true);
+  const Localizer localizer(c, extract_segments(map_cloud, Eigen::Vector3f(25, 0, 2), c.segmentation));
+  const Pose3d T = T_query_map();
+  const LocalizationResult r = localizer.localize(transformed(map_cloud, T), (T.cast<float>() * Eigen::Vector3f(25, 0, 2)));
+  ASSERT_TRUE(r.localized()) << r.reason;
+  const Pose3d error = r.T_map_query * T;  // identity if exact
+  EXPECT_LT(error.translation().norm(), 0.02);
+  EXPECT_LT(Eigen::AngleAxisd(error.linear()).angle(), 0.002);
+  EXPECT_GE(r.support, 15u);
+  EXPECT_GT(r.confidence, 0.5f);
+  EXPECT_GE(r.timings.total_ms, r.timings.voxel_ms + r.timings.verify_ms);
+}
+
+TEST(Localizer, RefusesAStreetOfIdenticalPolesAsAmbiguous) {
+  const LocalizerConfig c = config();
+  const PointCloud map_cloud = pole_street(false);
+  const Localizer localizer(c, extract_segments(map_cloud, Eigen::Vector3f(25, 0, 2), c.segmentation));
+  ASSERT_EQ(localizer.targets().size(), 10u);
+  const Pose3d T = T_query_map();
+  const LocalizationResult r = localizer.localize(transformed(map_cloud, T), Eigen::Vector3f::Zero());
+  EXPECT_FALSE(r.localized());
+  EXPECT_NE(r.reason.find("ambiguous"), std::string::npos) << r.reason;
+  EXPECT_GE(r.hypotheses, 2u);
+}
+
+TEST(Localizer, RefusesEmptyAndNonFiniteQueriesWithAReason) {
+  const LocalizerConfig c = config();
+  const Localizer localizer(c, extract_segments(pole_street(true), Eigen::Vector3f::Zero(), c.segmentation));
+  LocalizationResult r = localizer.localize(PointCloud{}, Eigen::Vector3f::Zero());
+  EXPECT_FALSE(r.localized());
+  EXPECT_NE(r.reason.find("segments in the query"), std::string::npos) << r.reason;
+  PointCloud nan_cloud(1000, Point{NAN, 0.f, 0.f, 0.f});
+  r = localizer.localize(nan_cloud, Eigen::Vector3f::Zero());
+  EXPECT_FALSE(r.localized());
+}
+
+TEST(Localizer, RejectsInvalidConfigurationAtConstruction) {
+  LocalizerConfig c = config();
+  c.min_support = 2;  // below verification.min_inliers
+  EXPECT_THROW(Localizer(c, Segments{}), std::invalid_argument);
+  c = config();
+  c.matcher.type = MatcherType::kRandomForest;  // without a classifier
+  EXPECT_THROW(Localizer(c, Segments{}), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace segmatch

@@ -1,0 +1,166 @@
+// Files that are not a readable segment map of this schema are refused with a StorageError
+// that names the file and the problem.
+#include "storage_test_util.h"
+
+// The storage library links SQLite; the tests use it directly to forge databases.
+#include <sqlite3.h>
+
+#include <filesystem>
+
+namespace segmatch {
+namespace storage {
+namespace test {
+namespace {
+
+// Fixed SQL on a scratch database (test-only; the library itself binds every value).
+void run_sql(const std::string& path, const char* sql) {
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+  char* error = nullptr;
+  const int rc = sqlite3_exec(db, sql, nullptr, nullptr, &error);
+  EXPECT_EQ(rc, SQLITE_OK) << (error ? error : "");
+  sqlite3_free(error);
+  sqlite3_close(db);
+}
+
+// Opens and reads every part; whatever is wrong must surface as a StorageError.
+void read_everything(const std::string& path) {
+  const MapReader reader = MapReader::open(path);
+  reader.load_segments();
+  reader.trajectory();
+  reader.classifier();
+  reader.stats();
+}
+
+class StorageRefusal : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    path_ = dir_.file("good.segmap");
+    write_test_map(path_, random_segments(300, 31));
+    bytes_ = read_bytes(path_);
+  }
+  // A copy of the good map, changed by `edit`.
+  std::string variant(const std::string& name, const std::function<void(std::string&)>& edit) {
+    std::string bytes = bytes_;
+    edit(bytes);
+    const std::string path = dir_.file(name);
+    write_bytes(path, bytes);
+    return path;
+  }
+
+  TempDir dir_;
+  std::string path_, bytes_;
+};
+
+TEST_F(StorageRefusal, GoodMapOpens) {
+  EXPECT_NO_THROW(read_everything(path_));
+  EXPECT_TRUE(MapReader::open(path_).check_integrity().empty());
+}
+
+TEST_F(StorageRefusal, NewerSchemaVersion) {
+  const std::string path = variant("newer.segmap", [](std::string&) {});
+  run_sql(path, "PRAGMA user_version = 2");
+  expect_storage_error([&] { MapReader::open(path); }, path, {"schema version 2", "newer"});
+}
+
+TEST_F(StorageRefusal, OlderUnsupportedSchemaVersion) {
+  const std::string path = variant("older.segmap", [](std::string&) {});
+  run_sql(path, "PRAGMA user_version = 0");
+  expect_storage_error([&] { MapReader::open(path); }, path, {"schema version 0", "older"});
+}
+
+TEST_F(StorageRefusal, ForeignSqliteDatabase) {
+  const std::string path = dir_.file("foreign.db");
+  run_sql(path, "CREATE TABLE customers (id INTEGER PRIMARY KEY, name TEXT)");
+  expect_storage_error([&] { MapReader::open(path); }, path,
+                       {"another application", "application_id 0x00000000"});
+  const std::string gpkg = dir_.file("other.gpkg");
+  run_sql(gpkg, "PRAGMA application_id = 1196444487; CREATE TABLE t (x)");  // GeoPackage
+  expect_storage_error([&] { MapReader::open(gpkg); }, gpkg, {"another application", "0x47504B47"});
+}
+
+TEST_F(StorageRefusal, OurIdButTablesMissing) {
+  const std::string path = dir_.file("hollow.segmap");
+  run_sql(path, "PRAGMA application_id = 1399278960; PRAGMA user_version = 1; CREATE TABLE t (x)");
+  expect_storage_error([&] { MapReader::open(path); }, path, {"no table map_info"});
+}
+
+TEST_F(StorageRefusal, NotSqlite) {
+  const std::string text = dir_.file("notes.segmap");
+  write_bytes(text, std::string(5000, 'x'));
+  expect_storage_error([&] { MapReader::open(text); }, text, {"not an SQLite database"});
+  const std::string tiny = dir_.file("tiny.segmap");
+  write_bytes(tiny, "SQLite");
+  expect_storage_error([&] { MapReader::open(tiny); }, tiny, {"not an SQLite database"});
+  const std::string empty = dir_.file("empty.segmap");
+  write_bytes(empty, "");
+  expect_storage_error([&] { MapReader::open(empty); }, empty, {"empty file"});
+}
+
+TEST_F(StorageRefusal, Truncated) {
+  const std::string half = variant("half.segmap", [](std::string& b) { b.resize(b.size() / 2 + 100); });
+  expect_storage_error([&] { MapReader::open(half); }, half, {"truncated"});
+  const std::string page_short =
+      variant("short.segmap", [](std::string& b) { b.resize(b.size() - 65536); });
+  expect_storage_error([&] { MapReader::open(page_short); }, page_short,
+                       {"truncated", "header says"});
+  const std::string header_only = variant("header.segmap", [](std::string& b) { b.resize(60); });
+  expect_storage_error([&] { MapReader::open(header_only); }, header_only,
+                       {"not an SQLite database", "truncated to 60 bytes"});
+}
+
+TEST_F(StorageRefusal, CorruptedInTheMiddle) {
+  for (const size_t length : {16u, 256u, 4096u}) {
+    const std::string path = variant("middle" + std::to_string(length) + ".segmap",
+                                     [&](std::string& b) {
+                                       for (size_t i = 0; i < length; ++i) b[b.size() / 2 + i] ^= 0x5A;
+                                     });
+    expect_storage_error([&] { read_everything(path); }, path, {"corrupted"});
+    EXPECT_FALSE(MapReader::open(path).check_integrity().empty());
+  }
+}
+
+TEST_F(StorageRefusal, CorruptedPointsOrDescriptors) {
+  const Segments segments = random_segments(300, 31);
+  // Find segment 100's ESF bytes in the file and flip one bit of them.
+  const std::string esf(reinterpret_cast<const char*>(segments[100].esf.data()), 64);
+  const size_t at = bytes_.find(esf);
+  ASSERT_NE(at, std::string::npos);
+  const std::string path = variant("bitflip.segmap", [&](std::string& b) { b[at + 30] ^= 0x01; });
+  expect_storage_error([&] { MapReader::open(path).load_segments(); }, path,
+                       {"corrupted", "checksum mismatch"});
+  const std::vector<std::string> problems = MapReader::open(path).check_integrity();
+  ASSERT_EQ(problems.size(), 1u);
+  EXPECT_NE(problems[0].find("segment row 101"), std::string::npos) << problems[0];
+  // A query that does not touch the damaged row still works.
+  const MapReader reader = MapReader::open(path);
+  EXPECT_NO_THROW(reader.segments_near(segments[5].centroid, 0.f));
+  EXPECT_THROW(reader.segments_near(segments[100].centroid, 0.f), StorageError);
+}
+
+TEST_F(StorageRefusal, MissingFileOrFolder) {
+  const std::string missing = dir_.file("nope.segmap");
+  expect_storage_error([&] { MapReader::open(missing); }, missing, {"does not exist"});
+  expect_storage_error([&] { MapReader::open(dir_.path()); }, dir_.path(), {"is a directory"});
+  const std::string no_folder = dir_.file("no/such/folder/map.segmap");
+  expect_storage_error([&] { MapWriter::create(no_folder, test_metadata(), true); }, no_folder,
+                       {"does not exist"});
+}
+
+TEST_F(StorageRefusal, ExistingMapIsNotOverwrittenByDefault) {
+  const std::vector<std::string> before = dir_.entries();
+  expect_storage_error([&] { MapWriter::create(path_, test_metadata("B"), false); }, path_,
+                       {"already exists", "overwrite=true"});
+  EXPECT_EQ(dir_.entries(), before);  // refused before any work: no temporary file either
+  EXPECT_EQ(read_bytes(path_), bytes_);
+
+  write_test_map(path_, random_segments(3, 1), "B", /*overwrite=*/true);
+  EXPECT_EQ(MapReader::open(path_).metadata().name, "B");
+  EXPECT_EQ(MapReader::open(path_).stats().segments, 3u);
+  EXPECT_EQ(dir_.entries(), before);
+}
+
+}  // namespace
+}  // namespace test
+}  // namespace storage
+}  // namespace segmatch
