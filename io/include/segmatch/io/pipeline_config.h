@@ -1,0 +1,64 @@
+// Every parameter of the pipeline (local cloud, segmentation, description, matching,
+// verification, map merging) as one value, with named per-sensor presets and a JSON form.
+//
+// The JSON form is what a user writes in a config file and what a map stores as its
+// parameters: an object with one sub-object per stage, every key optional (an omitted key keeps
+// the preset's value), an unknown key or a value of the wrong type is an error naming it:
+//
+//   { "preset": "sparse-keyframes",
+//     "local_cloud": {"radius_m": 60, "min_travel_between_scans_m": 1, "subsample_leaf_m": 0},
+//     "voxel":       {"leaf_m": 0.2, "min_points_per_voxel": 1},
+//     "ground":      {"method": "column_variance" | "height_threshold" | "none", ...},
+//     "segmenter":   {"type": "euclidean" | "region_growing", "cluster_distance_m": 0.4, ...},
+//     "descriptors": {"compute_eigen": true, "compute_esf": true, "esf_samples": 1000, ...},
+//     "retrieval":   {"k": 200},
+//     "matcher":     {"type": "random_forest" | "l2", "use_shapes": true, "rf_threshold": 0.72, ...},
+//     "verification":{"resolution_m": 0.4, "min_inliers": 4, ...},
+//     "refine":      {"max_iterations": 30, ...},
+//     "localizer":   {"support_radius_m": 1, "min_support": 10, "max_ambiguity": 0.8, ...},
+//     "segment_map": {"duplicate_distance_m": 1} }
+//
+// Field names are the C++ member names of the config structs (see their headers for meaning,
+// units and defaults).
+#pragma once
+
+#include <segmatch/core/local_cloud.h>
+#include <segmatch/core/localizer.h>
+#include <segmatch/core/segment_map.h>
+
+#include <string>
+#include <vector>
+
+namespace segmatch {
+namespace io {
+
+struct PipelineConfig {
+  std::string preset = "kitti-hdl64";
+  LocalCloudConfig local_cloud;
+  LocalizerConfig localizer;
+  SegmentMapConfig segment_map;
+  // Throws std::invalid_argument naming the offending field.
+  void validate() const;
+};
+
+// Presets:
+//   "kitti-hdl64"      the paper's parameters (Table I, section IV-A) for a dense 64-beam
+//                      sensor whose raw scans are accumulated (the default);
+//   "sparse-keyframes" keyframes already voxel-downsampled by a SLAM front end (~0.2 m point
+//                      spacing, e.g. ../shared/data/real): 0.2 m voxels with >= 1 point, 0.4 m
+//                      cluster distance, >= 30 points per segment.
+// Throws std::invalid_argument listing the known names.
+PipelineConfig pipeline_preset(const std::string& name);
+std::vector<std::string> pipeline_preset_names();
+
+// Parses the JSON form above (starting from its "preset", default "kitti-hdl64") and
+// validates the result. `origin` names the text in error messages (a file path). Throws IoError
+// on malformed JSON, an unknown key, a wrong type or an invalid value.
+PipelineConfig parse_pipeline_config(const std::string& json_text, const std::string& origin);
+// Reads and parses a config file. IoError when missing or unreadable too.
+PipelineConfig read_pipeline_config(const std::string& path);
+// Every field, pretty-printed; parse_pipeline_config(to_json(c)) == c.
+std::string to_json(const PipelineConfig& config);
+
+}  // namespace io
+}  // namespace segmatch
