@@ -1,0 +1,269 @@
+#include "segmatch/io/pipeline_config.h"
+
+#include "segmatch/io/error.h"
+
+#include <nlohmann/json.hpp>
+
+#include <charconv>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+#include <stdexcept>
+#include <type_traits>
+#include <utility>
+
+namespace segmatch {
+namespace io {
+namespace {
+
+using nlohmann::json;
+
+// Enum <-> the names a user writes.
+template <class E>
+using EnumNames = std::vector<std::pair<E, const char*>>;
+const EnumNames<GroundRemoval>& names(GroundRemoval*) {
+  static const EnumNames<GroundRemoval> n = {{GroundRemoval::kNone, "none"},
+                                             {GroundRemoval::kHeightThreshold, "height_threshold"},
+                                             {GroundRemoval::kColumnVariance, "column_variance"}};
+  return n;
+}
+const EnumNames<SegmenterType>& names(SegmenterType*) {
+  static const EnumNames<SegmenterType> n = {{SegmenterType::kEuclidean, "euclidean"},
+                                             {SegmenterType::kRegionGrowing, "region_growing"}};
+  return n;
+}
+const EnumNames<MatcherType>& names(MatcherType*) {
+  static const EnumNames<MatcherType> n = {{MatcherType::kL2, "l2"}, {MatcherType::kRandomForest, "random_forest"}};
+  return n;
+}
+
+// Every field of the pipeline, section by section, in one place: the reader and the writer
+// both walk this list, so the JSON form cannot drift from the structs.
+template <class V>
+void visit_fields(V& v, PipelineConfig& c) {
+  LocalizerConfig& l = c.localizer;
+  SegmentationConfig& s = l.segmentation;
+  v.section("local_cloud");
+  v("radius_m", c.local_cloud.radius_m);
+  v("min_travel_between_scans_m", c.local_cloud.min_travel_between_scans_m);
+  v("subsample_leaf_m", c.local_cloud.subsample_leaf_m);
+  v.section("voxel");
+  v("leaf_m", s.voxel.leaf_m);
+  v("min_points_per_voxel", s.voxel.min_points_per_voxel);
+  v.section("ground");
+  v("method", s.ground.method);
+  v("height_above_ground_m", s.ground.height_above_ground_m);
+  v("sensor_height_m", s.ground.sensor_height_m);
+  v("column_size_m", s.ground.column_size_m);
+  v("max_column_spread_m", s.ground.max_column_spread_m);
+  v("max_column_stddev_m", s.ground.max_column_stddev_m);
+  v("envelope_tile_m", s.ground.envelope_tile_m);
+  v("seed_tolerance_m", s.ground.seed_tolerance_m);
+  v("max_step_m", s.ground.max_step_m);
+  v("ground_margin_m", s.ground.ground_margin_m);
+  v("max_search_rings", s.ground.max_search_rings);
+  v.section("segmenter");
+  v("type", s.segmenter.type);
+  v("cluster_distance_m", s.segmenter.cluster_distance_m);
+  v("min_points", s.segmenter.min_points);
+  v("max_points", s.segmenter.max_points);
+  v("normal_radius_m", s.segmenter.normal_radius_m);
+  v("max_normal_angle_deg", s.segmenter.max_normal_angle_deg);
+  v("max_curvature", s.segmenter.max_curvature);
+  v("min_normal_neighbours", s.segmenter.min_normal_neighbours);
+  v.section("descriptors");
+  v("compute_eigen", s.descriptors.compute_eigen);
+  v("compute_esf", s.descriptors.compute_esf);
+  v("esf_samples", s.descriptors.esf_samples);
+  v("esf_seed", s.descriptors.esf_seed);
+  v.section("retrieval");
+  v("k", l.retrieval.k);
+  v.section("matcher");
+  v("type", l.matcher.type);
+  v("use_shapes", l.matcher.use_shapes);
+  v("l2_threshold", l.matcher.l2_threshold);
+  v("rf_threshold", l.matcher.rf_threshold);
+  v("rf_trees", l.matcher.rf_trees);
+  v("rf_max_depth", l.matcher.rf_max_depth);
+  v("rf_min_samples", l.matcher.rf_min_samples);
+  v.section("verification");
+  v("resolution_m", l.verification.resolution_m);
+  v("min_inliers", l.verification.min_inliers);
+  v("max_iterations", l.verification.max_iterations);
+  v("seed", l.verification.seed);
+  v("max_hypotheses", l.verification.max_hypotheses);
+  v("distinct_translation_m", l.verification.distinct_translation_m);
+  v("distinct_rotation_deg", l.verification.distinct_rotation_deg);
+  v.section("refine");
+  v("max_iterations", l.refine.max_iterations);
+  v("max_correspondence_m", l.refine.max_correspondence_m);
+  v("convergence_m", l.refine.convergence_m);
+  v("point_to_plane", l.refine.point_to_plane);
+  v("max_query_points", l.refine.max_query_points);
+  v.section("localizer");
+  v("support_radius_m", l.support_radius_m);
+  v("min_support", l.min_support);
+  v("max_ambiguity", l.max_ambiguity);
+  v("refine_pose", l.refine_pose);
+  v("min_refine_fitness", l.min_refine_fitness);
+  v.section("segment_map");
+  v("duplicate_distance_m", c.segment_map.duplicate_distance_m);
+}
+
+class Writer {
+ public:
+  void section(const char* name) { current_ = &out[name]; }
+  template <class T>
+  void operator()(const char* key, T& value) {
+    if constexpr (std::is_enum_v<T>) {
+      for (const auto& [e, n] : names(static_cast<T*>(nullptr)))
+        if (e == value) (*current_)[key] = n;
+    } else if constexpr (std::is_same_v<T, float>) {
+      // The shortest decimal that reads back as the same float: 0.1, not 0.10000000149.
+      char buf[32];
+      const auto end = std::to_chars(buf, buf + sizeof buf, value).ptr;
+      (*current_)[key] = std::stod(std::string(buf, end));
+    } else {
+      (*current_)[key] = value;
+    }
+  }
+  json out = json::object();
+
+ private:
+  json* current_ = nullptr;
+};
+
+class Reader {
+ public:
+  Reader(const json& in, std::string origin) : in_(in), origin_(std::move(origin)) {}
+  void section(const char* name) {
+    name_ = name;
+    known_sections_.insert(name);
+    current_ = in_.contains(name) ? &in_.at(name) : nullptr;
+    if (current_ && !current_->is_object()) fail("\"" + name_ + "\" must be an object");
+  }
+  template <class T>
+  void operator()(const char* key, T& value) {
+    known_keys_[name_].insert(key);
+    if (!current_ || !current_->contains(key)) return;
+    const json& j = current_->at(key);
+    const std::string where = "\"" + name_ + "." + key + "\"";
+    if constexpr (std::is_enum_v<T>) {
+      std::string allowed;
+      for (const auto& [e, n] : names(static_cast<T*>(nullptr))) {
+        if (j.is_string() && j.get<std::string>() == n) return void(value = e);
+        allowed += std::string(allowed.empty() ? "" : ", ") + n;
+      }
+      fail(where + " must be one of: " + allowed);
+    } else if constexpr (std::is_same_v<T, bool>) {
+      if (!j.is_boolean()) fail(where + " must be true or false");
+      value = j.get<bool>();
+    } else if constexpr (std::is_integral_v<T>) {
+      if (!j.is_number_integer()) fail(where + " must be a whole number");
+      if (std::is_unsigned_v<T> && !j.is_number_unsigned()) fail(where + " must not be negative");
+      value = j.get<T>();
+    } else {
+      if (!j.is_number()) fail(where + " must be a number");
+      value = j.get<T>();
+    }
+  }
+  // Unknown sections or keys are typos the user wants to hear about, not silently ignore.
+  void check_unknown() const {
+    for (const auto& [name, value] : in_.items()) {
+      if (name == "preset") continue;
+      if (!known_sections_.count(name)) fail("unknown section \"" + name + "\"");
+      for (const auto& [key, unused] : value.items())
+        if (!known_keys_.at(name).count(key)) fail("unknown key \"" + name + "." + key + "\"");
+    }
+  }
+  [[noreturn]] void fail(const std::string& what) const { throw IoError(origin_ + ": " + what); }
+
+ private:
+  const json& in_;
+  std::string origin_;
+  std::string name_;
+  const json* current_ = nullptr;
+  std::set<std::string> known_sections_;
+  std::map<std::string, std::set<std::string>> known_keys_;
+};
+
+}  // namespace
+
+void PipelineConfig::validate() const {
+  local_cloud.validate();
+  localizer.validate();
+  segment_map.validate();
+}
+
+std::vector<std::string> pipeline_preset_names() { return {"kitti-hdl64", "sparse-keyframes"}; }
+
+PipelineConfig pipeline_preset(const std::string& name) {
+  PipelineConfig c;
+  c.preset = name;
+  if (name == "kitti-hdl64") return c;  // the struct defaults are the paper's
+  if (name == "sparse-keyframes") {
+    // ../shared/data/README.md: keyframes already downsampled to ~0.2 m spacing collapse to
+    // one segment with the paper's 0.1 m voxels / 2 points / 0.2 m clustering.
+    SegmentationConfig& s = c.localizer.segmentation;
+    s.voxel.leaf_m = 0.2f;
+    s.voxel.min_points_per_voxel = 1;
+    s.segmenter.cluster_distance_m = 0.4f;
+    s.segmenter.min_points = 30;
+    c.local_cloud.min_travel_between_scans_m = 0.0;  // keyframes are already metres apart
+    return c;
+  }
+  std::string known;
+  for (const std::string& n : pipeline_preset_names()) known += (known.empty() ? "" : ", ") + n;
+  throw std::invalid_argument("unknown preset \"" + name + "\" (known: " + known + ")");
+}
+
+PipelineConfig parse_pipeline_config(const std::string& json_text, const std::string& origin) {
+  json in;
+  try {
+    in = json::parse(json_text);
+  } catch (const json::parse_error& e) {
+    throw IoError(origin + ": not valid JSON: " + e.what());
+  }
+  if (!in.is_object()) throw IoError(origin + ": the config must be a JSON object");
+  std::string preset = "kitti-hdl64";
+  if (in.contains("preset")) {
+    if (!in["preset"].is_string()) throw IoError(origin + ": \"preset\" must be a string");
+    preset = in["preset"].get<std::string>();
+  }
+  PipelineConfig c;
+  try {
+    c = pipeline_preset(preset);
+  } catch (const std::invalid_argument& e) {
+    throw IoError(origin + ": " + e.what());
+  }
+  Reader reader(in, origin);
+  visit_fields(reader, c);
+  reader.check_unknown();
+  try {
+    c.validate();
+  } catch (const std::invalid_argument& e) {
+    throw IoError(origin + ": invalid value: " + e.what());
+  }
+  return c;
+}
+
+PipelineConfig read_pipeline_config(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw IoError(path + ": cannot open config file");
+  std::ostringstream text;
+  text << f.rdbuf();
+  if (f.bad()) throw IoError(path + ": read error");
+  return parse_pipeline_config(text.str(), path);
+}
+
+std::string to_json(const PipelineConfig& config) {
+  PipelineConfig copy = config;
+  Writer writer;
+  writer.out["preset"] = config.preset;
+  visit_fields(writer, copy);
+  return writer.out.dump(2);
+}
+
+}  // namespace io
+}  // namespace segmatch
