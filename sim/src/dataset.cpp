@@ -1,4 +1,5 @@
 #include "segmatch/sim/dataset.h"
+#include "segmatch/sim/city.h"
 
 #include "segmatch/io/cloud_io.h"
 #include "segmatch/io/pose_io.h"
@@ -210,13 +211,11 @@ DatasetSummary generate_dataset(const DatasetConfig& c, const std::string& out_d
   const fs::path out(out_dir);
   fs::create_directories(out / "ground_truth");
   if (progress) progress("world", 0, 1);
-  const World world = generate_world(c.world);
-  const World changed = change_world(world, c.change);
-  Rng rng(mix_seed(c.world.seed, 0x7a5e));
-  const Route first_route = plan_route(world.streets, c.first_length_m, rng);
-  const Route second_route = plan_revisit_route(world.streets, first_route, c.second_length_m, rng);
-  const Traversal first = drive(world, first_route, c.drive_first);
-  const Traversal second = drive(changed, second_route, c.drive_second);
+  const City city = make_city(c);
+  const World& world = city.world;
+  const World& changed = city.changed;
+  const Traversal& first = city.first;
+  const Traversal& second = city.second;
   const auto revisits = match_revisits(first, second);
   if (progress) progress("world", 1, 1);
 
