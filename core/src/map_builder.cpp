@@ -1,0 +1,85 @@
+#include "segmatch/core/map_builder.h"
+
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+
+namespace segmatch {
+namespace {
+
+double ms_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+}  // namespace
+
+void MapBuilderConfig::validate() const {
+  local_cloud.validate();
+  segmentation.validate();
+  segment_map.validate();
+  if (!(map_every_m > 0.0) || !std::isfinite(map_every_m))
+    throw std::invalid_argument("MapBuilderConfig.map_every_m must be positive");
+}
+
+MapBuilder::MapBuilder(const MapBuilderConfig& config)
+    : config_(config), local_(config.local_cloud), map_(config.segment_map) {
+  config_.validate();
+}
+
+bool MapBuilder::add_scan(const PointCloud& points_sensor, const Pose3d& T_world_sensor, uint32_t scan_index,
+                          const std::vector<uint32_t>* labels) {
+  if (has_scan_) odometer_m_ += (T_world_sensor.translation() - T_world_last_.translation()).norm();
+  has_scan_ = true;
+  T_world_last_ = T_world_sensor;
+  last_index_ = scan_index;
+  has_labels_ = has_labels_ || labels != nullptr;
+  const auto start = std::chrono::steady_clock::now();
+  local_.add_scan(points_sensor, T_world_sensor, labels);
+  timings_.accumulate_ms += ms_since(start);
+  if (odometer_m_ - segmented_at_m_ < config_.map_every_m) return false;
+  segment_local_cloud();
+  return true;
+}
+
+bool MapBuilder::finish() {
+  // Nothing new since the last segmented cloud: the same crop would add nothing.
+  if (!has_scan_ || (local_clouds_ > 0 && odometer_m_ == segmented_at_m_)) return false;
+  segment_local_cloud();
+  return true;
+}
+
+void MapBuilder::segment_local_cloud() {
+  segmented_at_m_ = odometer_m_;
+  ++local_clouds_;
+  auto start = std::chrono::steady_clock::now();
+  std::vector<uint32_t> labels;
+  const PointCloud cloud = local_.crop(T_world_last_, &labels);
+  timings_.crop_ms += ms_since(start);
+
+  ModuleTimings t;
+  Segments segments = extract_segments(cloud, T_world_last_.translation().cast<float>(), config_.segmentation,
+                                       has_labels_ ? &labels : nullptr, &t);
+  timings_.voxel_ms += t.voxel_ms;
+  timings_.ground_ms += t.ground_ms;
+  timings_.segment_ms += t.segment_ms;
+  timings_.describe_ms += t.describe_ms;
+  extracted_segments_ += segments.size();
+
+  start = std::chrono::steady_clock::now();
+  map_.add(std::move(segments));
+  // SegmentMap replaces a segment only by a view with more points and appends new ones, so a
+  // changed point count or a new index is exactly a view from this local cloud.
+  const Segments& all = map_.segments();
+  for (size_t i = 0; i < all.size(); ++i) {
+    if (i == keyframe_of_segment_.size()) {
+      keyframe_of_segment_.push_back(last_index_);
+      points_of_segment_.push_back(all[i].points.size());
+    } else if (all[i].points.size() != points_of_segment_[i]) {
+      keyframe_of_segment_[i] = last_index_;
+      points_of_segment_[i] = all[i].points.size();
+    }
+  }
+  timings_.merge_ms += ms_since(start);
+}
+
+}  // namespace segmatch

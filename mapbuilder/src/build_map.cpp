@@ -1,0 +1,176 @@
+#include "build_map.h"
+
+#include <segmatch/cli/progress.h>
+#include <segmatch/core/map_builder.h>
+#include <segmatch/core/matcher.h>
+#include <segmatch/io/pipeline_config.h>
+#include <segmatch/io/sequence.h>
+#include <segmatch/storage/map_writer.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <vector>
+
+namespace fs = std::filesystem;
+
+namespace segmatch::mapbuilder {
+namespace {
+
+constexpr const char* kClassifierFormat = "opencv-rtrees-yaml";
+
+// Refuses before any work is done, so an existing map is never put at risk by a typo.
+void check_output(const BuildOptions& o) {
+  const fs::path out(o.output);
+  if (fs::is_directory(out)) throw UsageError("output " + o.output + " is a folder, not a map file");
+  if (fs::exists(out) && !o.force)
+    throw UsageError("output " + o.output + " already exists: pass --force to replace it");
+  const fs::path folder = out.has_parent_path() ? out.parent_path() : fs::path(".");
+  if (!fs::is_directory(folder)) throw UsageError("output folder " + folder.string() + " does not exist");
+}
+
+io::PipelineConfig load_config(const BuildOptions& o) {
+  if (!o.config_path.empty()) return io::read_pipeline_config(o.config_path);
+  try {
+    return o.preset.empty() ? io::PipelineConfig{} : io::pipeline_preset(o.preset);
+  } catch (const std::invalid_argument& e) {
+    throw UsageError(std::string("--preset: ") + e.what());
+  }
+}
+
+MapBuilderConfig builder_config(const io::PipelineConfig& pipeline, double map_every_m) {
+  MapBuilderConfig c;
+  c.local_cloud = pipeline.local_cloud;
+  c.segmentation = pipeline.localizer.segmentation;
+  c.segment_map = pipeline.segment_map;
+  c.map_every_m = map_every_m;
+  try {
+    c.validate();
+  } catch (const std::invalid_argument& e) {
+    throw UsageError(std::string("invalid configuration: ") + e.what());
+  }
+  return c;
+}
+
+std::string read_file_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw io::IoError(path + ": cannot open the classifier model file");
+  std::ostringstream bytes;
+  bytes << in.rdbuf();
+  if (in.bad()) throw io::IoError(path + ": read error");
+  return bytes.str();
+}
+
+// The explicit model must be valid; the default one is optional (a fresh checkout has none).
+std::optional<storage::ClassifierBlob> load_classifier(const BuildOptions& o) {
+  if (o.no_classifier) return std::nullopt;
+  std::string path = o.classifier_path;
+  if (path.empty()) {
+    path = SEGMATCH_DEFAULT_MODEL;
+    if (!fs::exists(path)) {
+      std::fprintf(stderr,
+                   "segmatch-mapbuilder: warning: default classifier %s not found, building the map "
+                   "without a classifier (pass --classifier FILE to add one)\n",
+                   path.c_str());
+      return std::nullopt;
+    }
+  }
+  storage::ClassifierBlob blob{kClassifierFormat, read_file_bytes(path)};
+  try {
+    RandomForestMatcher::load(blob.bytes);
+  } catch (const std::exception& e) {
+    throw io::IoError(path + ": not a valid classifier model: " + e.what());
+  }
+  return blob;
+}
+
+struct ScanRange {
+  size_t first = 0, last = 0, stride = 1;
+  size_t count() const { return (last - first) / stride + 1; }
+};
+
+ScanRange scan_range(const BuildOptions& o, const io::Sequence& seq) {
+  const size_t size = seq.size();
+  ScanRange r{o.first.value_or(0), o.last.value_or(size - 1), o.stride};
+  const std::string where = " (" + seq.folder() + " has scans 0.." + std::to_string(size - 1) + ")";
+  if (r.stride == 0) throw UsageError("--stride must be at least 1");
+  if (r.first >= size) throw UsageError("--first " + std::to_string(r.first) + " is past the last scan" + where);
+  if (r.last >= size) throw UsageError("--last " + std::to_string(r.last) + " is past the last scan" + where);
+  if (r.first > r.last)
+    throw UsageError("empty scan range: --first " + std::to_string(r.first) + " is after --last " +
+                     std::to_string(r.last) + ", 0 scans to map");
+  return r;
+}
+
+storage::MapMetadata metadata_for(const BuildOptions& o, const io::PipelineConfig& config) {
+  storage::MapMetadata m;
+  m.name = o.name.empty() ? fs::path(o.output).stem().string() : o.name;
+  m.tool_version = std::string("segmatch-mapbuilder ") + SEGMATCH_VERSION;
+  m.parameters_json = io::to_json(config);
+  return m;
+}
+
+void print_summary(const MapBuilder& b, size_t scans, double seconds, const std::string& path) {
+  const double km = b.distance_driven_m() / 1000.0;
+  const double bytes = static_cast<double>(fs::file_size(path));
+  std::printf("map:          %s\n", path.c_str());
+  std::printf("driven:       %.3f km\n", km);
+  std::printf("scans:        %zu\n", scans);
+  std::printf("local clouds: %zu\n", b.local_clouds());
+  std::printf("segments:     %zu (from %zu extracted views)\n", b.segments().size(), b.extracted_segments());
+  std::printf("build time:   %s (%.1f scans/s)\n", cli::Progress::format_duration(seconds).c_str(),
+              seconds > 0 ? scans / seconds : 0.0);
+  char per_km[64] = "";
+  if (km > 0) std::snprintf(per_km, sizeof per_km, " (%.2f MB/km)", bytes / 1e6 / km);
+  std::printf("file size:    %.2f MB%s\n", bytes / 1e6, per_km);
+}
+
+}  // namespace
+
+int build_map(const BuildOptions& o, const volatile std::sig_atomic_t* stop_signal) {
+  const auto start = std::chrono::steady_clock::now();
+  check_output(o);
+  const io::PipelineConfig config = load_config(o);
+  MapBuilder builder(builder_config(config, o.map_every_m));
+  const std::optional<storage::ClassifierBlob> classifier = load_classifier(o);
+  if (!fs::is_directory(o.input)) throw UsageError("input folder " + o.input + " does not exist");
+  const io::Sequence seq = io::Sequence::open(o.input);
+  const ScanRange range = scan_range(o, seq);
+
+  // Created before the loop: an unwritable target fails now, and an interrupted build leaves
+  // nothing behind (the writer's destructor deletes its temporary file).
+  storage::MapWriter writer = storage::MapWriter::create(o.output, metadata_for(o, config), o.force);
+  std::vector<storage::Keyframe> trajectory;
+  trajectory.reserve(range.count());
+  {
+    cli::Progress progress("map " + fs::path(o.input).filename().string(), range.count(), "scans");
+    for (size_t i = range.first; i <= range.last; i += range.stride) {
+      if (*stop_signal) break;
+      const io::CloudData scan = seq.scan(i);
+      builder.add_scan(scan.points, seq.poses()[i], static_cast<uint32_t>(i),
+                       scan.labels.empty() ? nullptr : &scan.labels);
+      trajectory.push_back({static_cast<uint32_t>(i), seq.times()[i], seq.poses()[i]});
+      progress.advance();
+    }
+    if (!*stop_signal) builder.finish();
+  }
+  auto interrupted = [&] {
+    if (!*stop_signal) return false;
+    std::fprintf(stderr, "segmatch-mapbuilder: interrupted, no map written%s\n",
+                 fs::exists(o.output) ? " (the existing map is unchanged)" : "");
+    return true;
+  };
+  if (interrupted()) return 128 + *stop_signal;
+  writer.add_segments(builder.segments(), builder.keyframe_of_segment());
+  writer.set_trajectory(trajectory);
+  if (classifier) writer.set_classifier(*classifier);
+  if (interrupted()) return 128 + *stop_signal;  // last chance: after commit() the map exists
+  writer.commit();
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  print_summary(builder, trajectory.size(), seconds, o.output);
+  return 0;
+}
+
+}  // namespace segmatch::mapbuilder

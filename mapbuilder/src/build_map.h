@@ -1,0 +1,39 @@
+// What segmatch-mapbuilder does once its arguments are parsed: reads a sequence, builds the
+// segment map with core's MapBuilder and writes it atomically with storage's MapWriter.
+#pragma once
+
+#include <csignal>
+#include <cstddef>
+#include <optional>
+#include <stdexcept>
+#include <string>
+
+namespace segmatch::mapbuilder {
+
+// A problem with the command line itself (exit code 2), as opposed to a failure found while
+// reading or writing files (exit code 1).
+class UsageError : public std::runtime_error {
+ public:
+  explicit UsageError(const std::string& message) : std::runtime_error(message) {}
+};
+
+struct BuildOptions {
+  std::string input;            // sequence folder (KITTI or PCD keyframes)
+  std::string output;           // map file
+  std::string config_path;      // pipeline config JSON (empty: preset)
+  std::string preset;           // pipeline preset (empty: the default, kitti-hdl64)
+  std::string classifier_path;  // empty: the default model if present
+  bool no_classifier = false;
+  std::string name;             // map name (empty: the output file's stem)
+  std::optional<size_t> first, last;  // scan range, inclusive (default: the whole sequence)
+  size_t stride = 1;            // use every stride-th scan of the range
+  double map_every_m = 5.0;     // MapBuilderConfig::map_every_m
+  bool force = false;           // replace an existing map
+};
+
+// Builds the map. Returns the process exit code: 0 written, 128 + signal when *stop_signal
+// became non-zero during the build (no map written, an existing one kept). Throws UsageError,
+// io::IoError, storage::StorageError or std::exception on failures.
+int build_map(const BuildOptions& options, const volatile std::sig_atomic_t* stop_signal);
+
+}  // namespace segmatch::mapbuilder
