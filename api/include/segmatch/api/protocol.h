@@ -1,0 +1,206 @@
+// The localization protocol (docs/protocol.md, byte by byte): framed little-endian messages
+// over TCP. Every frame is a 12-byte header (magic "SGMQ", version u16, type u16, payload
+// length u32) followed by the payload.
+//
+// Encoding never fails on a valid struct. Decoding never throws and never reads outside the
+// given bytes: it returns a DecodeStatus saying what is wrong with them, and only kOk means
+// the output was filled.
+#pragma once
+
+#include <segmatch/core/types.h>
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace segmatch {
+namespace api {
+
+constexpr std::array<uint8_t, 4> kMagic = {'S', 'G', 'M', 'Q'};
+constexpr uint16_t kProtocolVersion = 1;
+constexpr size_t kHeaderBytes = 12;
+
+enum class MessageType : uint16_t {
+  kHello = 0x0001,      // request: shared-secret token (first message when the server has one)
+  kPing = 0x0002,
+  kInfo = 0x0003,
+  kLocalize = 0x0004,
+  kHelloOk = 0x8001,    // replies have the high bit set
+  kPong = 0x8002,
+  kInfoReply = 0x8003,
+  kLocalizeReply = 0x8004,
+  kError = 0x80FF,
+};
+bool is_known_type(uint16_t type);
+const char* to_string(MessageType type);
+
+enum class DecodeStatus {
+  kOk,
+  kIncomplete,       // header: fewer than kHeaderBytes; frame: payload not all there yet
+  kBadMagic,
+  kBadVersion,
+  kUnknownType,
+  kTooLarge,         // payload length over the configured limit
+  kTruncated,        // payload shorter than its fields need
+  kTrailingBytes,    // payload longer than its fields
+  kBadPointCount,    // point count * stride disagrees with the payload length
+  kBadStride,        // point stride other than 3 or 4
+  kNonFinite,        // NaN or Inf in a coordinate, pose or radius
+  kBadQuaternion,    // norm not within kQuaternionNormTolerance of 1
+  kBadField,         // reserved flag bits set, string too long, negative radius, ...
+};
+const char* to_string(DecodeStatus status);
+
+// Error codes of ERROR replies (u16 on the wire).
+enum class ErrorCode : uint16_t {
+  kBadMagic = 1,
+  kUnsupportedVersion = 2,
+  kUnknownType = 3,
+  kMalformed = 4,         // truncated payload, trailing bytes, bad field
+  kFrameTooLarge = 5,
+  kBadPointCount = 6,
+  kNonFinite = 7,
+  kBadQuaternion = 8,
+  kAuthRequired = 9,      // the server has a token and the first message was not HELLO
+  kAuthFailed = 10,       // wrong token
+  kServerBusy = 11,       // max connections reached
+  kInternal = 12,         // the localizer threw; the connection stays usable
+  kUnexpectedMessage = 13,  // a reply type sent as a request, or a second HELLO
+  kShuttingDown = 14,
+};
+ErrorCode error_code_for(DecodeStatus status);
+// Whether the byte stream is still in sync after this decode failure (the whole frame could
+// be skipped): header errors lose the framing, payload errors do not.
+bool stream_in_sync_after(DecodeStatus status);
+
+struct Limits {
+  size_t max_payload_bytes = 64u << 20;  // 64 MiB: ~4.2 M points of 4 floats
+  size_t max_string_bytes = 1u << 20;    // any one string (token, reason, JSON, message)
+};
+constexpr double kQuaternionNormTolerance = 1e-3;  // quaternions are normalised after the check
+
+struct Header {
+  uint16_t version = kProtocolVersion;
+  uint16_t type = 0;
+  uint32_t payload_bytes = 0;
+};
+
+// Checks the first kHeaderBytes of `data`: magic, version, known type, length within limits.
+DecodeStatus decode_header(const uint8_t* data, size_t size, const Limits& limits, Header& out);
+
+// ---- messages -----------------------------------------------------------------------------
+
+struct HelloRequest { std::string token; };
+struct HelloOkReply {};
+struct PingRequest { uint64_t nonce = 0; };
+struct PongReply { uint64_t nonce = 0; };
+struct InfoRequest {};
+
+struct InfoReply {
+  uint16_t protocol_version = kProtocolVersion;
+  std::string map_name;
+  uint64_t segment_count = 0;
+  Eigen::Vector3d extent_min = Eigen::Vector3d::Zero();  // bbox of segment centroids (map frame)
+  Eigen::Vector3d extent_max = Eigen::Vector3d::Zero();
+  std::string parameters_json;  // the map's PipelineConfig (io::to_json)
+};
+
+// Flag bits of LocalizeRequest::flags.
+constexpr uint32_t kFlagHasPrior = 1u << 0;
+constexpr uint32_t kKnownFlags = kFlagHasPrior;
+
+struct LocalizeRequest {
+  uint64_t request_id = 0;
+  uint32_t flags = 0;
+  // The sensor in the vehicle's local (odometry) frame: the server crops the local cylinder
+  // around its position.
+  Eigen::Vector3d sensor_position_local = Eigen::Vector3d::Zero();
+  Eigen::Quaterniond sensor_orientation_local = Eigen::Quaterniond::Identity();
+  // Used when flags & kFlagHasPrior: a guess of T_map_local and how far (metres, horizontal
+  // and vertical alike) the sensor's map position may be from where that guess puts it.
+  Pose3d T_map_local_prior = Pose3d::Identity();
+  double prior_radius_m = 0.0;
+  uint32_t point_stride = 4;  // floats per point on the wire: 3 (x y z) or 4 (x y z intensity)
+  PointCloud points;          // local frame; intensity 0 when the stride is 3
+};
+
+enum class LocalizeStatus : uint16_t { kLocalized = 0, kNotLocalized = 1, kOutsidePrior = 2 };
+const char* to_string(LocalizeStatus status);
+
+struct ModuleTimingsMs {
+  float voxel = 0, ground = 0, segment = 0, describe = 0, retrieve = 0, classify = 0, verify = 0,
+        refine = 0, total = 0, server_total = 0;  // server_total: receipt to reply, crop included
+};
+constexpr size_t kTimingCount = 10;
+
+struct LocalizeReply {
+  uint64_t request_id = 0;
+  LocalizeStatus status = LocalizeStatus::kNotLocalized;
+  std::string reason;                    // empty when localized
+  Pose3d T_map_local = Pose3d::Identity();  // on the wire: quaternion w x y z + translation
+  uint32_t inliers = 0;
+  float confidence = 0.f;
+  uint32_t support = 0;
+  std::vector<uint64_t> matched_segment_ids;  // map segment ids of the inliers
+  ModuleTimingsMs timings;
+};
+
+struct ErrorReply {
+  ErrorCode code = ErrorCode::kInternal;
+  std::string message;
+};
+
+// Each encode returns a whole frame (header + payload).
+std::vector<uint8_t> encode(const HelloRequest& m);
+std::vector<uint8_t> encode(const HelloOkReply& m);
+std::vector<uint8_t> encode(const PingRequest& m);
+std::vector<uint8_t> encode(const PongReply& m);
+std::vector<uint8_t> encode(const InfoRequest& m);
+std::vector<uint8_t> encode(const InfoReply& m);
+std::vector<uint8_t> encode(const LocalizeRequest& m);
+std::vector<uint8_t> encode(const LocalizeReply& m);
+std::vector<uint8_t> encode(const ErrorReply& m);
+
+// Each decode reads one payload (without the header).
+DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, HelloRequest& out);
+DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, HelloOkReply& out);
+DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, PingRequest& out);
+DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, PongReply& out);
+DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, InfoRequest& out);
+DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, InfoReply& out);
+DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, LocalizeRequest& out);
+DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, LocalizeReply& out);
+DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, ErrorReply& out);
+
+// A whole frame in one buffer: decodes the header, checks that exactly header + payload bytes
+// are present (kIncomplete if fewer, kTrailingBytes if more) and decodes the payload as M,
+// refusing a frame of another type with kUnknownType.
+template <typename M>
+DecodeStatus decode_frame(const std::vector<uint8_t>& frame, const Limits& limits, M& out);
+
+MessageType type_of(const HelloRequest&);
+MessageType type_of(const HelloOkReply&);
+MessageType type_of(const PingRequest&);
+MessageType type_of(const PongReply&);
+MessageType type_of(const InfoRequest&);
+MessageType type_of(const InfoReply&);
+MessageType type_of(const LocalizeRequest&);
+MessageType type_of(const LocalizeReply&);
+MessageType type_of(const ErrorReply&);
+
+template <typename M>
+DecodeStatus decode_frame(const std::vector<uint8_t>& frame, const Limits& limits, M& out) {
+  Header header;
+  const DecodeStatus s = decode_header(frame.data(), frame.size(), limits, header);
+  if (s != DecodeStatus::kOk) return s;
+  if (header.type != static_cast<uint16_t>(type_of(out))) return DecodeStatus::kUnknownType;
+  const size_t total = kHeaderBytes + header.payload_bytes;
+  if (frame.size() < total) return DecodeStatus::kIncomplete;
+  if (frame.size() > total) return DecodeStatus::kTrailingBytes;
+  return decode(frame.data() + kHeaderBytes, header.payload_bytes, limits, out);
+}
+
+}  // namespace api
+}  // namespace segmatch

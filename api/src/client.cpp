@@ -1,0 +1,90 @@
+#include "segmatch/api/client.h"
+
+namespace segmatch {
+namespace api {
+
+Client::Client(const std::string& host, uint16_t port, const ClientOptions& options)
+    : options_(options), where_(host + ":" + std::to_string(port)) {
+  try {
+    socket_ = connect_tcp(host, port, std::chrono::milliseconds(static_cast<int64_t>(options.connect_timeout_s * 1000)));
+  } catch (const std::exception& e) {
+    throw ClientError(ClientError::Kind::kConnect, e.what());
+  }
+  if (!options_.token.empty()) {
+    send_raw(encode(HelloRequest{options_.token}));
+    expect<HelloOkReply>(MessageType::kHelloOk);
+  }
+}
+
+void Client::fail(ClientError::Kind kind, const std::string& message) {
+  broken_ = true;
+  socket_.close();
+  throw ClientError(kind, where_ + ": " + message);
+}
+
+void Client::send_raw(const std::vector<uint8_t>& bytes) {
+  if (broken_) throw ClientError(ClientError::Kind::kClosed, where_ + ": connection is closed");
+  const IoResult r = write_all(socket_.fd(), bytes.data(), bytes.size(), deadline_after(options_.send_timeout_s));
+  if (r == IoResult::kTimeout) fail(ClientError::Kind::kTimeout, "send timed out");
+  if (r != IoResult::kOk) fail(ClientError::Kind::kClosed, std::string("send failed: ") + to_string(r));
+}
+
+Frame Client::read_frame() {
+  if (broken_) throw ClientError(ClientError::Kind::kClosed, where_ + ": connection is closed");
+  const Clock::time_point deadline = deadline_after(options_.reply_timeout_s);
+  uint8_t header[kHeaderBytes];
+  auto check = [&](IoResult r) {
+    if (r == IoResult::kTimeout) fail(ClientError::Kind::kTimeout, "no reply within " + std::to_string(options_.reply_timeout_s) + " s");
+    if (r != IoResult::kOk) fail(ClientError::Kind::kClosed, std::string("reading the reply: ") + to_string(r));
+  };
+  check(read_exact(socket_.fd(), header, kHeaderBytes, deadline));
+  Frame f;
+  const DecodeStatus s = decode_header(header, kHeaderBytes, options_.limits, f.header);
+  if (s != DecodeStatus::kOk) fail(ClientError::Kind::kProtocol, std::string("bad reply header: ") + to_string(s));
+  f.payload.resize(f.header.payload_bytes);
+  check(read_exact(socket_.fd(), f.payload.data(), f.payload.size(), deadline));
+  return f;
+}
+
+template <typename Reply>
+Reply Client::expect(MessageType type) {
+  const Frame f = read_frame();
+  if (f.header.type == static_cast<uint16_t>(MessageType::kError)) {
+    ErrorReply e;
+    if (decode(f.payload.data(), f.payload.size(), options_.limits, e) != DecodeStatus::kOk)
+      fail(ClientError::Kind::kProtocol, "undecodable ERROR reply");
+    throw ClientError(ClientError::Kind::kServer, where_ + ": server error " +
+                      std::to_string(static_cast<int>(e.code)) + ": " + e.message, e.code);
+  }
+  if (f.header.type != static_cast<uint16_t>(type))
+    fail(ClientError::Kind::kProtocol, std::string("expected ") + to_string(type) + ", got type " +
+                                           std::to_string(f.header.type));
+  Reply reply;
+  const DecodeStatus s = decode(f.payload.data(), f.payload.size(), options_.limits, reply);
+  if (s != DecodeStatus::kOk) fail(ClientError::Kind::kProtocol, std::string("bad ") + to_string(type) + ": " + to_string(s));
+  return reply;
+}
+
+uint64_t Client::ping(uint64_t nonce) {
+  send_raw(encode(PingRequest{nonce}));
+  const PongReply pong = expect<PongReply>(MessageType::kPong);
+  if (pong.nonce != nonce) fail(ClientError::Kind::kProtocol, "PONG nonce differs from the PING's");
+  return pong.nonce;
+}
+
+InfoReply Client::info() {
+  send_raw(encode(InfoRequest{}));
+  return expect<InfoReply>(MessageType::kInfoReply);
+}
+
+LocalizeReply Client::localize(const LocalizeRequest& request) {
+  send_raw(encode(request));
+  LocalizeReply reply = expect<LocalizeReply>(MessageType::kLocalizeReply);
+  if (reply.request_id != request.request_id)
+    fail(ClientError::Kind::kProtocol, "reply for request " + std::to_string(reply.request_id) + ", expected " +
+                                           std::to_string(request.request_id));
+  return reply;
+}
+
+}  // namespace api
+}  // namespace segmatch

@@ -1,0 +1,172 @@
+// LOCALIZE and LOCALIZE_REPLY payloads (docs/protocol.md, sections 5.4 and 6.4).
+#include "segmatch/api/protocol.h"
+
+#include "codec_util.h"
+
+#include <cmath>
+
+namespace segmatch {
+namespace api {
+namespace {
+
+// Fixed part of a LOCALIZE payload before the points.
+constexpr size_t kLocalizeFixedBytes = 8 + 4 + 3 * 8 + 4 * 8 + 4 * 8 + 3 * 8 + 8 + 4 + 4;
+static_assert(kLocalizeFixedBytes == 140, "docs/protocol.md documents 140 bytes");
+
+void put_quaternion(wire::Writer& w, const Eigen::Quaterniond& q_in) {
+  const Eigen::Quaterniond q = q_in.normalized();
+  w.f64(q.w()), w.f64(q.x()), w.f64(q.y()), w.f64(q.z());
+}
+
+void put_pose(wire::Writer& w, const Pose3d& T) {
+  put_quaternion(w, Eigen::Quaterniond(T.linear()));
+  for (int i = 0; i < 3; ++i) w.f64(T.translation()[i]);
+}
+
+// Reads w x y z; kNonFinite / kBadQuaternion on bad values (checked once the read succeeded).
+DecodeStatus get_quaternion(wire::Reader& r, Eigen::Quaterniond& q) {
+  const double w = r.f64(), x = r.f64(), y = r.f64(), z = r.f64();
+  if (r.failed()) return DecodeStatus::kOk;  // reported as truncated by finish()
+  if (!(std::isfinite(w) && std::isfinite(x) && std::isfinite(y) && std::isfinite(z))) return DecodeStatus::kNonFinite;
+  const double norm = std::sqrt(w * w + x * x + y * y + z * z);
+  if (!(std::abs(norm - 1.0) <= kQuaternionNormTolerance)) return DecodeStatus::kBadQuaternion;
+  q = Eigen::Quaterniond(w / norm, x / norm, y / norm, z / norm);
+  return DecodeStatus::kOk;
+}
+
+DecodeStatus get_vector(wire::Reader& r, Eigen::Vector3d& v) {
+  for (int i = 0; i < 3; ++i) v[i] = r.f64();
+  if (!r.failed() && !v.allFinite()) return DecodeStatus::kNonFinite;
+  return DecodeStatus::kOk;
+}
+
+DecodeStatus get_pose(wire::Reader& r, Pose3d& T) {
+  Eigen::Quaterniond q = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  DecodeStatus s = get_quaternion(r, q);
+  const DecodeStatus st = get_vector(r, t);
+  if (s == DecodeStatus::kOk) s = st;
+  T = Pose3d::Identity();
+  T.linear() = q.toRotationMatrix();
+  T.translation() = t;
+  return s;
+}
+
+// The first failure wins; a read past the end is reported as truncated.
+DecodeStatus first_error(std::initializer_list<DecodeStatus> statuses) {
+  for (DecodeStatus s : statuses)
+    if (s != DecodeStatus::kOk) return s;
+  return DecodeStatus::kOk;
+}
+
+DecodeStatus get_points(wire::Reader& r, uint32_t count, uint32_t stride, PointCloud& points) {
+  points.resize(count);
+  for (uint32_t i = 0; i < count; ++i) {
+    Point& p = points[i];
+    p.x = r.f32(), p.y = r.f32(), p.z = r.f32();
+    p.intensity = stride == 4 ? r.f32() : 0.f;
+    if (!(std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z) && std::isfinite(p.intensity)))
+      return DecodeStatus::kNonFinite;
+  }
+  return DecodeStatus::kOk;
+}
+
+std::array<float*, kTimingCount> timing_fields(ModuleTimingsMs& t) {
+  return {&t.voxel, &t.ground, &t.segment, &t.describe, &t.retrieve, &t.classify,
+          &t.verify, &t.refine, &t.total, &t.server_total};
+}
+
+}  // namespace
+
+std::vector<uint8_t> encode(const LocalizeRequest& m) {
+  wire::Writer w;
+  const uint32_t stride = m.point_stride == 3 ? 3 : 4;
+  w.reserve(kLocalizeFixedBytes + m.points.size() * stride * 4);
+  w.u64(m.request_id);
+  w.u32(m.flags);
+  for (int i = 0; i < 3; ++i) w.f64(m.sensor_position_local[i]);
+  put_quaternion(w, m.sensor_orientation_local);
+  put_pose(w, m.T_map_local_prior);
+  w.f64(m.prior_radius_m);
+  w.u32(static_cast<uint32_t>(m.points.size()));
+  w.u32(stride);
+  for (const Point& p : m.points) {
+    w.f32(p.x), w.f32(p.y), w.f32(p.z);
+    if (stride == 4) w.f32(p.intensity);
+  }
+  return detail::frame(type_of(m), w);
+}
+
+DecodeStatus decode(const uint8_t* payload, size_t size, const Limits&, LocalizeRequest& out) {
+  if (size < kLocalizeFixedBytes) return DecodeStatus::kTruncated;
+  wire::Reader r(payload, size);
+  LocalizeRequest m;
+  m.request_id = r.u64();
+  m.flags = r.u32();
+  const DecodeStatus s_pos = get_vector(r, m.sensor_position_local);
+  const DecodeStatus s_q = get_quaternion(r, m.sensor_orientation_local);
+  const DecodeStatus s_prior = get_pose(r, m.T_map_local_prior);
+  m.prior_radius_m = r.f64();
+  const uint32_t count = r.u32();
+  m.point_stride = r.u32();
+  if (m.flags & ~kKnownFlags) return DecodeStatus::kBadField;
+  if (m.point_stride != 3 && m.point_stride != 4) return DecodeStatus::kBadStride;
+  // 64-bit arithmetic: count * stride * 4 cannot overflow.
+  if (kLocalizeFixedBytes + static_cast<uint64_t>(count) * m.point_stride * 4 != size)
+    return DecodeStatus::kBadPointCount;
+  DecodeStatus s = first_error({s_pos, s_q, s_prior});
+  if (s != DecodeStatus::kOk) return s;
+  if (!std::isfinite(m.prior_radius_m)) return DecodeStatus::kNonFinite;
+  if (m.prior_radius_m < 0.0) return DecodeStatus::kBadField;
+  s = get_points(r, count, m.point_stride, m.points);
+  if (s != DecodeStatus::kOk) return s;
+  s = detail::finish(r);
+  if (s == DecodeStatus::kOk) out = std::move(m);
+  return s;
+}
+
+std::vector<uint8_t> encode(const LocalizeReply& m) {
+  wire::Writer w;
+  w.u64(m.request_id);
+  w.u16(static_cast<uint16_t>(m.status));
+  w.u16(0);  // reserved
+  w.str(m.reason);
+  put_pose(w, m.T_map_local);
+  w.u32(m.inliers);
+  w.f32(m.confidence);
+  w.u32(m.support);
+  w.u32(static_cast<uint32_t>(m.matched_segment_ids.size()));
+  for (uint64_t id : m.matched_segment_ids) w.u64(id);
+  ModuleTimingsMs t = m.timings;
+  for (float* f : timing_fields(t)) w.f32(*f);
+  return detail::frame(type_of(m), w);
+}
+
+DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, LocalizeReply& out) {
+  wire::Reader r(payload, size);
+  LocalizeReply m;
+  m.request_id = r.u64();
+  const uint16_t status = r.u16();
+  const uint16_t reserved = r.u16();
+  m.reason = r.str(limits.max_string_bytes);
+  const DecodeStatus s_pose = get_pose(r, m.T_map_local);
+  m.inliers = r.u32();
+  m.confidence = r.f32();
+  m.support = r.u32();
+  const uint32_t ids = r.u32();
+  if (r.failed()) return r.too_long() ? DecodeStatus::kBadField : DecodeStatus::kTruncated;
+  if (static_cast<uint64_t>(ids) * 8 + kTimingCount * 4 != r.remaining()) return DecodeStatus::kTruncated;
+  m.matched_segment_ids.resize(ids);
+  for (uint64_t& id : m.matched_segment_ids) id = r.u64();
+  for (float* f : timing_fields(m.timings)) *f = r.f32();
+  DecodeStatus s = first_error({s_pose, detail::finish(r)});
+  if (s == DecodeStatus::kOk && (reserved != 0 || status > 2)) s = DecodeStatus::kBadField;
+  if (s == DecodeStatus::kOk && !std::isfinite(m.confidence)) s = DecodeStatus::kNonFinite;
+  if (s != DecodeStatus::kOk) return s;
+  m.status = static_cast<LocalizeStatus>(status);
+  out = std::move(m);
+  return s;
+}
+
+}  // namespace api
+}  // namespace segmatch

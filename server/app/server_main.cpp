@@ -1,0 +1,88 @@
+// segmatch-server: serves one segment map to many vehicles over the SGMQ protocol.
+#include <segmatch/server/server.h>
+
+#include <CLI/CLI.hpp>
+
+#include <sys/stat.h>
+
+#include <csignal>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <thread>
+
+using namespace segmatch;
+
+namespace {
+
+// The token comes from a file so it never shows in `ps` or shell history. Trailing
+// whitespace (the newline an editor adds) is not part of it.
+std::string read_token(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error("cannot read token file " + path);
+  std::ostringstream s;
+  s << in.rdbuf();
+  std::string token = s.str();
+  while (!token.empty() && std::isspace(static_cast<unsigned char>(token.back()))) token.pop_back();
+  if (token.empty()) throw std::runtime_error("token file " + path + " is empty");
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0 && (st.st_mode & 077))
+    std::cerr << "warning: token file " << path << " is readable by other users (chmod 600 it)\n";
+  return token;
+}
+
+// Blocks SIGINT/SIGTERM in every thread (they inherit the mask) so that only sigwait() in
+// main sees them; SIGPIPE is ignored (sends use MSG_NOSIGNAL anyway).
+sigset_t block_stop_signals() {
+  sigset_t set;
+  sigemptyset(&set);
+  sigaddset(&set, SIGINT);
+  sigaddset(&set, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &set, nullptr);
+  std::signal(SIGPIPE, SIG_IGN);
+  return set;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"segmatch-server: localization against a segment map over TCP (docs/protocol.md)"};
+  std::string map_path, token_file;
+  server::ServerConfig config;
+  double max_frame_mb = 64.0;
+  app.add_option("--map", map_path, "segment map (.sqlite) built by segmatch-mapbuilder")->required();
+  app.add_option("--listen", config.listen_address, "address to listen on (default loopback)")->capture_default_str();
+  app.add_option("--port", config.port, "TCP port; 0 = ephemeral (the chosen port is printed)")->capture_default_str();
+  app.add_option("--workers", config.workers, "localization threads (default: number of cores)");
+  app.add_option("--token-file", token_file, "file holding the shared-secret token clients must send first");
+  app.add_option("--max-frame-mb", max_frame_mb, "largest accepted frame payload (MiB)")->capture_default_str()->check(CLI::Range(0.001, 4095.0));
+  app.add_option("--read-timeout-s", config.read_timeout_s, "drop a connection idle or stalled this long")->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--max-connections", config.max_connections, "connections served at once")->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--stats-interval-s", config.stats_interval_s, "counters line period (0 = none)")->capture_default_str();
+  CLI11_PARSE(app, argc, argv);
+  config.max_frame_bytes = static_cast<size_t>(max_frame_mb * 1024 * 1024);
+  const sigset_t stop_signals = block_stop_signals();
+  try {
+    if (!token_file.empty()) config.token = read_token(token_file);
+    std::cerr << "loading " << map_path << " ...\n";
+    std::shared_ptr<const server::LoadedMap> map = server::load_map(map_path);
+    for (const std::string& w : map->warnings) std::cerr << "warning: " << w << '\n';
+    std::cerr << "map '" << map->metadata.name << "': " << map->segment_count() << " segments, matcher "
+              << (map->config.localizer.matcher.type == MatcherType::kL2 ? "l2" : "random_forest") << ", local cloud radius "
+              << map->config.local_cloud.radius_m << " m" << (config.token.empty() ? "" : ", token required") << '\n';
+    server::Server server(config, map);
+    server.start();
+    std::cout << "listening on " << server.address() << std::endl;
+    int signal = 0;
+    sigwait(&stop_signals, &signal);
+    std::cerr << "signal " << signal << ": stopping (finishing in-flight requests)\n";
+    server.stop();
+    const server::ServerCounters c = server.counters();
+    std::cerr << "stopped: " << c.requests << " requests, " << c.localized << " localized, " << c.errors << " errors\n";
+    return 0;
+  } catch (const std::exception& e) {
+    std::cerr << "segmatch-server: " << e.what() << '\n';
+    return 1;
+  }
+}

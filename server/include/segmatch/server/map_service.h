@@ -1,0 +1,50 @@
+// A segment map ready to serve: opened with storage::MapReader, its parameters parsed
+// (io::parse_pipeline_config on the map's parameters_json), its classifier loaded, and a
+// Localizer built over its segments. Immutable once loaded, so any number of threads may
+// localize against one LoadedMap at once.
+//
+// Matcher fallback: when the map's parameters ask for the random forest but the map stores no
+// classifier, the map is served with the L2 matcher (MatcherConfig::l2_threshold) and a
+// warning is recorded in `warnings` (segmatch-server prints it). L2 localizes less often than
+// a trained forest but never needs one; refusing to start would leave vehicles with nothing.
+#pragma once
+
+#include <segmatch/api/protocol.h>
+#include <segmatch/core/localizer.h>
+#include <segmatch/io/pipeline_config.h>
+#include <segmatch/storage/map_types.h>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace segmatch {
+namespace server {
+
+struct LoadedMap {
+  std::string path;
+  storage::MapMetadata metadata;
+  io::PipelineConfig config;  // as served (after the L2 fallback, if any)
+  Eigen::Vector3d extent_min = Eigen::Vector3d::Zero();  // bbox of the segment centroids (map frame)
+  Eigen::Vector3d extent_max = Eigen::Vector3d::Zero();
+  std::unique_ptr<const Localizer> localizer;  // targets in map order; targets()[i].id = map id
+  bool fell_back_to_l2 = false;
+  std::vector<std::string> warnings;
+  size_t segment_count() const { return localizer ? localizer->targets().size() : 0; }
+};
+
+// Throws (storage::StorageError, io::IoError or std::runtime_error, each naming the file) when
+// the map cannot be read, has no parameters, a classifier of an unknown format or one that
+// disagrees with the parameters (use_shapes).
+std::shared_ptr<const LoadedMap> load_map(const std::string& path);
+
+api::InfoReply info_of(const LoadedMap& map);
+
+// One LOCALIZE: keeps the points within local_cloud.radius_m (horizontal) of the sensor,
+// localizes them, and with a prior refuses (kOutsidePrior, the pose still reported) a pose
+// that puts the sensor farther than prior_radius_m from where T_map_local_prior puts it.
+// Throws only what the localizer throws (a bug, reported to the client as kInternal).
+api::LocalizeReply localize_request(const LoadedMap& map, const api::LocalizeRequest& request);
+
+}  // namespace server
+}  // namespace segmatch

@@ -1,0 +1,181 @@
+// One connection: read a frame (header, then payload in bounded chunks), authenticate,
+// dispatch, reply, log. Decoding errors that keep the stream in sync are answered with ERROR
+// and the connection goes on; the others (bad magic, version, oversize) and authentication
+// failures are answered with ERROR and the connection is closed.
+#include "server_state.h"
+
+#include <chrono>
+#include <cstdio>
+#include <future>
+
+namespace segmatch {
+namespace server {
+namespace {
+
+using api::DecodeStatus;
+using api::ErrorCode;
+using api::MessageType;
+
+constexpr size_t kReadChunkBytes = 1u << 20;  // payload memory grows only as bytes arrive
+
+struct Handled {
+  std::vector<uint8_t> reply;
+  std::string detail;       // for the log line
+  std::string status = "ok";
+  bool is_localize = false, localized = false, error = false;
+  bool close_after = false;
+};
+
+Handled error_reply(ErrorCode code, const std::string& message, bool close_after) {
+  Handled h;
+  h.reply = api::encode(api::ErrorReply{code, message});
+  h.status = "error(" + std::to_string(static_cast<int>(code)) + ": " + message + ")";
+  h.error = true;
+  h.close_after = close_after;
+  return h;
+}
+
+// No early exit on the first differing byte (the length may leak; the bytes do not).
+bool same_token(const std::string& given, const std::string& expected) {
+  if (given.size() != expected.size()) return false;
+  unsigned char diff = 0;
+  for (size_t i = 0; i < given.size(); ++i) diff |= static_cast<unsigned char>(given[i] ^ expected[i]);
+  return diff == 0;
+}
+
+Handled handle_hello(Server::State& s, const std::vector<uint8_t>& payload, bool& authed) {
+  api::HelloRequest hello;
+  const DecodeStatus d = api::decode(payload.data(), payload.size(), s.limits, hello);
+  if (d != DecodeStatus::kOk) return error_reply(api::error_code_for(d), api::to_string(d), true);
+  if (!s.config.token.empty() && !same_token(hello.token, s.config.token))
+    return error_reply(ErrorCode::kAuthFailed, "wrong token", true);
+  authed = true;
+  Handled h;
+  h.reply = api::encode(api::HelloOkReply{});
+  return h;
+}
+
+using TimePoint = std::chrono::steady_clock::time_point;
+
+Handled handle_localize(Server::State& s, const std::vector<uint8_t>& payload, TimePoint start) {
+  api::LocalizeRequest request;
+  const DecodeStatus d = api::decode(payload.data(), payload.size(), s.limits, request);
+  if (d != DecodeStatus::kOk) {
+    Handled h = error_reply(api::error_code_for(d), api::to_string(d), false);
+    h.is_localize = true;
+    return h;
+  }
+  // The localization runs on the bounded worker pool; this connection thread waits for it.
+  std::packaged_task<api::LocalizeReply()> task([&s, &request] { return localize_request(*s.map, request); });
+  std::future<api::LocalizeReply> result = task.get_future();
+  s.pool->submit([&task] { task(); });
+  Handled h;
+  h.is_localize = true;
+  char detail[96];
+  try {
+    api::LocalizeReply reply = result.get();
+    reply.timings.server_total =
+        std::chrono::duration<float, std::milli>(std::chrono::steady_clock::now() - start).count();
+    h.reply = api::encode(reply);
+    h.status = api::to_string(reply.status);
+    h.localized = reply.status == api::LocalizeStatus::kLocalized;
+    std::snprintf(detail, sizeof(detail), " id=%llu points=%zu inliers=%u", static_cast<unsigned long long>(request.request_id),
+                  request.points.size(), reply.inliers);
+  } catch (const std::exception& e) {
+    h = error_reply(ErrorCode::kInternal, std::string("localization failed: ") + e.what(), false);
+    h.is_localize = true;
+    std::snprintf(detail, sizeof(detail), " id=%llu points=%zu", static_cast<unsigned long long>(request.request_id),
+                  request.points.size());
+  }
+  h.detail = detail;
+  return h;
+}
+
+Handled handle_frame(Server::State& s, const api::Header& header, const std::vector<uint8_t>& payload, bool& authed,
+                     TimePoint start) {
+  const auto type = static_cast<MessageType>(header.type);
+  if (type == MessageType::kHello) return handle_hello(s, payload, authed);
+  if (!authed) return error_reply(ErrorCode::kAuthRequired, "authenticate with HELLO first", true);
+  switch (type) {
+    case MessageType::kPing: {
+      api::PingRequest ping;
+      const DecodeStatus d = api::decode(payload.data(), payload.size(), s.limits, ping);
+      if (d != DecodeStatus::kOk) return error_reply(api::error_code_for(d), api::to_string(d), false);
+      Handled h;
+      h.reply = api::encode(api::PongReply{ping.nonce});
+      return h;
+    }
+    case MessageType::kInfo: {
+      api::InfoRequest info;
+      const DecodeStatus d = api::decode(payload.data(), payload.size(), s.limits, info);
+      if (d != DecodeStatus::kOk) return error_reply(api::error_code_for(d), api::to_string(d), false);
+      Handled h;
+      h.reply = api::encode(info_of(*s.map));
+      return h;
+    }
+    case MessageType::kLocalize:
+      return handle_localize(s, payload, start);
+    default:
+      return error_reply(ErrorCode::kUnexpectedMessage, std::string(api::to_string(type)) + " is not a request", false);
+  }
+}
+
+// Reads the payload in chunks so a client announcing 64 MiB and sending nothing costs 1 MiB.
+api::IoResult read_payload(int fd, size_t n, double timeout_s, std::vector<uint8_t>& payload) {
+  const api::Clock::time_point deadline = api::deadline_after(timeout_s);
+  payload.clear();
+  while (payload.size() < n) {
+    const size_t done = payload.size();
+    const size_t chunk = std::min(kReadChunkBytes, n - done);
+    payload.resize(done + chunk);
+    const api::IoResult r = api::read_exact(fd, payload.data() + done, chunk, deadline);
+    if (r != api::IoResult::kOk) return r;
+  }
+  return api::IoResult::kOk;
+}
+
+void log_request(Server::State& s, const std::string& peer, const char* type, const Handled& h, double ms) {
+  if (!s.config.log_requests) return;
+  char latency[48];
+  std::snprintf(latency, sizeof(latency), " latency_ms=%.1f", ms);
+  s.log(peer + " " + type + h.detail + " status=" + h.status + latency);
+}
+
+}  // namespace
+
+void serve_connection(Server::State& s, api::Socket socket, const std::string& peer) {
+  bool authed = s.config.token.empty();
+  std::vector<uint8_t> payload;
+  for (;;) {
+    uint8_t header_bytes[api::kHeaderBytes];
+    api::IoResult r = api::read_exact(socket.fd(), header_bytes, sizeof(header_bytes),
+                                      api::deadline_after(s.config.read_timeout_s), &s.stopping);
+    if (r == api::IoResult::kTimeout) s.log(peer + " closed: idle for " + std::to_string(s.config.read_timeout_s) + " s");
+    if (r != api::IoResult::kOk) return;
+    const auto start = std::chrono::steady_clock::now();
+    api::Header header;
+    const DecodeStatus d = api::decode_header(header_bytes, sizeof(header_bytes), s.limits, header);
+    Handled h;
+    if (!api::stream_in_sync_after(d)) {
+      h = error_reply(api::error_code_for(d), api::to_string(d), true);
+    } else {
+      r = read_payload(socket.fd(), header.payload_bytes, s.config.read_timeout_s, payload);
+      if (r != api::IoResult::kOk) {
+        s.log(peer + " closed: frame cut off (" + api::to_string(r) + ")");
+        return;
+      }
+      h = d == DecodeStatus::kUnknownType
+              ? error_reply(ErrorCode::kUnknownType, "unknown message type " + std::to_string(header.type), !authed)
+              : handle_frame(s, header, payload, authed, start);
+    }
+    r = api::write_all(socket.fd(), h.reply.data(), h.reply.size(), api::deadline_after(s.config.write_timeout_s));
+    const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    s.stats.record(h.is_localize, h.localized, h.error, ms);
+    const char* type_name = d == DecodeStatus::kOk ? api::to_string(static_cast<MessageType>(header.type)) : "FRAME";
+    log_request(s, peer, type_name, h, ms);
+    if (r != api::IoResult::kOk || h.close_after) return;
+  }
+}
+
+}  // namespace server
+}  // namespace segmatch
