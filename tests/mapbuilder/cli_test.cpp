@@ -1,0 +1,310 @@
+// segmatch-mapbuilder and segmatch-mapinfo as a user runs them, on a tiny simulated dataset
+// generated once for the suite.
+#include "segmatch/core/matcher.h"
+#include "segmatch/core/random.h"
+#include "segmatch/io/cloud_io.h"
+#include "segmatch/io/sequence.h"
+#include "segmatch/storage/map_reader.h"
+
+#include <gtest/gtest.h>
+
+#include <fcntl.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <sstream>
+#include <thread>
+
+using namespace segmatch;
+namespace fs = std::filesystem;
+
+namespace {
+
+const std::string kBin = SEGMATCH_BIN_DIR;
+constexpr int kLast = 60;  // scans 0..60 of sequence 00: a few local clouds, a few seconds
+
+struct Result {
+  int code = -1;
+  std::string output;  // stdout and stderr
+};
+
+Result run(const std::string& args) {
+  Result r;
+  FILE* pipe = popen((args + " 2>&1").c_str(), "r");
+  if (!pipe) return r;
+  char buffer[4096];
+  for (size_t n; (n = fread(buffer, 1, sizeof buffer, pipe)) > 0;) r.output.append(buffer, n);
+  const int status = pclose(pipe);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+std::string read_all(const fs::path& p) {
+  std::ifstream f(p, std::ios::binary);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+void write_all(const fs::path& p, const std::string& text) { std::ofstream(p, std::ios::binary) << text; }
+
+// A small trained classifier, so that the stored model can be compared byte for byte.
+std::string trained_model_bytes() {
+  Rng rng(5);
+  Segments a(60), b(60);
+  std::vector<std::pair<const Segment*, const Segment*>> pairs;
+  std::vector<bool> same;
+  for (size_t i = 0; i < a.size(); ++i) {
+    for (Segment* s : {&a[i], &b[i]}) {
+      for (float& f : s->eigen) f = static_cast<float>(rng.uniform());
+      for (float& f : s->esf) f = static_cast<float>(rng.uniform());
+      s->has_eigen = s->has_esf = true;
+    }
+    if (i % 2 == 0) b[i] = a[i];
+    pairs.emplace_back(&a[i], &b[i]);
+    same.push_back(i % 2 == 0);
+  }
+  MatcherConfig config;
+  config.rf_trees = 3;
+  RandomForestMatcher rf(config);
+  rf.train(pairs, same);
+  return rf.save();
+}
+
+class MapBuilderCli : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    std::random_device rd;
+    dir_ = fs::temp_directory_path() / ("segmatch_mapbuilder_test_" + std::to_string(rd()));
+    fs::create_directories(dir_ / "maps");
+    const Result simulated = run(kBin + "/segmatch-sim --preset tiny --seed 3 --length-00-m 100 --length-01-m 50 "
+                        "--no-images --out " + (dir_ / "data").string());
+    ASSERT_EQ(simulated.code, 0) << simulated.output;
+    write_all(dir_ / "model.yml", trained_model_bytes());
+    built_ = run(builder() + " --classifier " + (dir_ / "model.yml").string() + " --name tiny-00 --output " +
+                 map_path().string());
+    std::printf("%s", built_.output.c_str());
+  }
+  static void TearDownTestSuite() { fs::remove_all(dir_); }
+
+  static fs::path sequence() { return dir_ / "data/sequences/00"; }
+  static fs::path map_path() { return dir_ / "maps/tiny.sqlite"; }
+  static std::string builder(int last = kLast) {
+    return kBin + "/segmatch-mapbuilder --input " + sequence().string() + " --last " + std::to_string(last);
+  }
+  static std::vector<std::string> folder_entries(const fs::path& folder) {
+    std::vector<std::string> names;
+    for (const auto& e : fs::directory_iterator(folder)) names.push_back(e.path().filename().string());
+    return names;
+  }
+
+  static fs::path dir_;
+  static Result built_;
+};
+fs::path MapBuilderCli::dir_;
+Result MapBuilderCli::built_;
+
+}  // namespace
+
+TEST_F(MapBuilderCli, WritesAReadableMapWithTrajectoryClassifierAndParameters) {
+  ASSERT_EQ(built_.code, 0) << built_.output;
+  const storage::MapReader map = storage::MapReader::open(map_path().string());
+  const storage::MapStats stats = map.stats();
+  EXPECT_GT(stats.segments, 10u);
+  EXPECT_EQ(stats.keyframes, static_cast<size_t>(kLast + 1)) << "one keyframe per scan used";
+  EXPECT_EQ(map.metadata().name, "tiny-00");
+  EXPECT_NE(map.metadata().parameters_json.find("\"segment_map\""), std::string::npos);
+  EXPECT_NE(map.metadata().tool_version.find("segmatch-mapbuilder"), std::string::npos);
+  const auto classifier = map.classifier();
+  ASSERT_TRUE(classifier.has_value());
+  EXPECT_EQ(classifier->format, "opencv-rtrees-yaml");
+  EXPECT_EQ(classifier->bytes, read_all(dir_ / "model.yml"));
+
+  // The trajectory is the sequence's poses; every segment refers to one of its keyframes.
+  const io::Sequence seq = io::Sequence::open(sequence().string());
+  const std::vector<storage::Keyframe> trajectory = map.trajectory();
+  ASSERT_EQ(trajectory.size(), static_cast<size_t>(kLast + 1));
+  EXPECT_TRUE(trajectory[kLast].T_map_sensor.isApprox(seq.poses()[kLast]));
+  EXPECT_DOUBLE_EQ(trajectory[kLast].time_s, seq.times()[kLast]);
+  std::vector<uint32_t> keyframes;
+  map.load_segments(&keyframes);
+  for (uint32_t k : keyframes) EXPECT_LE(k, static_cast<uint32_t>(kLast));
+  EXPECT_TRUE(map.check_integrity().empty());
+  EXPECT_EQ(folder_entries(map_path().parent_path()).size(), 1u) << "no temporary file left";
+  EXPECT_NE(built_.output.find("local clouds:"), std::string::npos) << "summary printed";
+}
+
+TEST_F(MapBuilderCli, MapinfoPrintsTheCountsAndCheckPasses) {
+  const storage::MapStats stats = storage::MapReader::open(map_path().string()).stats();
+  const Result info = run(kBin + "/segmatch-mapinfo " + map_path().string() + " --check");
+  ASSERT_EQ(info.code, 0) << info.output;
+  EXPECT_NE(info.output.find("segments:       " + std::to_string(stats.segments) + "\n"), std::string::npos)
+      << info.output;
+  EXPECT_NE(info.output.find("points:         " + std::to_string(stats.points) + "\n"), std::string::npos);
+  EXPECT_NE(info.output.find("keyframes:      " + std::to_string(stats.keyframes) + "\n"), std::string::npos);
+  EXPECT_NE(info.output.find("name:           tiny-00"), std::string::npos);
+  EXPECT_NE(info.output.find("integrity:      ok"), std::string::npos);
+  EXPECT_NE(info.output.find("classifier:     opencv-rtrees-yaml"), std::string::npos);
+}
+
+TEST_F(MapBuilderCli, MapinfoCheckFailsOnADamagedMap) {
+  const fs::path damaged = dir_ / "damaged.sqlite";
+  std::string bytes = read_all(map_path());
+  bytes.resize(bytes.size() / 2);  // truncated: a copy cut short
+  write_all(damaged, bytes);
+  const Result info = run(kBin + "/segmatch-mapinfo " + damaged.string() + " --check");
+  EXPECT_EQ(info.code, 1) << info.output;
+  EXPECT_NE(info.output.find(damaged.string()), std::string::npos) << "names the file: " << info.output;
+  fs::remove(damaged);
+}
+
+TEST_F(MapBuilderCli, MapinfoExportsColouredPointsAndAPicture) {
+  const storage::MapStats stats = storage::MapReader::open(map_path().string()).stats();
+  const fs::path ply = dir_ / "segments.ply", pcd = dir_ / "segments.pcd", png = dir_ / "top.png";
+  Result r = run(kBin + "/segmatch-mapinfo " + map_path().string() + " --export-ply " + ply.string() + " --png " +
+              png.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(io::read_ply(ply.string()).points.size(), stats.points);
+  EXPECT_NE(read_all(ply).find("property uchar red"), std::string::npos);
+  const std::string picture = read_all(png);
+  ASSERT_GT(picture.size(), 1000u);
+  EXPECT_EQ(picture.substr(1, 3), "PNG");
+  r = run(kBin + "/segmatch-mapinfo " + map_path().string() + " --export-pcd " + pcd.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(io::read_pcd(pcd.string()).points.size(), stats.points);
+}
+
+TEST_F(MapBuilderCli, ASecondBuildWithoutForceIsRefusedAndTheMapKept) {
+  const std::string before = read_all(map_path());
+  const auto mtime = fs::last_write_time(map_path());
+  const Result r = run(builder() + " --no-classifier --output " + map_path().string());
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("already exists"), std::string::npos) << r.output;
+  EXPECT_EQ(read_all(map_path()), before);
+  EXPECT_EQ(fs::last_write_time(map_path()), mtime);
+}
+
+TEST_F(MapBuilderCli, ForceReplacesAMap) {
+  const fs::path other = dir_ / "forced.sqlite";
+  write_all(other, "not a map yet");
+  const Result r = run(builder(20) + " --no-classifier --force --output " + other.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const storage::MapReader map = storage::MapReader::open(other.string());
+  EXPECT_EQ(map.stats().keyframes, 21u);
+  EXPECT_FALSE(map.stats().has_classifier);
+  fs::remove(other);
+}
+
+TEST_F(MapBuilderCli, BadRangesAreRefused) {
+  const fs::path out = dir_ / "range.sqlite";
+  Result r = run(kBin + "/segmatch-mapbuilder --input " + sequence().string() + " --first 50 --last 10 --output " +
+              out.string());
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("empty scan range"), std::string::npos) << r.output;
+  r = run(builder(1000000) + " --output " + out.string());
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("--last 1000000 is past the last scan"), std::string::npos) << r.output;
+  r = run(builder() + " --stride 0 --output " + out.string());
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_FALSE(fs::exists(out));
+}
+
+TEST_F(MapBuilderCli, AMissingInputFolderIsRefusedWithAMessage) {
+  const fs::path out = dir_ / "missing.sqlite";
+  const Result r = run(kBin + "/segmatch-mapbuilder --input " + (dir_ / "no-such-seq").string() + " --output " +
+                    out.string());
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("no-such-seq does not exist"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(out));
+}
+
+TEST_F(MapBuilderCli, AnUnreadableScanIsAnErrorNamingTheFile) {
+  // A copy of the sequence whose scan 3 is truncated mid-record.
+  const fs::path copy = dir_ / "broken-seq";
+  fs::create_directories(copy / "velodyne");
+  for (const char* f : {"poses.txt", "calib.txt", "times.txt"}) fs::copy_file(sequence() / f, copy / f);
+  const io::Sequence seq = io::Sequence::open(sequence().string());
+  for (size_t i = 0; i < seq.size(); ++i)
+    fs::create_symlink(seq.scan_path(i), copy / "velodyne" / fs::path(seq.scan_path(i)).filename());
+  const fs::path bad = copy / "velodyne/000003.bin";
+  fs::remove(bad);
+  write_all(bad, read_all(seq.scan_path(3)).substr(0, 100));
+  const fs::path out = dir_ / "broken.sqlite";
+  const Result r = run(kBin + "/segmatch-mapbuilder --input " + copy.string() + " --last 10 --output " + out.string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("000003.bin"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(out));
+  EXPECT_EQ(folder_entries(dir_ / "maps").size(), 1u);
+  fs::remove_all(copy);
+}
+
+TEST_F(MapBuilderCli, BadConfigAndModelFilesAreRefusedNamingTheProblem) {
+  const fs::path out = dir_ / "config.sqlite", config = dir_ / "bad.json", junk = dir_ / "junk.yml";
+  write_all(config, R"({"voxel": {"leaf_mm": 0.2}})");
+  Result r = run(builder() + " --config " + config.string() + " --output " + out.string());
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.output.find("leaf_mm"), std::string::npos) << r.output;
+  r = run(builder() + " --classifier " + (dir_ / "none.yml").string() + " --output " + out.string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("none.yml"), std::string::npos) << r.output;
+  write_all(junk, "this is no model");
+  r = run(builder() + " --classifier " + junk.string() + " --output " + out.string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("junk.yml: not a valid classifier model"), std::string::npos) << r.output;
+  r = run(builder() + " --preset no-such-preset --output " + out.string());
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_FALSE(fs::exists(out));
+}
+
+TEST_F(MapBuilderCli, WithoutTheDefaultModelTheMapHasNoClassifierAndSaysSo) {
+  const fs::path out = dir_ / "default.sqlite";
+  const Result r = run(builder(10) + " --output " + out.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const bool default_exists = fs::exists(SEGMATCH_DEFAULT_MODEL_FOR_TEST);
+  EXPECT_EQ(storage::MapReader::open(out.string()).stats().has_classifier, default_exists);
+  EXPECT_EQ(r.output.find("warning: default classifier") != std::string::npos, !default_exists) << r.output;
+  fs::remove(out);
+}
+
+// Starts a full build, signals it once its temporary map exists, and checks that it leaves
+// nothing behind.
+void interrupt_build(const fs::path& sequence, const fs::path& folder, int signal) {
+  fs::create_directories(folder);
+  const fs::path out = folder / "map.sqlite", log = folder.parent_path() / "interrupt.log";
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    dup2(fd, 1), dup2(fd, 2);
+    const std::string bin = kBin + "/segmatch-mapbuilder";
+    execl(bin.c_str(), bin.c_str(), "--input", sequence.c_str(), "--output", out.c_str(), "--no-classifier",
+          static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  bool began = false;
+  for (int i = 0; i < 600 && !began; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    for (const auto& e : fs::directory_iterator(folder)) began = began || e.path().string().find(".tmp-") != std::string::npos;
+  }
+  EXPECT_TRUE(began) << "the build started writing its temporary map";
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // inside the build loop
+  kill(pid, signal);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  const std::string output = read_all(log);
+  ASSERT_TRUE(WIFEXITED(status)) << "exits by itself, not killed by the signal: " << output;
+  EXPECT_EQ(WEXITSTATUS(status), 128 + signal) << output;
+  EXPECT_NE(output.find("interrupted, no map written"), std::string::npos) << output;
+  EXPECT_FALSE(fs::exists(out));
+  EXPECT_TRUE(fs::is_empty(folder)) << "no temporary file left behind";
+}
+
+TEST_F(MapBuilderCli, AnInterruptedBuildLeavesNoFileSigint) { interrupt_build(sequence(), dir_ / "sigint", SIGINT); }
+
+TEST_F(MapBuilderCli, AnInterruptedBuildLeavesNoFileSigterm) { interrupt_build(sequence(), dir_ / "sigterm", SIGTERM); }

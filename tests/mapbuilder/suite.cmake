@@ -1,0 +1,6 @@
+# segmatch-mapbuilder / segmatch-mapinfo and core's MapBuilder. The CLI tests run the built tools.
+segmatch_test_suite(test_mapbuilder mapbuilder segmatch_core segmatch_io segmatch_storage segmatch_sim)
+add_dependencies(test_mapbuilder segmatch-mapbuilder segmatch-mapinfo segmatch-sim)
+# The default classifier the builder looks for, to know which behaviour to expect.
+target_compile_definitions(test_mapbuilder PRIVATE
+  SEGMATCH_DEFAULT_MODEL_FOR_TEST="${PROJECT_SOURCE_DIR}/maps/models/default-rf.yml")
