@@ -1,0 +1,1 @@
+segmatch_test_suite(test_api api segmatch_api)
