@@ -23,34 +23,16 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct CityPairs {
-  Segments targets, queries;
-  TrainingPairs pairs;  // points into targets / queries
-};
-
-std::unique_ptr<CityPairs> city_pairs(const std::string& preset, uint64_t seed, const io::PipelineConfig& config,
-                                      const std::string& sensor) {
-  const sim::City city = sim::make_city(sim::dataset_preset(preset, seed));
-  const sim::LidarModel model = sim::lidar_model_by_name(sensor);
+std::unique_ptr<sim::LabelledCity> city_pairs(const std::string& preset, uint64_t seed, const io::PipelineConfig& config,
+                                              const std::string& sensor) {
   sim::SegmentsAlongConfig along;
   along.local_cloud = config.local_cloud;
   along.segmentation = config.localizer.segmentation;
   along.segment_map = config.segment_map;
-  along.schedule.every_m = 5.0;
-  along.schedule.seed = mix_seed(seed, 1);
-  auto out = std::make_unique<CityPairs>();
-  out->targets = sim::segments_along(city.world, city.first, model, along);
-  along.merge = false;
-  along.schedule.every_m = 10.0;
-  along.schedule.seed = mix_seed(seed, 2);
-  out->queries = sim::segments_along(city.changed, city.second, model, along);
-  FeatureIndex index;
-  index.build(out->targets);
   TrainingPairConfig pc;
   pc.k = config.localizer.retrieval.k;
   pc.seed = seed;
-  out->pairs = label_pairs_by_instance(out->queries, out->targets, index, pc);
-  return out;
+  return sim::labelled_city(sim::dataset_preset(preset, seed), sim::lidar_model_by_name(sensor), along, pc);
 }
 
 void write_atomically(const std::string& path, const std::string& bytes) {
@@ -85,6 +67,7 @@ int main(int argc, char** argv) {
   std::vector<uint64_t> seeds = {101, 102, 103, 105, 106};
   uint64_t holdout = 104;
   bool eigen_only = false;
+  std::string eigen_out;
   app.add_option("-o,--out", out, "model file to write (e.g. maps/models/default-rf.yml)")->required();
   app.add_option("--config", config_path, "pipeline config JSON (default: the kitti-hdl64 preset)");
   app.add_option("--preset", preset, "simulated city size: tiny, demo, city")->check(CLI::IsMember(sim::dataset_preset_names()));
@@ -92,6 +75,7 @@ int main(int argc, char** argv) {
   app.add_option("--holdout-seed", holdout, "city seed to report TPR / FPR on (0: none)");
   app.add_option("--sensor", sensor, "hdl64e, vlp16, os1-64");
   app.add_flag("--eigen-only", eigen_only, "train RF_eigen (21 pair features) instead of RF_eigen+shapes (31)");
+  app.add_option("--eigen-out", eigen_out, "also train RF_eigen on the same pairs and write it here");
   CLI11_PARSE(app, argc, argv);
   try {
     io::PipelineConfig config = config_path.empty() ? io::pipeline_preset("kitti-hdl64") : io::read_pipeline_config(config_path);
@@ -99,7 +83,7 @@ int main(int argc, char** argv) {
     if (eigen_only) config.localizer.matcher.rf_threshold = 0.81f;  // paper Table I
     config.validate();
     const auto start = std::chrono::steady_clock::now();
-    std::vector<std::unique_ptr<CityPairs>> cities;
+    std::vector<std::unique_ptr<sim::LabelledCity>> cities;
     std::vector<std::pair<const Segment*, const Segment*>> pairs;
     std::vector<bool> same;
     cli::Progress progress("cities", seeds.size(), "cities");
@@ -120,7 +104,21 @@ int main(int argc, char** argv) {
                 eigen_only ? "RF_eigen" : "RF_eigen+shapes", seeds.size(), positives, pairs.size() - positives, seconds);
     write_atomically(out, rf.save());
     std::printf("model written to %s\n", out.c_str());
-    if (holdout != 0) report_holdout(rf, city_pairs(preset, holdout, config, sensor)->pairs);
+    std::unique_ptr<RandomForestMatcher> rf_eigen;
+    if (!eigen_out.empty() && !eigen_only) {
+      MatcherConfig mc = config.localizer.matcher;
+      mc.use_shapes = false;
+      mc.rf_threshold = 0.81f;  // paper Table I
+      rf_eigen = std::make_unique<RandomForestMatcher>(mc);
+      rf_eigen->train(pairs, same);
+      write_atomically(eigen_out, rf_eigen->save());
+      std::printf("RF_eigen model written to %s\n", eigen_out.c_str());
+    }
+    if (holdout != 0) {
+      const auto held_out = city_pairs(preset, holdout, config, sensor);
+      report_holdout(rf, held_out->pairs);
+      if (rf_eigen) report_holdout(*rf_eigen, held_out->pairs);
+    }
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "segmatch-train: %s\n", e.what());

@@ -31,4 +31,23 @@ Segments segments_along(const World& world, const Traversal& traversal, const Li
   return config.merge ? map.segments() : all;
 }
 
+std::unique_ptr<LabelledCity> labelled_city(const DatasetConfig& dataset, const LidarModel& model,
+                                            SegmentsAlongConfig along, const TrainingPairConfig& pair_config) {
+  const City city = make_city(dataset);
+  const uint64_t seed = dataset.world.seed;
+  auto out = std::make_unique<LabelledCity>();
+  along.merge = true;
+  along.schedule.every_m = 5.0;
+  along.schedule.seed = mix_seed(seed, 1);
+  out->targets = segments_along(city.world, city.first, model, along);
+  along.merge = false;
+  along.schedule.every_m = 10.0;
+  along.schedule.seed = mix_seed(seed, 2);
+  out->queries = segments_along(city.changed, city.second, model, along);
+  FeatureIndex index;
+  index.build(out->targets);
+  out->pairs = label_pairs_by_instance(out->queries, out->targets, index, pair_config);
+  return out;
+}
+
 }  // namespace segmatch::sim

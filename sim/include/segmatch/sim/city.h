@@ -6,8 +6,11 @@
 
 #include "segmatch/core/localizer.h"
 #include "segmatch/core/segment_map.h"
+#include "segmatch/core/training.h"
 #include "segmatch/sim/dataset.h"
 #include "segmatch/sim/local_clouds.h"
+
+#include <memory>
 
 namespace segmatch::sim {
 
@@ -32,5 +35,17 @@ struct SegmentsAlongConfig {
 // of `world`, seen by `model`.
 Segments segments_along(const World& world, const Traversal& traversal, const LidarModel& model,
                         const SegmentsAlongConfig& config);
+
+// Labelled candidate pairs of one city for training or evaluating the match classifier (paper
+// IV-B): the targets are the merged segments of the mapping traversal (a local cloud every
+// 5 m), the queries the unmerged segments of the revisit (every 10 m, changed world, other
+// lane); each query's k nearest targets in feature space are its candidates, same instance =
+// positive, negatives kept at 1:50. `pairs` points into `targets` and `queries`.
+struct LabelledCity {
+  Segments targets, queries;
+  TrainingPairs pairs;
+};
+std::unique_ptr<LabelledCity> labelled_city(const DatasetConfig& dataset, const LidarModel& model,
+                                            SegmentsAlongConfig along, const TrainingPairConfig& pairs);
 
 }  // namespace segmatch::sim

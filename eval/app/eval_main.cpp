@@ -1,0 +1,157 @@
+// segmatch-eval: how well localization works, in the paper's terms.
+//   segmatch-eval localize   replay a traversal against a map (in-process or through a server)
+//   segmatch-eval classifier ROC of L2, RF_eigen, RF_eigen+shapes on a held-out simulated city
+#include "segmatch/api/client.h"
+#include "segmatch/eval/localization_run.h"
+#include "segmatch/eval/roc.h"
+#include "segmatch/io/pipeline_config.h"
+#include "segmatch/server/map_service.h"
+#include "segmatch/sim/city.h"
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+
+using namespace segmatch;
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string read_token(const std::string& path) {
+  if (path.empty()) return "";
+  std::ifstream f(path);
+  if (!f) throw std::runtime_error(path + ": cannot read the token file");
+  std::string token;
+  std::getline(f, token);
+  return token;
+}
+
+int run_localize(const eval::LocalizationRunConfig& config, const std::string& server, const std::string& token_file,
+                 const std::string& out_dir) {
+  eval::LocalizeFn localize;
+  std::shared_ptr<const server::LoadedMap> loaded;
+  std::unique_ptr<api::Client> client;
+  if (server.empty()) {
+    loaded = server::load_map(config.map_path);
+    for (const std::string& w : loaded->warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+    localize = [&](const api::LocalizeRequest& r) { return server::localize_request(*loaded, r); };
+  } else {
+    const size_t colon = server.rfind(':');
+    if (colon == std::string::npos) throw std::runtime_error("--server must be HOST:PORT, got '" + server + "'");
+    api::ClientOptions options;
+    options.token = read_token(token_file);
+    client = std::make_unique<api::Client>(server.substr(0, colon), static_cast<uint16_t>(std::stoi(server.substr(colon + 1))),
+                                           options);
+    localize = [&](const api::LocalizeRequest& r) { return client->localize(r); };
+  }
+  const eval::LocalizationRun run = eval::run_localization(config, localize);
+  eval::print_summary(run);
+  if (!out_dir.empty()) {
+    eval::write_localization_report(run, out_dir);
+    std::printf("report: %s/{localization.json, trajectory.png, px.png, errors.png}\n", out_dir.c_str());
+  }
+  return 0;
+}
+
+struct ClassifierOptions {
+  std::string preset = "tiny", config_path, model_shapes, model_eigen, out_dir, sensor = "hdl64e";
+  uint64_t seed = 104;
+};
+
+RandomForestMatcher load_model(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw std::runtime_error(path + ": cannot open the model file");
+  const std::string bytes((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  return RandomForestMatcher::load(bytes);
+}
+
+int run_classifier(const ClassifierOptions& o) {
+  const io::PipelineConfig config = o.config_path.empty() ? io::pipeline_preset("kitti-hdl64") : io::read_pipeline_config(o.config_path);
+  sim::SegmentsAlongConfig along;
+  along.local_cloud = config.local_cloud;
+  along.segmentation = config.localizer.segmentation;
+  along.segment_map = config.segment_map;
+  TrainingPairConfig pc;
+  pc.k = config.localizer.retrieval.k;
+  pc.seed = o.seed;
+  pc.negatives_per_positive = 1000000;  // evaluate on every candidate, not a 1:50 sample
+  std::fprintf(stderr, "simulating held-out city %llu (%s)...\n", static_cast<unsigned long long>(o.seed), o.preset.c_str());
+  const auto city = sim::labelled_city(sim::dataset_preset(o.preset, o.seed), sim::lidar_model_by_name(o.sensor), along, pc);
+  const TrainingPairs& p = city->pairs;
+  const FeatureScaling scaling = FeatureScaling::fit(city->targets);
+  std::vector<std::pair<std::string, std::function<double(const Segment&, const Segment&)>>> scorers = {
+      {"L2", [&](const Segment& q, const Segment& t) { return -scaling.distance(q.eigen, t.eigen); }}};
+  std::vector<std::unique_ptr<RandomForestMatcher>> models;
+  for (const auto& [name, path] : {std::pair<std::string, std::string>{"RF_eigen", o.model_eigen}, {"RF_eigen+shapes", o.model_shapes}}) {
+    if (path.empty()) continue;
+    models.push_back(std::make_unique<RandomForestMatcher>(load_model(path)));
+    const RandomForestMatcher* rf = models.back().get();
+    scorers.push_back({name, [rf](const Segment& q, const Segment& t) { return rf->probability(q, t); }});
+  }
+  std::vector<eval::RocCurve> curves;
+  nlohmann::json j;
+  j["pairs"] = {{"positives", p.positives}, {"negatives", p.negatives}, {"city_seed", o.seed}, {"preset", o.preset}};
+  for (const auto& [name, scorer] : scorers) {
+    std::vector<eval::ScoredPair> scored;
+    for (size_t i = 0; i < p.pairs.size(); ++i) scored.push_back({scorer(*p.pairs[i].first, *p.pairs[i].second), p.same_object[i]});
+    curves.push_back(eval::roc_curve(name, std::move(scored), 0.2));
+    const eval::RocCurve& c = curves.back();
+    std::printf("%-16s AUC %.3f; at FPR <= 0.2: TPR %.3f (FPR %.3f, threshold %.3f)\n", name.c_str(), c.auc, c.operating_tpr,
+                c.operating_fpr, c.operating_threshold);
+    j["curves"][name] = {{"auc", c.auc}, {"operating_tpr", c.operating_tpr}, {"operating_fpr", c.operating_fpr},
+                         {"operating_threshold", c.operating_threshold}};
+  }
+  std::printf("held-out pairs: %zu positives, %zu negatives\n", p.positives, p.negatives);
+  if (!o.out_dir.empty()) {
+    fs::create_directories(o.out_dir);
+    eval::plot_roc((fs::path(o.out_dir) / "roc.png").string(), curves, "ROC on held-out city " + std::to_string(o.seed));
+    std::ofstream(fs::path(o.out_dir) / "roc.json") << j.dump(2) << "\n";
+    std::printf("report: %s/{roc.png, roc.json}\n", o.out_dir.c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Evaluate SegMatch localization and classifiers against ground truth"};
+  app.require_subcommand(1);
+  eval::LocalizationRunConfig lc;
+  std::string server, token_file, out_dir;
+  auto* loc = app.add_subcommand("localize", "replay a traversal against a map and score every answer");
+  loc->add_option("--map", lc.map_path, "map database")->required();
+  loc->add_option("--query", lc.query_folder, "sequence to replay; its poses are the ground truth in the map frame");
+  loc->add_option("--sim", lc.sim_dataset, "segmatch-sim folder: replay sequences/01 with its exact ground truth");
+  loc->add_option("--server", server, "HOST:PORT of segmatch-server (default: localize in-process)");
+  loc->add_option("--token-file", token_file, "file holding the server's shared secret");
+  loc->add_option("--every-m", lc.replay.every_m, "one query every this many metres");
+  loc->add_option("--first", lc.replay.first, "first scan");
+  loc->add_option("--last", lc.replay.last, "last scan");
+  loc->add_option("--stride", lc.replay.stride, "use every n-th scan");
+  loc->add_option("--mapped-radius-m", lc.thresholds.mapped_radius_m, "a street is mapped within this of the map trajectory");
+  loc->add_flag("!--quiet", lc.print_each, "no line per query");
+  loc->add_option("--out", out_dir, "report folder (JSON + PNG)");
+  ClassifierOptions co;
+  auto* cls = app.add_subcommand("classifier", "ROC curves of the match classifiers on a held-out simulated city");
+  cls->add_option("--model", co.model_shapes, "RF_eigen+shapes model file");
+  cls->add_option("--model-eigen", co.model_eigen, "RF_eigen model file");
+  cls->add_option("--preset", co.preset, "city size: tiny, demo, city");
+  cls->add_option("--seed", co.seed, "held-out city seed (not one the models were trained on)");
+  cls->add_option("--config", co.config_path, "pipeline config JSON");
+  cls->add_option("--out", co.out_dir, "report folder");
+  CLI11_PARSE(app, argc, argv);
+  try {
+    if (*loc) {
+      if (lc.query_folder.empty() == lc.sim_dataset.empty()) throw std::runtime_error("give exactly one of --query and --sim");
+      return run_localize(lc, server, token_file, out_dir);
+    }
+    return run_classifier(co);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "segmatch-eval: %s\n", e.what());
+    return 1;
+  }
+}

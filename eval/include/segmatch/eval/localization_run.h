@@ -1,0 +1,49 @@
+// Localization evaluation (issue 6): a second traversal is replayed as a vehicle would
+// (io::replay_sequence), each query goes to a localizer (the server over the protocol, or the
+// same code in-process), and every answer is scored against the ground truth.
+#pragma once
+
+#include <segmatch/api/protocol.h>
+#include <segmatch/eval/metrics.h>
+#include <segmatch/io/replay.h>
+
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace segmatch {
+namespace eval {
+
+using LocalizeFn = std::function<api::LocalizeReply(const api::LocalizeRequest&)>;
+
+struct LocalizationRunConfig {
+  std::string map_path;     // the map (its trajectory decides which streets are mapped)
+  std::string query_folder; // sequence to replay
+  // Ground truth T_map_sensor of every query scan: by default the query sequence's own poses
+  // are in the map frame (same recording, e.g. riverside02 even / odd keyframes). With
+  // sim_dataset, a segmatch-sim folder: queries = sequences/01, truth from ground_truth/
+  // lidar_poses_01.txt expressed in the frame of the first scan of sequence 00 (the map's).
+  std::string sim_dataset;
+  io::ReplayConfig replay;
+  Thresholds thresholds;
+  bool print_each = true;   // one line per query on stdout
+};
+
+struct LocalizationRun {
+  std::vector<QueryOutcome> outcomes;
+  Summary summary;
+  std::map<std::string, Distribution> module_ms;  // per-module time over all queries
+  std::vector<Eigen::Vector3d> map_trajectory;
+  std::string title;
+};
+
+// Throws io::IoError / storage::StorageError / std::runtime_error naming the bad input.
+LocalizationRun run_localization(const LocalizationRunConfig& config, const LocalizeFn& localize);
+
+// out_dir/localization.json, trajectory.png, px.png, errors.png; prints the summary.
+void write_localization_report(const LocalizationRun& run, const std::string& out_dir);
+void print_summary(const LocalizationRun& run);
+
+}  // namespace eval
+}  // namespace segmatch

@@ -1,0 +1,66 @@
+// Localization figures in the paper's terms (section IV-C): true and false localizations,
+// pose errors, and P(x), "the probability of travelling a given distance without successful
+// localization in the target map" (equation 1):
+//
+//   P(x) = (sum of distance travelled without localization for >= x metres) / (total distance)
+//
+// Distance counts only where the vehicle drives streets the map covers (`mapped`): driving a
+// street the map never saw cannot be localized and says nothing about the method.
+#pragma once
+
+#include <segmatch/core/types.h>
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+namespace segmatch {
+namespace eval {
+
+struct Thresholds {
+  double false_translation_m = 1.0;  // a localization farther off than this is false (issue 6)
+  double false_rotation_deg = 3.0;
+  double mapped_radius_m = 10.0;     // a query is on a mapped street within this of the map's trajectory
+};
+
+struct QueryOutcome {
+  size_t frame = 0;
+  double odometer_m = 0.0;
+  bool mapped = true;
+  bool localized = false;            // the localizer said so
+  bool correct = false;              // localized and within the thresholds
+  double error_m = 0.0, error_deg = 0.0;  // when localized
+  double latency_ms = 0.0;
+  std::string status;                // the localizer's status word, for reports
+  Eigen::Vector3d truth_xy = Eigen::Vector3d::Zero();     // map-frame truth position
+  Eigen::Vector3d estimate_xy = Eigen::Vector3d::Zero();  // map-frame estimate when localized
+};
+
+// Fills correct / error_m / error_deg of a localized outcome from the estimated and true
+// sensor poses (both map frame).
+void score(QueryOutcome& outcome, const Pose3d& T_map_sensor_estimate, const Pose3d& T_map_sensor_truth,
+           const Thresholds& thresholds);
+
+struct Distribution {
+  size_t count = 0;
+  double median = 0, p90 = 0, max = 0, mean = 0;
+};
+Distribution distribution_of(std::vector<double> values);
+
+struct PxCurve {
+  std::vector<double> gaps_m;    // distance (on mapped streets) between consecutive true localizations
+  double total_m = 0.0;          // mapped distance driven
+  double x95_m = 0.0;            // smallest x with P(x) <= 0.05
+  double p_of(double x) const;   // equation 1
+};
+PxCurve px_curve(const std::vector<QueryOutcome>& outcomes);
+
+struct Summary {
+  size_t queries = 0, mapped_queries = 0, localized = 0, correct = 0, false_localizations = 0;
+  Distribution error_m, error_deg, latency_ms;  // errors of the correct localizations
+  PxCurve px;
+};
+Summary summarize(const std::vector<QueryOutcome>& outcomes);
+
+}  // namespace eval
+}  // namespace segmatch

@@ -1,0 +1,163 @@
+#include "segmatch/eval/localization_run.h"
+
+#include "segmatch/cli/progress.h"
+#include "segmatch/eval/plots.h"
+#include "segmatch/io/pose_io.h"
+#include "segmatch/storage/map_reader.h"
+
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <memory>
+
+namespace segmatch {
+namespace eval {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Truth {
+  io::Sequence sequence;
+  Poses T_map_sensor;  // per scan of the sequence
+};
+
+Truth open_truth(const LocalizationRunConfig& c) {
+  if (c.sim_dataset.empty()) {
+    io::Sequence seq = io::Sequence::open(c.query_folder);
+    Poses truth = seq.poses();
+    return {std::move(seq), std::move(truth)};
+  }
+  const fs::path dir(c.sim_dataset);
+  io::Sequence seq = io::Sequence::open((dir / "sequences" / "01").string());
+  const Poses world_00 = io::read_kitti_poses((dir / "ground_truth" / "lidar_poses_00.txt").string());
+  const Poses world_01 = io::read_kitti_poses((dir / "ground_truth" / "lidar_poses_01.txt").string());
+  if (world_00.empty() || world_01.size() != seq.size())
+    throw std::runtime_error(c.sim_dataset + ": ground truth poses do not match sequences/01 (" +
+                             std::to_string(world_01.size()) + " poses, " + std::to_string(seq.size()) + " scans)");
+  const Pose3d T_map_world = world_00.front().inverse();
+  Poses truth;
+  for (const Pose3d& T_world_sensor : world_01) truth.push_back(T_map_world * T_world_sensor);
+  return {std::move(seq), std::move(truth)};
+}
+
+double distance_to(const std::vector<Eigen::Vector3d>& path, const Eigen::Vector3d& p) {
+  double best = std::numeric_limits<double>::infinity();
+  for (const Eigen::Vector3d& q : path) best = std::min(best, (q - p).head<2>().norm());
+  return best;
+}
+
+api::LocalizeRequest request_of(const io::ReplayQuery& q) {
+  api::LocalizeRequest r;
+  r.request_id = q.frame;
+  r.sensor_position_local = q.T_odom_sensor.translation();
+  r.sensor_orientation_local = Eigen::Quaterniond(q.T_odom_sensor.linear()).normalized();
+  r.points = q.cloud_odom;
+  return r;
+}
+
+void add_timings(std::map<std::string, std::vector<double>>& t, const api::ModuleTimingsMs& m) {
+  const std::pair<const char*, float> all[] = {{"voxel", m.voxel},       {"ground", m.ground},     {"segment", m.segment},
+                                               {"describe", m.describe}, {"retrieve", m.retrieve}, {"classify", m.classify},
+                                               {"verify", m.verify},     {"refine", m.refine},     {"total", m.total},
+                                               {"server_total", m.server_total}};
+  for (const auto& [name, ms] : all) t[name].push_back(ms);
+}
+
+}  // namespace
+
+LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeFn& localize) {
+  const storage::MapReader map = storage::MapReader::open(c.map_path);
+  LocalizationRun run;
+  for (const storage::Keyframe& k : map.trajectory()) run.map_trajectory.push_back(k.T_map_sensor.translation());
+  const Truth truth = open_truth(c);
+  run.title = map.metadata().name + ": " + (c.sim_dataset.empty() ? c.query_folder : c.sim_dataset + " (01)");
+  std::map<std::string, std::vector<double>> timings;
+  std::unique_ptr<cli::Progress> progress;
+  io::replay_sequence(
+      truth.sequence, c.replay,
+      [&](const io::ReplayQuery& q) {
+        const auto start = std::chrono::steady_clock::now();
+        const api::LocalizeReply reply = localize(request_of(q));
+        QueryOutcome o;
+        o.latency_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+        o.frame = q.frame;
+        o.odometer_m = q.odometer_m;
+        o.localized = reply.status == api::LocalizeStatus::kLocalized;
+        o.status = api::to_string(reply.status);
+        const Pose3d& T_map_sensor_truth = truth.T_map_sensor[q.frame];
+        o.mapped = distance_to(run.map_trajectory, T_map_sensor_truth.translation()) <= c.thresholds.mapped_radius_m;
+        score(o, reply.T_map_local * q.T_odom_sensor, T_map_sensor_truth, c.thresholds);
+        add_timings(timings, reply.timings);
+        if (c.print_each)
+          std::printf("frame %5zu  %7.1f m  %-13s %s inliers %3u  error %6.3f m %5.2f deg  %6.1f ms%s%s\n", q.frame,
+                      q.odometer_m, o.status.c_str(), o.localized ? (o.correct ? "TRUE " : "FALSE") : "     ",
+                      reply.inliers, o.error_m, o.error_deg, o.latency_ms, o.mapped ? "" : "  (unmapped street)",
+                      reply.reason.empty() ? "" : ("  " + reply.reason).c_str());
+        run.outcomes.push_back(o);
+        return true;
+      },
+      [&](size_t done, size_t total) {
+        if (!progress) progress = std::make_unique<cli::Progress>("replay", total, "scans");
+        progress->update(done);
+      });
+  if (progress) progress->finish();
+  run.summary = summarize(run.outcomes);
+  for (auto& [name, values] : timings) run.module_ms[name] = distribution_of(values);
+  return run;
+}
+
+void print_summary(const LocalizationRun& run) {
+  const Summary& s = run.summary;
+  std::printf("\n== %s\n", run.title.c_str());
+  std::printf("queries %zu (%zu on mapped streets): %zu localized, %zu true, %zu false (> %.1f m or %.1f deg)\n", s.queries,
+              s.mapped_queries, s.localized, s.correct, s.false_localizations, Thresholds{}.false_translation_m,
+              Thresholds{}.false_rotation_deg);
+  std::printf("error of true localizations: median %.3f m / %.2f deg, p90 %.3f m / %.2f deg, max %.3f m / %.2f deg\n",
+              s.error_m.median, s.error_deg.median, s.error_m.p90, s.error_deg.p90, s.error_m.max, s.error_deg.max);
+  std::printf("P(x): %.0f m driven on mapped streets, 95%% of it within %.0f m of the last true localization\n",
+              s.px.total_m, s.px.x95_m);
+  std::printf("latency per query: median %.1f ms, p90 %.1f ms, max %.1f ms\n", s.latency_ms.median, s.latency_ms.p90,
+              s.latency_ms.max);
+  std::printf("module medians (ms):");
+  for (const auto& [name, d] : run.module_ms) std::printf(" %s %.1f", name.c_str(), d.median);
+  std::printf("\n");
+}
+
+void write_localization_report(const LocalizationRun& run, const std::string& out_dir) {
+  namespace fs = std::filesystem;
+  fs::create_directories(out_dir);
+  auto dist = [](const Distribution& d) {
+    return nlohmann::json{{"count", d.count}, {"median", d.median}, {"p90", d.p90}, {"max", d.max}, {"mean", d.mean}};
+  };
+  const Summary& s = run.summary;
+  nlohmann::json j;
+  j["title"] = run.title;
+  j["queries"] = s.queries;
+  j["mapped_queries"] = s.mapped_queries;
+  j["localized"] = s.localized;
+  j["true_localizations"] = s.correct;
+  j["false_localizations"] = s.false_localizations;
+  j["error_m"] = dist(s.error_m);
+  j["error_deg"] = dist(s.error_deg);
+  j["latency_ms"] = dist(s.latency_ms);
+  j["px"] = {{"total_mapped_m", s.px.total_m}, {"x95_m", s.px.x95_m}, {"gaps_m", s.px.gaps_m}};
+  for (const auto& [name, d] : run.module_ms) j["module_ms"][name] = dist(d);
+  for (const QueryOutcome& o : run.outcomes)
+    j["per_query"].push_back({{"frame", o.frame},       {"odometer_m", o.odometer_m}, {"mapped", o.mapped},
+                              {"status", o.status},     {"correct", o.correct},       {"error_m", o.error_m},
+                              {"error_deg", o.error_deg}, {"latency_ms", o.latency_ms}});
+  const std::string json_path = (fs::path(out_dir) / "localization.json").string();
+  std::ofstream f(json_path);
+  f << j.dump(2) << "\n";
+  if (!f) throw std::runtime_error(json_path + ": cannot write");
+  plot_trajectory((fs::path(out_dir) / "trajectory.png").string(), run.map_trajectory, run.outcomes, run.title);
+  plot_px((fs::path(out_dir) / "px.png").string(), s.px, "P(x), equation 1: " + run.title);
+  plot_error_histogram((fs::path(out_dir) / "errors.png").string(), run.outcomes, "Translation errors: " + run.title);
+}
+
+}  // namespace eval
+}  // namespace segmatch

@@ -1,0 +1,43 @@
+// Replays a recorded sequence as a vehicle would (paper III-A): its scans, placed with the
+// sequence's own poses re-expressed in an odometry frame that starts at the first used scan,
+// are accumulated into a local cloud; every `every_m` of driving the cylinder around the
+// sensor is handed to the caller as a query. The vehicle's odometry frame is not the map's:
+// finding T_map_odom is the localizer's job.
+#pragma once
+
+#include <segmatch/core/local_cloud.h>
+#include <segmatch/io/sequence.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+
+namespace segmatch {
+namespace io {
+
+struct ReplayConfig {
+  double every_m = 10.0;   // distance driven between two queries
+  double warmup_m = 30.0;  // no query before this much driving (the local cloud is too thin)
+  size_t first = 0;        // first scan used
+  size_t last = SIZE_MAX;  // last scan used (inclusive; clipped to the sequence)
+  size_t stride = 1;       // use every stride-th scan
+  LocalCloudConfig local_cloud;
+  void validate() const;   // throws std::invalid_argument naming the field
+};
+
+struct ReplayQuery {
+  size_t frame = 0;                         // scan index in the sequence
+  double odometer_m = 0.0;                  // distance driven since the first used scan
+  Pose3d T_odom_sensor = Pose3d::Identity();
+  Pose3d T_world_sensor = Pose3d::Identity();  // the sequence's own pose of that scan
+  PointCloud cloud_odom;                    // the local cylinder, odometry frame
+};
+
+// Calls visit(query) for every query in order; visit returns false to stop early. progress
+// (optional) gets (scans done, scans total). Throws IoError on an unreadable scan.
+void replay_sequence(const Sequence& sequence, const ReplayConfig& config,
+                     const std::function<bool(const ReplayQuery&)>& visit,
+                     const std::function<void(size_t, size_t)>& progress = {});
+
+}  // namespace io
+}  // namespace segmatch

@@ -1,0 +1,51 @@
+#include "segmatch/io/replay.h"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace segmatch {
+namespace io {
+
+void ReplayConfig::validate() const {
+  if (!(every_m > 0.0) || !std::isfinite(every_m)) throw std::invalid_argument("ReplayConfig.every_m must be > 0");
+  if (!(warmup_m >= 0.0) || !std::isfinite(warmup_m)) throw std::invalid_argument("ReplayConfig.warmup_m must be >= 0");
+  if (stride == 0) throw std::invalid_argument("ReplayConfig.stride must be >= 1");
+  if (last < first) throw std::invalid_argument("ReplayConfig.last must be >= first");
+  local_cloud.validate();
+}
+
+void replay_sequence(const Sequence& sequence, const ReplayConfig& config,
+                     const std::function<bool(const ReplayQuery&)>& visit,
+                     const std::function<void(size_t, size_t)>& progress) {
+  config.validate();
+  if (config.first >= sequence.size())
+    throw std::invalid_argument("replay: first scan " + std::to_string(config.first) + " is past the end of " +
+                                sequence.folder() + " (" + std::to_string(sequence.size()) + " scans)");
+  const size_t last = std::min(config.last, sequence.size() - 1);
+  const size_t total = (last - config.first) / config.stride + 1;
+  const Pose3d T_odom_world = sequence.poses()[config.first].inverse();
+  LocalCloud local(config.local_cloud);
+  double odometer_m = 0.0, next_query_m = std::max(config.warmup_m, 0.0);
+  Eigen::Vector3d previous = sequence.poses()[config.first].translation();
+  size_t done = 0;
+  for (size_t i = config.first; i <= last; i += config.stride) {
+    const Pose3d& T_world_sensor = sequence.poses()[i];
+    odometer_m += (T_world_sensor.translation() - previous).norm();
+    previous = T_world_sensor.translation();
+    const Pose3d T_odom_sensor = T_odom_world * T_world_sensor;
+    local.add_scan(sequence.scan(i).points, T_odom_sensor);
+    if (progress) progress(++done, total);
+    if (odometer_m + 1e-9 < next_query_m) continue;
+    next_query_m = odometer_m + config.every_m;
+    ReplayQuery q;
+    q.frame = i;
+    q.odometer_m = odometer_m;
+    q.T_odom_sensor = T_odom_sensor;
+    q.T_world_sensor = T_world_sensor;
+    q.cloud_odom = local.crop(T_odom_sensor);
+    if (!visit(q)) return;
+  }
+}
+
+}  // namespace io
+}  // namespace segmatch

@@ -1,0 +1,1 @@
+segmatch_test_suite(test_eval eval segmatch_eval segmatch_io segmatch_core)
