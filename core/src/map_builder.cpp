@@ -1,14 +1,25 @@
 #include "segmatch/core/map_builder.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <numeric>
 #include <stdexcept>
+#include <unordered_map>
 
 namespace segmatch {
 namespace {
 
 double ms_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+// Cell of a cubic grid of edge d, packed into 64 bits (21 bits per axis).
+uint64_t cell_key(const Eigen::Vector3f& p, float d, int dx = 0, int dy = 0, int dz = 0) {
+  auto axis = [d](float v, int offset) {
+    return static_cast<uint64_t>(static_cast<int64_t>(std::floor(v / d)) + offset + (1 << 20)) & 0x1FFFFF;
+  };
+  return axis(p.x(), dx) | (axis(p.y(), dy) << 21) | (axis(p.z(), dz) << 42);
 }
 
 }  // namespace
@@ -67,6 +78,7 @@ void MapBuilder::segment_local_cloud() {
 
   start = std::chrono::steady_clock::now();
   map_.add(std::move(segments));
+  consolidated_ = false;
   // SegmentMap replaces a segment only by a view with more points and appends new ones, so a
   // changed point count or a new index is exactly a view from this local cloud.
   const Segments& all = map_.segments();
@@ -80,6 +92,48 @@ void MapBuilder::segment_local_cloud() {
     }
   }
   timings_.merge_ms += ms_since(start);
+}
+
+
+const Segments& MapBuilder::segments() const {
+  if (!consolidated_) consolidate();
+  return segments_;
+}
+
+const std::vector<uint32_t>& MapBuilder::keyframe_of_segment() const {
+  if (!consolidated_) consolidate();
+  return keyframes_;
+}
+
+// Greedy, most points first: a segment is kept unless a kept one lies within the duplicate
+// distance. Output keeps the map's order (ids ascending), so ids stay stable across calls.
+void MapBuilder::consolidate() const {
+  const Segments& all = map_.segments();
+  const float d = config_.segment_map.duplicate_distance_m;
+  std::vector<size_t> order(all.size());
+  std::iota(order.begin(), order.end(), size_t{0});
+  std::stable_sort(order.begin(), order.end(),
+                   [&](size_t a, size_t b) { return all[a].points.size() > all[b].points.size(); });
+  std::unordered_multimap<uint64_t, size_t> kept_cells;
+  std::vector<bool> keep(all.size(), false);
+  for (size_t i : order) {
+    bool duplicate = false;
+    for (int dx = -1; dx <= 1 && !duplicate; ++dx)
+      for (int dy = -1; dy <= 1 && !duplicate; ++dy)
+        for (int dz = -1; dz <= 1 && !duplicate; ++dz) {
+          const auto range = kept_cells.equal_range(cell_key(all[i].centroid, d, dx, dy, dz));
+          for (auto it = range.first; it != range.second && !duplicate; ++it)
+            duplicate = (all[it->second].centroid - all[i].centroid).norm() < d;
+        }
+    if (duplicate) continue;
+    keep[i] = true;
+    kept_cells.emplace(cell_key(all[i].centroid, d), i);
+  }
+  segments_.clear();
+  keyframes_.clear();
+  for (size_t i = 0; i < all.size(); ++i)
+    if (keep[i]) segments_.push_back(all[i]), keyframes_.push_back(keyframe_of_segment_[i]);
+  consolidated_ = true;
 }
 
 }  // namespace segmatch

@@ -52,10 +52,14 @@ class MapBuilder {
   // one, so that the objects of the final stretch reach the map. Returns whether it did.
   bool finish();
 
-  // The map: one segment per object, world frame, with descriptors.
-  const Segments& segments() const { return map_.segments(); }
+  // The map: one segment per object, world frame, with descriptors. SegmentMap merges a view
+  // into the nearest segment, but a merge moves that segment's centroid and can bring it
+  // within duplicate_distance_m of another view of the same object; these are resolved here
+  // (the view with more points is kept), lazily, so call after the last add_scan / finish.
+  // Not thread-safe (the result is cached).
+  const Segments& segments() const;
   // For each segment, the scan index of the local cloud its kept view came from.
-  const std::vector<uint32_t>& keyframe_of_segment() const { return keyframe_of_segment_; }
+  const std::vector<uint32_t>& keyframe_of_segment() const;
   size_t local_clouds() const { return local_clouds_; }
   // Segments extracted from all local clouds before merging (>= segments().size()).
   size_t extracted_segments() const { return extracted_segments_; }
@@ -65,12 +69,16 @@ class MapBuilder {
 
  private:
   void segment_local_cloud();
+  void consolidate() const;
 
   MapBuilderConfig config_;
   LocalCloud local_;
   SegmentMap map_;
   std::vector<uint32_t> keyframe_of_segment_;
   std::vector<size_t> points_of_segment_;  // to see which segments a merge replaced
+  mutable Segments segments_;                 // consolidated map (see segments())
+  mutable std::vector<uint32_t> keyframes_;  // of segments_
+  mutable bool consolidated_ = false;
   MapBuilderTimings timings_;
   size_t local_clouds_ = 0, extracted_segments_ = 0;
   bool has_scan_ = false, has_labels_ = false;
