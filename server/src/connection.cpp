@@ -66,9 +66,11 @@ Handled handle_localize(Server::State& s, const std::vector<uint8_t>& payload, T
     return h;
   }
   // The localization runs on the bounded worker pool; this connection thread waits for it.
-  std::packaged_task<api::LocalizeReply()> task([&s, &request] { return localize_request(*s.map, request); });
-  std::future<api::LocalizeReply> result = task.get_future();
-  s.pool->submit([&task] { task(); });
+  // The task is shared with the pool: the worker may still be inside it when get() returns.
+  auto task = std::make_shared<std::packaged_task<api::LocalizeReply()>>(
+      [&s, &request] { return localize_request(*s.map, request); });
+  std::future<api::LocalizeReply> result = task->get_future();
+  s.pool->submit([task] { (*task)(); });
   Handled h;
   h.is_localize = true;
   char detail[96];

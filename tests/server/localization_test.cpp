@@ -1,0 +1,100 @@
+// The server localizes simulated revisit queries sent over TCP like the in-process localizer:
+// accurate poses, no false ones, map ids of the matched segments, INFO about the map, and the
+// pose prior enforced.
+#include "server_test_util.h"
+
+#include <cmath>
+
+using namespace segmatch;
+using namespace segmatch::testing;
+
+namespace {
+
+double position_error_m(const Pose3d& a, const Pose3d& b) { return (a.translation() - b.translation()).norm(); }
+double angle_error_deg(const Pose3d& a, const Pose3d& b) {
+  return Eigen::AngleAxisd(a.linear().transpose() * b.linear()).angle() * 180.0 / M_PI;
+}
+
+}  // namespace
+
+TEST(ServerLocalization, InfoDescribesTheMap) {
+  RunningServer s;
+  api::Client c = s.client();
+  const api::InfoReply info = c.info();
+  EXPECT_EQ(info.protocol_version, api::kProtocolVersion);
+  EXPECT_EQ(info.map_name, "tiny-3");
+  EXPECT_GT(info.segment_count, 50u);
+  EXPECT_TRUE((info.extent_max.array() > info.extent_min.array()).head<2>().all());
+  const io::PipelineConfig served = io::parse_pipeline_config(info.parameters_json, "INFO_REPLY");
+  EXPECT_EQ(served.localizer.matcher.type, MatcherType::kL2);
+  EXPECT_EQ(served.local_cloud.radius_m, test_world().config.local_cloud.radius_m);
+}
+
+TEST(ServerLocalization, RevisitQueriesLocalizeAccuratelyAndNeverFalsely) {
+  const TestWorld& w = test_world();
+  RunningServer s;
+  api::Client c = s.client();
+  const size_t map_segments = c.info().segment_count;
+  size_t localized = 0, accurate = 0, wrong = 0;
+  for (const Query& q : w.queries) {
+    const api::LocalizeReply r = c.localize(q.request);
+    EXPECT_EQ(r.request_id, q.request.request_id);
+    std::printf("[server]   frame %4zu: %s, %u inliers, support %u, %.0f ms %s\n", q.frame, api::to_string(r.status),
+                r.inliers, r.support, r.timings.server_total, r.reason.c_str());
+    if (r.status != api::LocalizeStatus::kLocalized) continue;
+    ++localized;
+    EXPECT_EQ(r.matched_segment_ids.size(), r.inliers);
+    for (uint64_t id : r.matched_segment_ids) EXPECT_LT(id, map_segments * 4) << "a map id, not garbage";
+    EXPECT_GT(r.timings.total, 0.f);
+    EXPECT_GE(r.timings.server_total, r.timings.total);
+    const Pose3d T_map_sensor = r.T_map_local * q.T_local_sensor;
+    const double err_m = position_error_m(T_map_sensor, q.T_world_sensor);
+    const double err_deg = angle_error_deg(T_map_sensor, q.T_world_sensor);
+    accurate += err_m <= 0.2 && err_deg <= 1.0;
+    wrong += err_m > 1.0 || err_deg > 3.0;
+  }
+  std::printf("[server] revisit: %zu queries, %zu localized, %zu within 0.2 m / 1 deg, %zu false\n", w.queries.size(),
+              localized, accurate, wrong);
+  ASSERT_GE(w.queries.size(), 8u);
+  EXPECT_EQ(wrong, 0u);
+  EXPECT_GE(accurate * 2, w.queries.size()) << "most queries localize accurately";
+  const server::ServerCounters counters = s.server->counters();
+  EXPECT_EQ(counters.localize_requests, w.queries.size() + 0);
+  EXPECT_EQ(counters.localized, localized);
+  EXPECT_EQ(counters.errors, 0u);
+}
+
+TEST(ServerLocalization, PosePriorIsEnforced) {
+  const TestWorld& w = test_world();
+  RunningServer s;
+  api::Client c = s.client();
+  for (const Query& q : w.queries) {
+    const api::LocalizeReply free = c.localize(q.request);
+    if (free.status != api::LocalizeStatus::kLocalized) continue;
+    api::LocalizeRequest with_prior = q.request;
+    with_prior.flags = api::kFlagHasPrior;
+    with_prior.prior_radius_m = 20.0;
+    with_prior.T_map_local_prior = free.T_map_local;
+    with_prior.T_map_local_prior.translation() += Eigen::Vector3d(5.0, -3.0, 0.0);  // a fair guess
+    EXPECT_EQ(c.localize(with_prior).status, api::LocalizeStatus::kLocalized);
+    with_prior.T_map_local_prior.translation() += Eigen::Vector3d(150.0, 0.0, 0.0);  // a wrong one
+    const api::LocalizeReply far = c.localize(with_prior);
+    EXPECT_EQ(far.status, api::LocalizeStatus::kOutsidePrior);
+    EXPECT_NE(far.reason.find("prior"), std::string::npos) << far.reason;
+    return;
+  }
+  FAIL() << "no query localized";
+}
+
+TEST(ServerLocalization, OnlyPointsInTheLocalCylinderAreUsed) {
+  // The same query with the sensor announced 500 m away: nothing of the cloud is within the
+  // local cloud radius of it, so there is nothing to localize.
+  const TestWorld& w = test_world();
+  RunningServer s;
+  api::Client c = s.client();
+  api::LocalizeRequest far = w.queries.front().request;
+  far.sensor_position_local += Eigen::Vector3d(500, 0, 0);
+  const api::LocalizeReply r = c.localize(far);
+  EXPECT_EQ(r.status, api::LocalizeStatus::kNotLocalized);
+  EXPECT_FALSE(r.reason.empty());
+}

@@ -1,0 +1,1 @@
+segmatch_test_suite(test_server server segmatch_server segmatch_api segmatch_sim segmatch_storage segmatch_io)
