@@ -1,0 +1,194 @@
+// segmatch-loop: online loop-closure detection over a recorded sequence (paper IV-D). The
+// target map is built online from the segments of past local clouds (odometry frame); each
+// new local cloud is matched against it. Writes loops.txt, loops.g2o, loops.png and, against
+// ground-truth poses, eval.json.
+#include "loop_eval.h"
+#include "loop_output.h"
+
+#include <segmatch/cli/progress.h>
+#include <segmatch/core/loop_closure.h>
+#include <segmatch/io/pipeline_config.h>
+#include <segmatch/io/pose_io.h>
+#include <segmatch/io/sequence.h>
+
+#include <CLI/CLI.hpp>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <sstream>
+#include <stdexcept>
+
+using namespace segmatch;
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Options {
+  std::string input, config_path, preset, classifier, odometry, truth, out;
+  long first = 0, last = -1;
+  bool l2 = false, no_eval = false, verbose = false;
+  double every_m = 0, exclude_m = -1, exclude_s = -1, radius_m = 0;
+  int min_inliers = 0;
+  loop::EvalConfig eval;
+};
+
+std::string read_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error("cannot read classifier " + path);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+LoopDetectorConfig detector_config(const Options& o) {
+  const io::PipelineConfig p = o.config_path.empty() ? io::pipeline_preset(o.preset.empty() ? "kitti-hdl64" : o.preset)
+                                                     : io::read_pipeline_config(o.config_path);
+  LoopDetectorConfig c;
+  c.local_cloud = p.local_cloud;
+  c.localizer = p.localizer;
+  c.segment_map = p.segment_map;
+  if (o.radius_m > 0) c.local_cloud.radius_m = o.radius_m;
+  if (o.every_m > 0) c.local_cloud_every_m = o.every_m;
+  if (o.exclude_m >= 0) c.exclude_recent_distance_m = o.exclude_m;
+  if (o.exclude_s >= 0) c.exclude_recent_time_s = o.exclude_s;
+  if (o.min_inliers > 0) c.min_inliers = o.min_inliers;
+  return c;
+}
+
+// The random forest from --classifier or the default model, else the L2 matcher.
+std::shared_ptr<const RandomForestMatcher> pick_matcher(const Options& o, LoopDetectorConfig& c) {
+  std::string path = o.classifier;
+  if (path.empty() && !o.l2 && fs::exists(SEGMATCH_DEFAULT_MODEL)) path = SEGMATCH_DEFAULT_MODEL;
+  if (o.l2 || path.empty()) {
+    if (!o.l2) std::fprintf(stderr, "segmatch-loop: no classifier (%s missing): using the L2 matcher\n", SEGMATCH_DEFAULT_MODEL);
+    c.localizer.matcher.type = MatcherType::kL2;
+    c.localizer.matcher.use_shapes = false;
+    return nullptr;
+  }
+  auto rf = std::make_shared<const RandomForestMatcher>(RandomForestMatcher::load(read_file(path)));
+  c.localizer.matcher.type = MatcherType::kRandomForest;
+  c.localizer.matcher.use_shapes = rf->config().use_shapes;
+  std::printf("classifier: %s (%s)\n", path.c_str(), rf->config().use_shapes ? "RF_eigen+shapes" : "RF_eigen");
+  return rf;
+}
+
+struct Run {
+  std::vector<size_t> frames;     // every frame fed
+  Poses T_odom_sensor;            // their odometry poses
+  std::vector<size_t> processed;  // frames where a local cloud was matched
+  std::vector<double> step_ms;    // time of each processed local cloud
+  std::vector<LoopClosure> loops;
+};
+
+Run run(const io::Sequence& seq, size_t first, size_t last, LoopDetector& detector, bool verbose) {
+  Run r;
+  cli::Progress progress("loop", last - first + 1, "scans");
+  for (size_t i = first; i <= last; ++i) {
+    const io::CloudData scan = seq.scan(i);
+    const LoopStep step = detector.process(scan.points, seq.poses()[i], i, seq.times()[i]);
+    r.frames.push_back(i);
+    r.T_odom_sensor.push_back(seq.poses()[i]);
+    if (step.processed) {
+      r.processed.push_back(i);
+      r.step_ms.push_back(step.total_ms);
+      if (verbose)
+        std::fprintf(stderr, "\nframe %zu: %zu segments, %zu eligible targets, %zu in map, %.0f ms%s %s\n", i,
+                     step.query_segments, step.eligible_targets, step.map_segments, step.total_ms,
+                     step.loop ? " LOOP" : ":", step.reason.c_str());
+    }
+    if (step.loop) {
+      const LoopClosure& l = *step.loop;
+      std::fprintf(stderr, "\nloop: frame %zu -> %zu, %zu inliers, confidence %.2f, |t| %.2f m\n", l.query_frame,
+                   l.match_frame, l.inliers, l.confidence, l.T_query_match.translation().norm());
+    }
+    progress.advance();
+  }
+  progress.finish();
+  r.loops = detector.loops();
+  return r;
+}
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, static_cast<size_t>(p * v.size()))];
+}
+
+void write_text(const std::string& path, const std::string& text) {
+  std::ofstream out(path);
+  out << text;
+  if (!out) throw std::runtime_error("cannot write " + path);
+}
+
+int run_main(const Options& o) {
+  LoopDetectorConfig config = detector_config(o);
+  const auto classifier = pick_matcher(o, config);
+  io::SequenceOptions so;
+  so.poses_path = o.odometry;
+  const io::Sequence seq = io::Sequence::open(o.input, so);
+  const long n = static_cast<long>(seq.size());
+  const long last = o.last < 0 ? n - 1 : o.last;
+  if (o.first < 0 || o.first > last || last >= n)
+    throw std::invalid_argument("--first " + std::to_string(o.first) + " --last " + std::to_string(last) +
+                                " outside the sequence's frames 0.." + std::to_string(n - 1));
+  fs::create_directories(o.out);
+  LoopDetector detector(config, classifier);
+  std::printf("%s: %ld scans, local cloud every %.1f m (radius %.0f m), recent past %.0f m / %.0f s excluded\n",
+              o.input.c_str(), last - o.first + 1, config.local_cloud_every_m, config.local_cloud.radius_m,
+              config.exclude_recent_distance_m, config.exclude_recent_time_s);
+  const Run r = run(seq, static_cast<size_t>(o.first), static_cast<size_t>(last), detector, o.verbose);
+  std::printf("%zu local clouds, %zu loops, %zu map segments; per local cloud %.0f ms median, %.0f ms p90\n",
+              r.processed.size(), r.loops.size(), detector.map_size(), percentile(r.step_ms, 0.5),
+              percentile(r.step_ms, 0.9));
+  loop::write_loops_txt((fs::path(o.out) / "loops.txt").string(), r.loops);
+  loop::write_g2o((fs::path(o.out) / "loops.g2o").string(), r.frames, r.T_odom_sensor, r.loops);
+  std::vector<bool> correct;
+  if (!o.no_eval) {
+    const Poses truth = o.truth.empty() ? seq.poses() : io::read_kitti_poses(o.truth);
+    const loop::Evaluation e = loop::evaluate(r.loops, r.processed, truth, static_cast<size_t>(o.first), o.eval);
+    for (const loop::LoopScore& s : e.scores) correct.push_back(s.correct);
+    loop::print_summary(e, o.eval);
+    write_text((fs::path(o.out) / "eval.json").string(), loop::to_json(e, o.eval));
+  }
+  loop::write_png((fs::path(o.out) / "loops.png").string(), r.frames, r.T_odom_sensor, r.processed, r.loops, correct);
+  std::printf("wrote %s/{loops.txt,loops.g2o,loops.png%s}\n", o.out.c_str(), o.no_eval ? "" : ",eval.json");
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Online loop-closure detection with SegMatch (the target map is built while driving)"};
+  Options o;
+  app.add_option("--input", o.input, "sequence folder (KITTI velodyne/ or PCD keyframes scans/)")->required();
+  auto* config_opt = app.add_option("--config", o.config_path, "pipeline config JSON");
+  app.add_option("--preset", o.preset, "pipeline preset: kitti-hdl64 (default), sparse-keyframes")->excludes(config_opt);
+  app.add_option("--classifier", o.classifier, "random forest model (default: maps/models/default-rf.yml if present)");
+  app.add_flag("--l2", o.l2, "use the L2 feature-distance matcher instead of a random forest");
+  app.add_option("--odometry", o.odometry, "odometry poses (KITTI 12 numbers) instead of the sequence's poses.txt");
+  app.add_option("--truth", o.truth, "ground-truth T_world_lidar poses, KITTI 12 numbers (default: the sequence's poses)");
+  app.add_flag("-v,--verbose", o.verbose, "print what each local cloud did");
+  app.add_flag("--no-eval", o.no_eval, "do not evaluate (the input has no ground truth)");
+  app.add_option("--first", o.first, "first frame (default 0)");
+  app.add_option("--last", o.last, "last frame (default: the sequence's last)");
+  app.add_option("--every-m", o.every_m, "local cloud every this many metres (default 10)");
+  app.add_option("--radius-m", o.radius_m, "local cloud radius (default: the config's)");
+  app.add_option("--exclude-m", o.exclude_m, "recent past excluded from matching, metres driven (default 150)");
+  app.add_option("--exclude-s", o.exclude_s, "recent past excluded from matching, seconds (default 0)");
+  app.add_option("--min-inliers", o.min_inliers, "minimum inlier matches of a loop (default 5)");
+  app.add_option("--revisit-radius-m", o.eval.revisit_radius_m, "evaluation: a revisit is within this of an earlier pose");
+  app.add_option("--revisit-gap-m", o.eval.min_revisit_gap_m,
+                 "evaluation: ... driven at least this long before (default: --exclude-m)");
+  app.add_option("--out", o.out, "output folder")->required();
+  CLI11_PARSE(app, argc, argv);
+  try {
+    if (app.count("--revisit-gap-m") == 0)
+      o.eval.min_revisit_gap_m = o.exclude_m >= 0 ? o.exclude_m : LoopDetectorConfig{}.exclude_recent_distance_m;
+    return run_main(o);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "segmatch-loop: %s\n", e.what());
+    return 1;
+  }
+}

@@ -1,0 +1,113 @@
+#include "loop_output.h"
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cstdio>
+#include <fstream>
+#include <stdexcept>
+#include <unordered_map>
+
+namespace segmatch::loop {
+namespace {
+
+std::ofstream open_out(const std::string& path) {
+  std::ofstream out(path);
+  if (!out) throw std::runtime_error("cannot write " + path);
+  out.precision(9);
+  return out;
+}
+
+void close_out(std::ofstream& out, const std::string& path) {
+  out.flush();
+  if (!out) throw std::runtime_error("failed writing " + path);
+}
+
+// x y z qx qy qz qw
+void put_pose(std::ostream& out, const Pose3d& T) {
+  const Eigen::Quaterniond q(T.linear());
+  const Eigen::Vector3d t = T.translation();
+  out << t.x() << ' ' << t.y() << ' ' << t.z() << ' ' << q.x() << ' ' << q.y() << ' ' << q.z() << ' ' << q.w();
+}
+
+// Upper triangle of diag(t, t, t, r, r, r), row by row (21 values).
+void put_information(std::ostream& out, double t, double r) {
+  for (int i = 0; i < 6; ++i)
+    for (int j = i; j < 6; ++j) out << ' ' << (i == j ? (i < 3 ? t : r) : 0.0);
+}
+
+}  // namespace
+
+void write_loops_txt(const std::string& path, const std::vector<LoopClosure>& loops) {
+  std::ofstream out = open_out(path);
+  out << "# query_frame match_frame x y z qx qy qz qw inliers confidence  (T_query_match)\n";
+  for (const LoopClosure& l : loops) {
+    out << l.query_frame << ' ' << l.match_frame << ' ';
+    put_pose(out, l.T_query_match);
+    out << ' ' << l.inliers << ' ' << l.confidence << '\n';
+  }
+  close_out(out, path);
+}
+
+void write_g2o(const std::string& path, const std::vector<size_t>& frames, const Poses& T_odom_sensor,
+               const std::vector<LoopClosure>& loops, const G2oInformation& info) {
+  std::ofstream out = open_out(path);
+  for (size_t i = 0; i < frames.size(); ++i) {
+    out << "VERTEX_SE3:QUAT " << frames[i] << ' ';
+    put_pose(out, T_odom_sensor[i]);
+    out << '\n';
+  }
+  for (size_t i = 0; i + 1 < frames.size(); ++i) {
+    out << "EDGE_SE3:QUAT " << frames[i] << ' ' << frames[i + 1] << ' ';
+    put_pose(out, T_odom_sensor[i].inverse() * T_odom_sensor[i + 1]);
+    put_information(out, info.odometry_translation, info.odometry_rotation);
+    out << '\n';
+  }
+  for (const LoopClosure& l : loops) {
+    out << "EDGE_SE3:QUAT " << l.query_frame << ' ' << l.match_frame << ' ';
+    put_pose(out, l.T_query_match);
+    put_information(out, info.loop_translation, info.loop_rotation);
+    out << '\n';
+  }
+  if (!frames.empty()) out << "FIX " << frames.front() << '\n';
+  close_out(out, path);
+}
+
+void write_png(const std::string& path, const std::vector<size_t>& frames, const Poses& T_odom_sensor,
+               const std::vector<size_t>& processed, const std::vector<LoopClosure>& loops,
+               const std::vector<bool>& correct) {
+  if (frames.empty()) throw std::runtime_error("no poses to draw in " + path);
+  std::unordered_map<size_t, Eigen::Vector2d> at;
+  Eigen::Vector2d lo(1e300, 1e300), hi(-1e300, -1e300);
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const Eigen::Vector2d p = T_odom_sensor[i].translation().head<2>();
+    at[frames[i]] = p;
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  const int size_px = 1000, margin_px = 40;
+  const double extent = std::max({hi.x() - lo.x(), hi.y() - lo.y(), 1.0});
+  const double scale = (size_px - 2 * margin_px) / extent;
+  auto px = [&](const Eigen::Vector2d& p) {
+    return cv::Point(margin_px + static_cast<int>((p.x() - lo.x()) * scale),
+                     size_px - margin_px - static_cast<int>((p.y() - lo.y()) * scale));
+  };
+  cv::Mat img(size_px, size_px, CV_8UC3, cv::Scalar(255, 255, 255));
+  for (size_t i = 0; i + 1 < frames.size(); ++i)
+    cv::line(img, px(at[frames[i]]), px(at[frames[i + 1]]), cv::Scalar(150, 150, 150), 2, cv::LINE_AA);
+  for (size_t f : processed)
+    if (at.count(f)) cv::circle(img, px(at[f]), 3, cv::Scalar(200, 120, 40), cv::FILLED, cv::LINE_AA);
+  for (size_t k = 0; k < loops.size(); ++k) {
+    if (!at.count(loops[k].query_frame) || !at.count(loops[k].match_frame)) continue;
+    const bool ok = correct.empty() || correct[k];
+    cv::line(img, px(at[loops[k].query_frame]), px(at[loops[k].match_frame]),
+             ok ? cv::Scalar(40, 170, 40) : cv::Scalar(40, 40, 220), 2, cv::LINE_AA);
+  }
+  const std::string legend = "odometry (grey), local clouds (blue), loops: true (green) / false (red); " +
+                             std::to_string(static_cast<int>(extent)) + " m across";
+  cv::putText(img, legend, cv::Point(10, 22), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
+  if (!cv::imwrite(path, img)) throw std::runtime_error("cannot write " + path);
+}
+
+}  // namespace segmatch::loop
