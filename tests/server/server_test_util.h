@@ -38,6 +38,9 @@ inline io::PipelineConfig fast_config() {
   c.localizer.segmentation.descriptors.compute_esf = false;
   c.localizer.matcher.type = MatcherType::kL2;
   c.localizer.matcher.use_shapes = false;
+  // A vehicle thins each scan before accumulating it: full HDL-64E local clouds are 4-14 M
+  // points (60-230 MB), over the 64 MiB frame limit and seconds to localize.
+  c.local_cloud.subsample_leaf_m = 0.1;
   return c;
 }
 
@@ -51,14 +54,15 @@ inline void write_map(const std::string& path, const io::PipelineConfig& config,
   writer.commit();
 }
 
-inline std::vector<Query> revisit_queries(const sim::City& city, double every_m, uint64_t seed) {
+inline std::vector<Query> revisit_queries(const sim::City& city, const LocalCloudConfig& local_cloud, double every_m,
+                                          uint64_t seed) {
   const sim::RayCaster caster(city.changed.scene());
   const Pose3d T_local_world = city.second.T_world_lidar.front().inverse();
   sim::LocalCloudSchedule schedule;
   schedule.every_m = every_m;
   schedule.seed = seed;
   std::vector<Query> out;
-  sim::for_each_local_cloud(caster, sim::hdl64e(), city.second, LocalCloudConfig{}, schedule,
+  sim::for_each_local_cloud(caster, sim::hdl64e(), city.second, local_cloud, schedule,
                             [&](const sim::SimulatedLocalCloud& lc) {
     Query q;
     q.frame = lc.frame;
@@ -91,12 +95,13 @@ inline const TestWorld& test_world() {
     const sim::City city = sim::make_city(sim::dataset_preset("tiny", 3));
     std::printf("[server] city %.1f s\n", seconds());
     sim::SegmentsAlongConfig along;
-    along.schedule.every_m = 5.0;
+    along.schedule.every_m = 8.0;
     along.schedule.seed = 21;
+    along.local_cloud = world->config.local_cloud;
     along.segmentation = world->config.localizer.segmentation;
     write_map(world->map_path, world->config, sim::segments_along(city.world, city.first, sim::hdl64e(), along));
     std::printf("[server] map %.1f s\n", seconds());
-    world->queries = revisit_queries(city, 15.0, 31);
+    world->queries = revisit_queries(city, world->config.local_cloud, 15.0, 31);
     std::printf("[server] queries %.1f s\n", seconds());
     std::printf("[server] map %s, %zu revisit queries\n", world->map_path.c_str(), world->queries.size());
   });
@@ -123,6 +128,7 @@ struct RunningServer {
     o.reply_timeout_s = 60;
     return api::Client("127.0.0.1", server->port(), o);
   }
+  ~RunningServer() { server.reset(); }  // its threads log into `log` until they are joined
   std::vector<std::string> log_lines() {
     std::lock_guard<std::mutex> lock(log_mutex);
     return log;

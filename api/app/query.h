@@ -1,0 +1,24 @@
+// Shared by segmatch-query's commands.
+#pragma once
+
+#include <segmatch/api/client.h>
+
+#include <string>
+
+namespace segmatch::query {
+
+struct ReplayOptions {
+  std::string folder;
+  double every_m = 10.0;     // one query each time the vehicle drove this far
+  size_t first = 0;          // first scan index
+  size_t last = SIZE_MAX;    // last scan index (inclusive)
+};
+
+// Replays a recorded sequence like a vehicle: accumulates its scans into a local cloud from
+// the sequence's own poses (the odometry frame), queries every `every_m` metres, prints each
+// answer and a summary. Returns the process exit code.
+int replay(api::Client& client, const ReplayOptions& options);
+
+void print_reply(const api::LocalizeReply& reply, double round_trip_ms);
+
+}  // namespace segmatch::query

@@ -1,0 +1,98 @@
+// segmatch-query: talks to segmatch-server (ping, info, one localization, or a replayed
+// sequence).
+#include "query.h"
+
+#include <segmatch/io/cloud_io.h>
+
+#include <CLI/CLI.hpp>
+
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+using namespace segmatch;
+
+namespace {
+
+std::string read_token(const std::string& path) {
+  if (path.empty()) return {};
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error("cannot read token file " + path);
+  std::ostringstream s;
+  s << in.rdbuf();
+  std::string token = s.str();
+  while (!token.empty() && std::isspace(static_cast<unsigned char>(token.back()))) token.pop_back();
+  return token;
+}
+
+double ms_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+Eigen::Vector3d parse_xyz(const std::string& text) {
+  Eigen::Vector3d v;
+  char c1 = 0, c2 = 0;
+  std::istringstream in(text);
+  if (!(in >> v.x() >> c1 >> v.y() >> c2 >> v.z()) || c1 != ',' || c2 != ',' || !v.allFinite())
+    throw std::runtime_error("--sensor wants x,y,z, got '" + text + "'");
+  return v;
+}
+
+void print_info(const api::InfoReply& info) {
+  std::printf("map:       %s\nsegments:  %llu\nextent:    (%.1f %.1f %.1f) .. (%.1f %.1f %.1f)\nprotocol:  %u\nparameters:\n%s\n",
+              info.map_name.c_str(), static_cast<unsigned long long>(info.segment_count), info.extent_min.x(),
+              info.extent_min.y(), info.extent_min.z(), info.extent_max.x(), info.extent_max.y(), info.extent_max.z(),
+              info.protocol_version, info.parameters_json.c_str());
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"segmatch-query: client of segmatch-server"};
+  app.require_subcommand(1);
+  std::string host = "127.0.0.1", token_file, cloud_path, sensor = "0,0,0";
+  uint16_t port = 7878;
+  double timeout_s = 30.0;
+  query::ReplayOptions replay;
+  app.add_option("--host", host, "server address")->capture_default_str();
+  app.add_option("--port", port, "server port")->capture_default_str();
+  app.add_option("--token-file", token_file, "file holding the server's token");
+  app.add_option("--timeout-s", timeout_s, "longest wait for one reply")->capture_default_str();
+  CLI::App* ping = app.add_subcommand("ping", "round trip of one PING");
+  CLI::App* info = app.add_subcommand("info", "the map the server serves");
+  CLI::App* localize = app.add_subcommand("localize", "localize one cloud (.bin/.pcd/.ply, local frame)");
+  localize->add_option("cloud", cloud_path, "point cloud file")->required();
+  localize->add_option("--sensor", sensor, "sensor position x,y,z in the cloud's frame")->capture_default_str();
+  CLI::App* rep = app.add_subcommand("replay", "replay a sequence folder like a vehicle");
+  rep->add_option("sequence", replay.folder, "KITTI sequence folder or PCD keyframe folder")->required();
+  rep->add_option("--every-m", replay.every_m, "query every this many metres")->capture_default_str()->check(CLI::PositiveNumber);
+  rep->add_option("--first", replay.first, "first scan index");
+  rep->add_option("--last", replay.last, "last scan index (inclusive)");
+  CLI11_PARSE(app, argc, argv);
+  try {
+    api::ClientOptions options;
+    options.token = read_token(token_file);
+    options.reply_timeout_s = timeout_s;
+    api::Client client(host, port, options);
+    const auto start = std::chrono::steady_clock::now();
+    if (ping->parsed()) {
+      client.ping(1);
+      std::printf("pong from %s:%u in %.2f ms\n", host.c_str(), port, ms_since(start));
+    } else if (info->parsed()) {
+      print_info(client.info());
+    } else if (localize->parsed()) {
+      api::LocalizeRequest request;
+      request.sensor_position_local = parse_xyz(sensor);
+      request.points = io::read_cloud(cloud_path).points;
+      const auto sent = std::chrono::steady_clock::now();
+      query::print_reply(client.localize(request), ms_since(sent));
+    } else {
+      return query::replay(client, replay);
+    }
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "segmatch-query: %s\n", e.what());
+    return 1;
+  }
+}

@@ -1,0 +1,82 @@
+#include "query.h"
+
+#include <segmatch/core/local_cloud.h>
+#include <segmatch/io/pipeline_config.h>
+#include <segmatch/io/sequence.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <vector>
+
+namespace segmatch::query {
+
+void print_reply(const api::LocalizeReply& r, double round_trip_ms) {
+  const Eigen::Quaterniond q(r.T_map_local.linear());
+  const Eigen::Vector3d t = r.T_map_local.translation();
+  std::printf("%-13s inliers %3u support %3u conf %.2f  T_map_local t=(%.3f %.3f %.3f) q=(%.5f %.5f %.5f %.5f)  "
+              "%.1f ms (server %.1f)%s%s\n",
+              api::to_string(r.status), r.inliers, r.support, r.confidence, t.x(), t.y(), t.z(), q.w(), q.x(), q.y(),
+              q.z(), round_trip_ms, r.timings.server_total, r.reason.empty() ? "" : "  ", r.reason.c_str());
+}
+
+namespace {
+
+// The map's local cloud parameters, so the vehicle accumulates what the map was built from.
+LocalCloudConfig local_cloud_of(api::Client& client) {
+  const api::InfoReply info = client.info();
+  try {
+    return io::parse_pipeline_config(info.parameters_json, "INFO_REPLY").local_cloud;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "warning: server parameters unreadable (%s); default local cloud\n", e.what());
+    return LocalCloudConfig{};
+  }
+}
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, static_cast<size_t>(p * (v.size() - 1) + 0.5))];
+}
+
+}  // namespace
+
+int replay(api::Client& client, const ReplayOptions& options) {
+  const io::Sequence seq = io::Sequence::open(options.folder);
+  const size_t last = std::min(options.last, seq.size() - 1);
+  LocalCloud local(local_cloud_of(client));
+  size_t queries = 0, localized = 0, errors = 0;
+  std::vector<double> latencies_ms;
+  double travelled_m = 0.0;
+  for (size_t i = options.first; i <= last; ++i) {
+    const Pose3d& T_odom_lidar = seq.poses()[i];
+    if (i > options.first) travelled_m += (T_odom_lidar.translation() - seq.poses()[i - 1].translation()).norm();
+    local.add_scan(seq.scan(i).points, T_odom_lidar);
+    if (travelled_m < options.every_m) continue;
+    travelled_m = 0.0;
+    api::LocalizeRequest request;
+    request.request_id = i;
+    request.sensor_position_local = T_odom_lidar.translation();
+    request.sensor_orientation_local = Eigen::Quaterniond(T_odom_lidar.linear());
+    request.points = local.crop(T_odom_lidar);
+    ++queries;
+    std::printf("frame %6zu  %7zu points  ", i, request.points.size());
+    const auto start = std::chrono::steady_clock::now();
+    try {
+      const api::LocalizeReply r = client.localize(request);
+      const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+      latencies_ms.push_back(ms);
+      localized += r.status == api::LocalizeStatus::kLocalized;
+      print_reply(r, ms);
+    } catch (const api::ClientError& e) {
+      ++errors;
+      std::printf("error: %s\n", e.what());
+      if (client.broken()) break;
+    }
+  }
+  std::printf("summary: %zu queries, %zu localized, %zu errors, latency p50 %.1f ms p99 %.1f ms\n", queries, localized,
+              errors, percentile(latencies_ms, 0.5), percentile(latencies_ms, 0.99));
+  return errors == 0 ? 0 : 1;
+}
+
+}  // namespace segmatch::query

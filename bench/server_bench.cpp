@@ -1,0 +1,139 @@
+// segmatch-bench-server: throughput and latency of segmatch-server over loopback with 1, 4
+// and 16 concurrent clients, on a simulated tiny city mapped by its first traversal and
+// queried with the revisit's full local clouds (HDL-64E, 60 m cylinder). L2 matcher (no
+// classifier to train). Prints figures, asserts nothing.
+#include <segmatch/api/client.h>
+#include <segmatch/io/pipeline_config.h>
+#include <segmatch/server/server.h>
+#include <segmatch/sim/city.h>
+#include <segmatch/storage/map_writer.h>
+
+#include <CLI/CLI.hpp>
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <mutex>
+#include <thread>
+
+using namespace segmatch;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+std::vector<api::LocalizeRequest> revisit_requests(const sim::City& city, const LocalCloudConfig& local_cloud, double every_m) {
+  const sim::RayCaster caster(city.changed.scene());
+  const Pose3d T_local_world = city.second.T_world_lidar.front().inverse();
+  sim::LocalCloudSchedule schedule;
+  schedule.every_m = every_m;
+  std::vector<api::LocalizeRequest> out;
+  sim::for_each_local_cloud(caster, sim::hdl64e(), city.second, local_cloud, schedule,
+                            [&](const sim::SimulatedLocalCloud& lc) {
+    api::LocalizeRequest r;
+    r.request_id = lc.frame;
+    r.sensor_position_local = T_local_world * lc.T_world_sensor.translation();
+    r.points = lc.cloud;
+    for (Point& p : r.points) {
+      const Eigen::Vector3f v = T_local_world.cast<float>() * p.xyz();
+      p.x = v.x(), p.y = v.y(), p.z = v.z();
+    }
+    out.push_back(std::move(r));
+  });
+  return out;
+}
+
+std::string build_map(const sim::City& city, const io::PipelineConfig& config) {
+  const std::string path = (std::filesystem::temp_directory_path() / ("segmatch_bench_server_" + std::to_string(::getpid()) + ".sqlite")).string();
+  sim::SegmentsAlongConfig along;
+  along.schedule.every_m = 5.0;
+  along.segmentation = config.localizer.segmentation;
+  along.local_cloud = config.local_cloud;
+  storage::MapMetadata meta;
+  meta.name = "bench-tiny";
+  meta.parameters_json = io::to_json(config);
+  storage::MapWriter writer = storage::MapWriter::create(path, meta, true);
+  writer.add_segments(sim::segments_along(city.world, city.first, sim::hdl64e(), along), {});
+  writer.commit();
+  return path;
+}
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, static_cast<size_t>(p * (v.size() - 1) + 0.5))];
+}
+
+// `clients` connections, each sending `per_client` queries back to back.
+void run_level(uint16_t port, const std::vector<api::LocalizeRequest>& requests, int clients, int per_client) {
+  std::mutex mutex;
+  std::vector<double> latencies_ms;
+  std::atomic<int> errors{0}, localized{0};
+  const auto start = Clock::now();
+  std::vector<std::thread> threads;
+  for (int c = 0; c < clients; ++c)
+    threads.emplace_back([&, c] {
+      api::ClientOptions options;
+      options.reply_timeout_s = 600;
+      api::Client client("127.0.0.1", port, options);
+      for (int i = 0; i < per_client; ++i) {
+        const api::LocalizeRequest& r = requests[(c * 7 + i) % requests.size()];
+        const auto t0 = Clock::now();
+        try {
+          localized += client.localize(r).status == api::LocalizeStatus::kLocalized;
+        } catch (const std::exception&) {
+          ++errors;
+          continue;
+        }
+        const double ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+        std::lock_guard<std::mutex> lock(mutex);
+        latencies_ms.push_back(ms);
+      }
+    });
+  for (std::thread& t : threads) t.join();
+  const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  std::printf("%2d clients: %4zu queries in %6.1f s = %6.2f queries/s, latency p50 %7.1f ms p99 %7.1f ms, %d localized, %d errors\n",
+              clients, latencies_ms.size(), seconds, latencies_ms.size() / seconds, percentile(latencies_ms, 0.5),
+              percentile(latencies_ms, 0.99), localized.load(), errors.load());
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"segmatch-bench-server: loopback throughput and latency of segmatch-server"};
+  int workers = 0, queries_per_level = 32;
+  uint64_t seed = 3;
+  double subsample_leaf_m = 0.1;
+  app.add_option("--workers", workers, "server localization threads (0 = cores)");
+  app.add_option("--queries", queries_per_level, "queries per level, spread over its clients (at least one each)");
+  app.add_option("--seed", seed, "city seed");
+  app.add_option("--subsample-leaf-m", subsample_leaf_m, "per-scan subsampling of the local cloud, 0 = full scans (60-230 MB clouds)");
+  CLI11_PARSE(app, argc, argv);
+  io::PipelineConfig config = io::pipeline_preset("kitti-hdl64");
+  config.localizer.matcher.type = MatcherType::kL2;
+  config.localizer.matcher.use_shapes = false;
+  config.local_cloud.subsample_leaf_m = subsample_leaf_m;
+  const auto t0 = Clock::now();
+  const sim::City city = sim::make_city(sim::dataset_preset("tiny", seed));
+  const std::string map_path = build_map(city, config);
+  const std::vector<api::LocalizeRequest> requests = revisit_requests(city, config.local_cloud, 10.0);
+  size_t points = 0;
+  for (const auto& r : requests) points += r.points.size();
+  std::printf("set-up %.0f s: %zu revisit local clouds, %.0f points on average\n",
+              std::chrono::duration<double>(Clock::now() - t0).count(), requests.size(), double(points) / requests.size());
+  server::ServerConfig sc;
+  sc.port = 0;
+  sc.workers = workers;
+  sc.log_requests = false;
+  sc.stats_interval_s = 0;
+  server::Server server(sc, server::load_map(map_path));
+  server.start();
+  std::printf("server on %s, %u cores\n", server.address().c_str(), std::thread::hardware_concurrency());
+  for (int clients : {1, 4, 16}) run_level(server.port(), requests, clients, std::max(1, queries_per_level / clients));
+  server.stop();
+  std::filesystem::remove(map_path);
+  return 0;
+}
