@@ -18,6 +18,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <random>
 #include <sstream>
 #include <thread>
@@ -306,10 +307,12 @@ TEST_F(MapBuilderCli, WithoutTheDefaultModelTheMapHasNoClassifierAndSaysSo) {
 }
 
 // Starts a full build, signals it once its temporary map exists, and checks that it leaves
-// nothing behind.
-void interrupt_build(const fs::path& sequence, const fs::path& folder, int signal) {
+// nothing behind; with `existing`, a file already at the target (replaced with --force) must
+// survive unchanged.
+void interrupt_build(const fs::path& sequence, const fs::path& folder, int signal, bool existing) {
   fs::create_directories(folder);
   const fs::path out = folder / "map.sqlite", log = folder.parent_path() / "interrupt.log";
+  if (existing) write_all(out, "the previous map");
   const pid_t pid = fork();
   ASSERT_GE(pid, 0);
   if (pid == 0) {
@@ -317,7 +320,7 @@ void interrupt_build(const fs::path& sequence, const fs::path& folder, int signa
     dup2(fd, 1), dup2(fd, 2);
     const std::string bin = kBin + "/segmatch-mapbuilder";
     execl(bin.c_str(), bin.c_str(), "--input", sequence.c_str(), "--output", out.c_str(), "--no-classifier",
-          static_cast<char*>(nullptr));
+          existing ? "--force" : static_cast<char*>(nullptr), static_cast<char*>(nullptr));
     _exit(127);
   }
   bool began = false;
@@ -334,10 +337,17 @@ void interrupt_build(const fs::path& sequence, const fs::path& folder, int signa
   ASSERT_TRUE(WIFEXITED(status)) << "exits by itself, not killed by the signal: " << output;
   EXPECT_EQ(WEXITSTATUS(status), 128 + signal) << output;
   EXPECT_NE(output.find("interrupted, no map written"), std::string::npos) << output;
-  EXPECT_FALSE(fs::exists(out));
-  EXPECT_TRUE(fs::is_empty(folder)) << "no temporary file left behind";
+  if (existing) {
+    EXPECT_EQ(read_all(out), "the previous map");
+    EXPECT_EQ(std::distance(fs::directory_iterator(folder), fs::directory_iterator()), 1) << "no temporary file left";
+  } else {
+    EXPECT_FALSE(fs::exists(out));
+    EXPECT_TRUE(fs::is_empty(folder)) << "no temporary file left behind";
+  }
 }
 
-TEST_F(MapBuilderCli, AnInterruptedBuildLeavesNoFileSigint) { interrupt_build(sequence(), dir_ / "sigint", SIGINT); }
+TEST_F(MapBuilderCli, AnInterruptedBuildLeavesNoFileSigint) { interrupt_build(sequence(), dir_ / "sigint", SIGINT, false); }
 
-TEST_F(MapBuilderCli, AnInterruptedBuildLeavesNoFileSigterm) { interrupt_build(sequence(), dir_ / "sigterm", SIGTERM); }
+TEST_F(MapBuilderCli, AnInterruptedForcedBuildKeepsTheExistingMapSigterm) {
+  interrupt_build(sequence(), dir_ / "sigterm", SIGTERM, true);
+}
