@@ -31,14 +31,22 @@ void LoopDetectorConfig::validate() const {
     throw std::invalid_argument("exclude_recent_time_s must be finite and >= 0");
   if (exclude_recent_distance_m <= 0.0 && exclude_recent_time_s <= 0.0)
     throw std::invalid_argument("exclude_recent_distance_m or exclude_recent_time_s must be > 0");
+  if (!(local_cloud_history_m > 0.0) || !std::isfinite(local_cloud_history_m))
+    throw std::invalid_argument("local_cloud_history_m must be finite and > 0");
+  if (exclude_recent_distance_m > 0.0 && local_cloud_history_m > exclude_recent_distance_m)
+    throw std::invalid_argument("local_cloud_history_m must not exceed exclude_recent_distance_m");
   if (min_inliers < 1) throw std::invalid_argument("min_inliers must be >= 1");
+  if (!(min_confidence >= 0.0f && min_confidence <= 1.0f)) throw std::invalid_argument("min_confidence must be in 0..1");
   if (rebuild_every_local_clouds < 1) throw std::invalid_argument("rebuild_every_local_clouds must be >= 1");
 }
 
 struct LoopDetector::Impl {
   LoopDetectorConfig config;
   std::shared_ptr<const RandomForestMatcher> classifier;
-  LocalCloud local;
+  // Two local clouds restarted alternately every local_cloud_history_m, half of it apart; the
+  // query uses the one with the longer history.
+  LocalCloud local[2];
+  double local_started_at[2];
   LoopSegmentMap map;
   // Localizer over the eligible (old, frozen) segments and, per target, its map index.
   std::unique_ptr<Localizer> localizer;
@@ -60,11 +68,14 @@ struct LoopDetector::Impl {
   Impl(const LoopDetectorConfig& c, std::shared_ptr<const RandomForestMatcher> rf)
       : config(c),
         classifier(std::move(rf)),
-        local(c.local_cloud),
+        local{LocalCloud(c.local_cloud), LocalCloud(c.local_cloud)},
+        local_started_at{0.0, -0.5 * c.local_cloud_history_m},
         map(c.segment_map, RecencyWindow{c.exclude_recent_distance_m, c.exclude_recent_time_s}),
         next_cloud_at(c.local_cloud_every_m) {}
 
   void advance_odometer(const Pose3d& T_odom_sensor, size_t frame);
+  void accumulate(const PointCloud& scan, const Pose3d& T_odom_sensor);
+  LocalCloud& longest_history() { return local_started_at[0] <= local_started_at[1] ? local[0] : local[1]; }
   bool rebuild_if_due(const Sighting& now);
   void match(const PointCloud& cloud, const Pose3d& T_odom_sensor, const Sighting& now, LoopStep& step,
              Segments& query);
@@ -81,6 +92,16 @@ void LoopDetector::Impl::advance_odometer(const Pose3d& T_odom_sensor, size_t fr
   has_last = true;
   last_frame = frame;
   T_odom_last = T_odom_sensor;
+}
+
+void LoopDetector::Impl::accumulate(const PointCloud& scan, const Pose3d& T_odom_sensor) {
+  for (int k = 0; k < 2; ++k) {
+    if (odometer - local_started_at[k] >= config.local_cloud_history_m) {
+      local[k].clear();
+      local_started_at[k] = odometer;
+    }
+    local[k].add_scan(scan, T_odom_sensor);
+  }
 }
 
 // Rebuilds the localizer over the segments that left the recent-past window, when due and
@@ -150,6 +171,10 @@ void LoopDetector::Impl::match(const PointCloud& cloud, const Pose3d& T_odom_sen
                   std::to_string(config.min_inliers) + " needed)";
     return;
   }
+  if (r.confidence < config.min_confidence) {
+    step.reason = "confidence " + std::to_string(r.confidence) + " below " + std::to_string(config.min_confidence);
+    return;
+  }
   step.loop = to_loop(r, now, T_odom_sensor);
 }
 
@@ -169,7 +194,7 @@ LoopStep LoopDetector::process(const PointCloud& scan_points_sensor, const Pose3
   const auto start = std::chrono::steady_clock::now();
   Impl& d = *impl_;
   d.advance_odometer(T_odom_sensor, frame_index);
-  d.local.add_scan(scan_points_sensor, T_odom_sensor);
+  d.accumulate(scan_points_sensor, T_odom_sensor);
   LoopStep step;
   if (d.odometer < d.next_cloud_at) return step;
   d.next_cloud_at = d.odometer + d.config.local_cloud_every_m;
@@ -177,7 +202,7 @@ LoopStep LoopDetector::process(const PointCloud& scan_points_sensor, const Pose3
   const Sighting now{frame_index, d.odometer, time_s};
   d.cloud_poses[frame_index] = {T_odom_sensor, d.odometer, time_s};
   step.rebuilt_index = d.rebuild_if_due(now);
-  const PointCloud cloud = d.local.crop(T_odom_sensor);
+  const PointCloud cloud = d.longest_history().crop(T_odom_sensor);
   Segments query;
   d.match(cloud, T_odom_sensor, now, step, query);
   step.query_segments = query.size();

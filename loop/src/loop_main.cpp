@@ -13,6 +13,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -29,7 +30,7 @@ struct Options {
   std::string input, config_path, preset, classifier, odometry, truth, out;
   long first = 0, last = -1;
   bool l2 = false, no_eval = false, verbose = false;
-  double every_m = 0, exclude_m = -1, exclude_s = -1, radius_m = 0;
+  double every_m = 0, exclude_m = -1, exclude_s = -1, radius_m = 0, history_m = 0, min_confidence = -1;
   int min_inliers = 0;
   loop::EvalConfig eval;
 };
@@ -54,6 +55,9 @@ LoopDetectorConfig detector_config(const Options& o) {
   if (o.exclude_m >= 0) c.exclude_recent_distance_m = o.exclude_m;
   if (o.exclude_s >= 0) c.exclude_recent_time_s = o.exclude_s;
   if (o.min_inliers > 0) c.min_inliers = o.min_inliers;
+  if (o.min_confidence >= 0) c.min_confidence = static_cast<float>(o.min_confidence);
+  if (o.history_m > 0) c.local_cloud_history_m = o.history_m;
+  else c.local_cloud_history_m = std::min(c.local_cloud_history_m, c.exclude_recent_distance_m);
   return c;
 }
 
@@ -177,6 +181,8 @@ int main(int argc, char** argv) {
   app.add_option("--radius-m", o.radius_m, "local cloud radius (default: the config's)");
   app.add_option("--exclude-m", o.exclude_m, "recent past excluded from matching, metres driven (default 150)");
   app.add_option("--exclude-s", o.exclude_s, "recent past excluded from matching, seconds (default 0)");
+  app.add_option("--history-m", o.history_m, "query local cloud holds at most this much driving (default min(120, exclude))");
+  app.add_option("--min-confidence", o.min_confidence, "minimum confidence of a loop, 0..1 (default 0.6)");
   app.add_option("--min-inliers", o.min_inliers, "minimum inlier matches of a loop (default 5)");
   app.add_option("--revisit-radius-m", o.eval.revisit_radius_m, "evaluation: a revisit is within this of an earlier pose");
   app.add_option("--revisit-gap-m", o.eval.min_revisit_gap_m,

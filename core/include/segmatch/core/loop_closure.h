@@ -47,6 +47,13 @@ struct LoopDetectorConfig {
   LocalizerConfig localizer;
   // Views closer than duplicate_distance_m are merged, but only among recent segments (above).
   SegmentMapConfig segment_map;
+  // The query local cloud holds only scans of the last local_cloud_history_m of driving
+  // (between half of it and all of it: two local clouds restart alternately). Without this
+  // bound a scan whose bounding box still touches the cylinder is never dropped, and back at
+  // a place the query would contain the old scans themselves in the old odometry coordinates
+  // and "match" the old view with the drift left in. Must not exceed exclude_recent_distance_m,
+  // so that no view is both in the query and among the targets.
+  double local_cloud_history_m = 120.0;
   // Segment and match the local cloud each time the odometer advanced this much. The first
   // local cloud is processed once the odometer reaches this distance too.
   double local_cloud_every_m = 10.0;
@@ -61,6 +68,10 @@ struct LoopDetectorConfig {
   // A loop is reported only with at least this many verified inlier matches (on top of the
   // localizer's verification.min_inliers and min_support).
   int min_inliers = 5;
+  // ... and a localizer confidence (0..1, grows with the support beyond min_support, scaled by
+  // the refinement's fitness) of at least this. On the simulated loop test a false loop had 5
+  // inliers, support 12, confidence 0.45; true loops had 0.8 and above.
+  float min_confidence = 0.6f;
   // The target index (k-d tree, centroid grid) is rebuilt at most once per this many local
   // clouds, and only when segments aged out of the recent-past window since the last build.
   // Segments that aged out since then are not matched until the next build.
