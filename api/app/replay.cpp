@@ -1,8 +1,7 @@
 #include "query.h"
 
-#include <segmatch/core/local_cloud.h>
 #include <segmatch/io/pipeline_config.h>
-#include <segmatch/io/sequence.h>
+#include <segmatch/io/replay.h>
 
 #include <algorithm>
 #include <chrono>
@@ -43,24 +42,21 @@ double percentile(std::vector<double> v, double p) {
 
 int replay(api::Client& client, const ReplayOptions& options) {
   const io::Sequence seq = io::Sequence::open(options.folder);
-  const size_t last = std::min(options.last, seq.size() - 1);
-  LocalCloud local(local_cloud_of(client));
+  io::ReplayConfig config;
+  config.every_m = options.every_m;
+  config.first = options.first;
+  config.last = options.last;
+  config.local_cloud = local_cloud_of(client);
   size_t queries = 0, localized = 0, errors = 0;
   std::vector<double> latencies_ms;
-  double travelled_m = 0.0;
-  for (size_t i = options.first; i <= last; ++i) {
-    const Pose3d& T_odom_lidar = seq.poses()[i];
-    if (i > options.first) travelled_m += (T_odom_lidar.translation() - seq.poses()[i - 1].translation()).norm();
-    local.add_scan(seq.scan(i).points, T_odom_lidar);
-    if (travelled_m < options.every_m) continue;
-    travelled_m = 0.0;
+  io::replay_sequence(seq, config, [&](const io::ReplayQuery& q) {
     api::LocalizeRequest request;
-    request.request_id = i;
-    request.sensor_position_local = T_odom_lidar.translation();
-    request.sensor_orientation_local = Eigen::Quaterniond(T_odom_lidar.linear());
-    request.points = local.crop(T_odom_lidar);
+    request.request_id = q.frame;
+    request.sensor_position_local = q.T_odom_sensor.translation();
+    request.sensor_orientation_local = Eigen::Quaterniond(q.T_odom_sensor.linear()).normalized();
+    request.points = q.cloud_odom;
     ++queries;
-    std::printf("frame %6zu  %7zu points  ", i, request.points.size());
+    std::printf("frame %6zu  %7.1f m  %7zu points  ", q.frame, q.odometer_m, request.points.size());
     const auto start = std::chrono::steady_clock::now();
     try {
       const api::LocalizeReply r = client.localize(request);
@@ -71,9 +67,10 @@ int replay(api::Client& client, const ReplayOptions& options) {
     } catch (const api::ClientError& e) {
       ++errors;
       std::printf("error: %s\n", e.what());
-      if (client.broken()) break;
+      if (client.broken()) return false;
     }
-  }
+    return true;
+  });
   std::printf("summary: %zu queries, %zu localized, %zu errors, latency p50 %.1f ms p99 %.1f ms\n", queries, localized,
               errors, percentile(latencies_ms, 0.5), percentile(latencies_ms, 0.99));
   return errors == 0 ? 0 : 1;

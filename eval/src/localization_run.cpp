@@ -72,6 +72,7 @@ void add_timings(std::map<std::string, std::vector<double>>& t, const api::Modul
 LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeFn& localize) {
   const storage::MapReader map = storage::MapReader::open(c.map_path);
   LocalizationRun run;
+  run.replay = c.replay;
   for (const storage::Keyframe& k : map.trajectory()) run.map_trajectory.push_back(k.T_map_sensor.translation());
   const Truth truth = open_truth(c);
   run.title = map.metadata().name + ": " + (c.sim_dataset.empty() ? c.query_folder : c.sim_dataset + " (01)");
@@ -136,6 +137,8 @@ void write_localization_report(const LocalizationRun& run, const std::string& ou
   const Summary& s = run.summary;
   nlohmann::json j;
   j["title"] = run.title;
+  j["replay"] = {{"every_m", run.replay.every_m}, {"warmup_m", run.replay.warmup_m}, {"first", run.replay.first},
+                 {"last", run.replay.last}, {"stride", run.replay.stride}};
   j["queries"] = s.queries;
   j["mapped_queries"] = s.mapped_queries;
   j["localized"] = s.localized;
@@ -146,10 +149,17 @@ void write_localization_report(const LocalizationRun& run, const std::string& ou
   j["latency_ms"] = dist(s.latency_ms);
   j["px"] = {{"total_mapped_m", s.px.total_m}, {"x95_m", s.px.x95_m}, {"gaps_m", s.px.gaps_m}};
   for (const auto& [name, d] : run.module_ms) j["module_ms"][name] = dist(d);
-  for (const QueryOutcome& o : run.outcomes)
-    j["per_query"].push_back({{"frame", o.frame},       {"odometer_m", o.odometer_m}, {"mapped", o.mapped},
-                              {"status", o.status},     {"correct", o.correct},       {"error_m", o.error_m},
-                              {"error_deg", o.error_deg}, {"latency_ms", o.latency_ms}});
+  for (const QueryOutcome& o : run.outcomes) {
+    nlohmann::json q = {{"frame", o.frame},         {"odometer_m", o.odometer_m}, {"mapped", o.mapped},
+                        {"status", o.status},       {"correct", o.correct},       {"error_m", o.error_m},
+                        {"error_deg", o.error_deg}, {"latency_ms", o.latency_ms}};
+    if (o.localized) {
+      const Eigen::Quaterniond r(o.T_map_sensor.linear());
+      const Eigen::Vector3d& t = o.T_map_sensor.translation();
+      q["T_map_sensor"] = {{"t", {t.x(), t.y(), t.z()}}, {"q_wxyz", {r.w(), r.x(), r.y(), r.z()}}};
+    }
+    j["per_query"].push_back(q);
+  }
   const std::string json_path = (fs::path(out_dir) / "localization.json").string();
   std::ofstream f(json_path);
   f << j.dump(2) << "\n";

@@ -13,6 +13,7 @@ void score(QueryOutcome& o, const Pose3d& T_map_sensor_estimate, const Pose3d& T
   o.truth_xy = T_map_sensor_truth.translation();
   if (!o.localized) return;
   o.estimate_xy = T_map_sensor_estimate.translation();
+  o.T_map_sensor = T_map_sensor_estimate;
   o.error_m = (T_map_sensor_estimate.translation() - T_map_sensor_truth.translation()).norm();
   const Eigen::Matrix3d dR = T_map_sensor_estimate.linear().transpose() * T_map_sensor_truth.linear();
   o.error_deg = Eigen::AngleAxisd(dR).angle() * 180.0 / M_PI;

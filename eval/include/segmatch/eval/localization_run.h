@@ -36,6 +36,7 @@ struct LocalizationRun {
   std::map<std::string, Distribution> module_ms;  // per-module time over all queries
   std::vector<Eigen::Vector3d> map_trajectory;
   std::string title;
+  io::ReplayConfig replay;  // as run, so that a regression test can replay the same queries
 };
 
 // Throws io::IoError / storage::StorageError / std::runtime_error naming the bad input.

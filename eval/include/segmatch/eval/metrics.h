@@ -34,6 +34,7 @@ struct QueryOutcome {
   std::string status;                // the localizer's status word, for reports
   Eigen::Vector3d truth_xy = Eigen::Vector3d::Zero();     // map-frame truth position
   Eigen::Vector3d estimate_xy = Eigen::Vector3d::Zero();  // map-frame estimate when localized
+  Pose3d T_map_sensor = Pose3d::Identity();              // the estimate when localized
 };
 
 // Fills correct / error_m / error_deg of a localized outcome from the estimated and true
