@@ -107,15 +107,24 @@ Segments extract_segments(const PointCloud& cloud, const Eigen::Vector3f& sensor
   ModuleTimings local;
   ModuleTimings& t = timings ? *timings : local;
   Stopwatch clock;
-  std::vector<uint32_t> voxel_labels, foreground_labels;
+  std::vector<uint32_t> voxel_labels;
   const PointCloud voxels =
       voxel_filter(cloud, config.voxel, labels, labels ? &voxel_labels : nullptr);
   t.voxel_ms = clock.lap();
-  const PointCloud foreground =
-      remove_ground(voxels, config.ground, sensor_position, labels ? &voxel_labels : nullptr,
-                    labels ? &foreground_labels : nullptr);
+  return extract_segments_from_voxels(voxels, sensor_position, config, labels ? &voxel_labels : nullptr, &t);
+}
+
+Segments extract_segments_from_voxels(const PointCloud& voxels, const Eigen::Vector3f& sensor_position,
+                                      const SegmentationConfig& config, const std::vector<uint32_t>* voxel_labels,
+                                      ModuleTimings* timings) {
+  ModuleTimings local;
+  ModuleTimings& t = timings ? *timings : local;
+  Stopwatch clock;
+  std::vector<uint32_t> foreground_labels;
+  const PointCloud foreground = remove_ground(voxels, config.ground, sensor_position, voxel_labels,
+                                              voxel_labels ? &foreground_labels : nullptr);
   t.ground_ms = clock.lap();
-  Segments segments = segment_cloud(foreground, config.segmenter, labels ? &foreground_labels : nullptr);
+  Segments segments = segment_cloud(foreground, config.segmenter, voxel_labels ? &foreground_labels : nullptr);
   t.segment_ms = clock.lap();
   describe_segments(segments, config.descriptors);
   t.describe_ms = clock.lap();

@@ -40,6 +40,28 @@ int SegmentMap::find_duplicate(const Eigen::Vector3f& c) const {
   return best;
 }
 
+std::vector<int> SegmentMap::neighbours_of(int self) const {
+  const float d = config_.duplicate_distance_m;
+  const Eigen::Vector3f& c = segments_[self].centroid;
+  std::vector<int> out;
+  for (int dx = -1; dx <= 1; ++dx)
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dz = -1; dz <= 1; ++dz) {
+        const auto range = grid_.equal_range(cell_of(c + Eigen::Vector3f(dx * d, dy * d, dz * d)));
+        for (auto it = range.first; it != range.second; ++it)
+          if (it->second != self && (segments_[it->second].centroid - c).norm() < d) out.push_back(it->second);
+      }
+  return out;
+}
+
+void SegmentMap::erase(int index) {
+  segments_.erase(segments_.begin() + index);
+  // Rare (a replacement that landed on another view): re-index the grid rather than keep
+  // back-pointers.
+  grid_.clear();
+  for (size_t i = 0; i < segments_.size(); ++i) grid_.emplace(cell_of(segments_[i].centroid), static_cast<int>(i));
+}
+
 size_t SegmentMap::add(Segments segments) {
   size_t added = 0;
   for (Segment& s : segments) {
@@ -63,6 +85,22 @@ size_t SegmentMap::add(Segments segments) {
     s.id = old.id;
     old = std::move(s);
     grid_.emplace(cell_of(old.centroid), dup);
+    // The moved centroid may now lie within the duplicate distance of other segments (the
+    // others are pairwise far enough apart already): keep the one with more points.
+    int self = dup;
+    for (std::vector<int> near = neighbours_of(self); !near.empty(); near = neighbours_of(self)) {
+      const int other = near.front();
+      const Segment& a = segments_[self];
+      const Segment& b = segments_[other];
+      const bool self_wins =
+          a.points.size() > b.points.size() || (a.points.size() == b.points.size() && a.id < b.id);
+      if (!self_wins) {
+        erase(self);
+        break;
+      }
+      erase(other);
+      if (other < self) --self;
+    }
   }
   return added;
 }

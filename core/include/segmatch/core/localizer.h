@@ -81,6 +81,14 @@ Segments extract_segments(const PointCloud& cloud, const Eigen::Vector3f& sensor
                           const std::vector<uint32_t>* labels = nullptr,
                           ModuleTimings* timings = nullptr);
 
+// The same without the voxel grid: ground removal, segmentation and description of an
+// already voxelized cloud (voxel_filter's output, e.g. VoxelAccumulator::crop) with its
+// per-voxel labels. extract_segments(cloud) == extract_segments_from_voxels(voxel_filter(cloud)).
+Segments extract_segments_from_voxels(const PointCloud& voxels, const Eigen::Vector3f& sensor_position,
+                                      const SegmentationConfig& config,
+                                      const std::vector<uint32_t>* voxel_labels = nullptr,
+                                      ModuleTimings* timings = nullptr);
+
 class Localizer {
  public:
   // targets: the map's described segments (map frame). classifier: required for the random

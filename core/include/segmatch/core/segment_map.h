@@ -5,6 +5,7 @@
 #include "segmatch/core/segment.h"
 
 #include <unordered_map>
+#include <vector>
 
 namespace segmatch {
 
@@ -18,9 +19,13 @@ class SegmentMap {
  public:
   explicit SegmentMap(const SegmentMapConfig& config = {});
 
-  // Adds segments (map frame). A segment near an existing one replaces it when it has more
-  // points (keeping the existing id), and is dropped otherwise. New segments get new ids.
-  // Returns how many segments were new.
+  // Adds segments (map frame). A segment near an existing one (the nearest within
+  // duplicate_distance_m) replaces it when it has more points (keeping the existing id), and
+  // is dropped otherwise. New segments get new ids. A replacement moves the centroid, which
+  // can land within the duplicate distance of other segments (views of the same object):
+  // those are resolved at once, keeping the one with more points (ties: the older, smaller
+  // id), so no two segments of the map are ever closer than duplicate_distance_m. Segments
+  // stay in id order. Returns how many segments were new.
   size_t add(Segments segments);
 
   const Segments& segments() const { return segments_; }
@@ -30,6 +35,9 @@ class SegmentMap {
   using CellKey = uint64_t;
   CellKey cell_of(const Eigen::Vector3f& p) const;
   int find_duplicate(const Eigen::Vector3f& centroid) const;
+  // Indices of the segments other than `self` within the duplicate distance of `self`.
+  std::vector<int> neighbours_of(int self) const;
+  void erase(int index);  // keeps the order and the grid consistent
 
   SegmentMapConfig config_;
   Segments segments_;

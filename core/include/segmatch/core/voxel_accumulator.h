@@ -1,0 +1,68 @@
+// Incremental voxel grid of a local cloud (paper III-A, IV-A: 0.1 m voxels, occupied with at
+// least 2 points, each voxel's point the centroid of its points), for the map builder, which
+// crops and voxelizes a local cloud of millions of points every few metres.
+//
+// VoxelAccumulator holds the same scans as LocalCloud (same admission: min travel, optional
+// subsampling, non-finite points dropped; same eviction: a scan whose horizontal bounding box
+// lies wholly outside the cylinder is dropped at crop time) and gives, for every crop,
+//
+//     voxel_filter(LocalCloud::crop(T), voxel, labels)           (same scans, same config)
+//
+// up to the float rounding of the centroid sums: same voxels, same order (voxel key: x, then
+// y, then z), same majority labels (non-zero majority, ties to the smaller label, 0 if none).
+//
+// How: every added scan's points are summed into one hash table voxel -> (count, sums of the
+// position inside the voxel in 32.32 fixed point, intensity sum, label votes); a dropped scan
+// is subtracted (its points are kept, world frame, sorted by 1.6 m tile). Fixed-point sums
+// make addition and subtraction exact and order-independent, so the table does not drift.
+// The crop is exact, not by voxel centroid: the plane is cut into tiles of 16 x 16 voxel
+// columns; voxels of tiles wholly inside the cylinder come from the table, tiles wholly
+// outside are skipped, and the voxels of the tiles the cylinder's boundary crosses (a ring of
+// ~1.6-2.3 m at R = 60 m) are summed again from the raw points that pass LocalCloud's point
+// test (horizontal distance <= radius_m). So a voxel cut by the boundary gets the centroid and
+// count of its points inside, exactly as cropping raw points first (a crop by voxel centroid
+// would instead keep or drop whole voxels and differ there; see voxel_accumulator_test.cpp).
+//
+// Limits: points more than 20 km (any axis) from their sensor are refused (invalid_argument);
+// voxel keys wrap every 2^21 voxels (210 km at 0.1 m) and are unwrapped around the crop
+// centre, so routes of any length work.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "segmatch/core/local_cloud.h"
+#include "segmatch/core/preprocess.h"
+#include "segmatch/core/types.h"
+
+namespace segmatch {
+
+class VoxelAccumulator {
+ public:
+  explicit VoxelAccumulator(const LocalCloudConfig& local = {}, const VoxelGridConfig& voxel = {});
+  ~VoxelAccumulator();
+  VoxelAccumulator(VoxelAccumulator&&) noexcept;
+  VoxelAccumulator& operator=(VoxelAccumulator&&) noexcept;
+
+  // As LocalCloud::add_scan (the scan is also summed into the voxels). Returns whether it
+  // was added.
+  bool add_scan(const PointCloud& scan_sensor, const Pose3d& T_world_sensor,
+                const std::vector<uint32_t>* labels = nullptr);
+
+  // The voxelized cylinder around T_world_sensor: voxel_filter of LocalCloud::crop (see
+  // above); drops (and subtracts) the scans wholly outside it first, as LocalCloud::crop.
+  // labels_out (if given) gets each voxel's majority label (0 where none).
+  PointCloud crop(const Pose3d& T_world_sensor, std::vector<uint32_t>* labels_out = nullptr);
+
+  size_t scan_count() const;
+  size_t point_count() const;
+  size_t voxel_count() const;  // voxels holding at least one point of a held scan
+  void clear();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace segmatch
