@@ -6,6 +6,7 @@
 #include <deque>
 #include <limits>
 #include <stdexcept>
+#include <unordered_map>
 
 #include "seg_grid.h"
 
@@ -205,18 +206,19 @@ struct Scan {
   float max_xy[2] = {0.f, 0.f};
 };
 
-// Adds (sign +1) or subtracts (-1) points into the table, prefetching a batch of slots first.
-void sum_points(const PointCloud& points, const std::vector<uint32_t>& labels, double leaf, int sign,
-                VoxelTable* table) {
-  constexpr size_t kBatch = 32;
+// Adds (sign +1) or subtracts (-1) points [begin, end) into the table, computing the keys of
+// a batch and prefetching their slots before touching any.
+void sum_points(const PointCloud& points, const std::vector<uint32_t>& labels, size_t begin, size_t end,
+                double leaf, int sign, VoxelTable* table) {
+  constexpr size_t kBatch = 16;
   uint64_t keys[kBatch];
   int64_t frac[kBatch][3];
   uint32_t idx[kBatch];
-  for (size_t start = 0; start < points.size(); start += kBatch) {
-    const size_t end = std::min(points.size(), start + kBatch);
-    table->reserve_more(kBatch);
+  table->reserve_more(end - begin);
+  for (size_t start = begin; start < end; start += kBatch) {
+    const size_t stop = std::min(end, start + kBatch);
     size_t m = 0;
-    for (size_t i = start; i < end; ++i) {
+    for (size_t i = start; i < stop; ++i) {
       Voxelized v;
       if (!voxelize(points[i], leaf, &v)) continue;
       keys[m] = wrap_key(v.v);
@@ -229,16 +231,41 @@ void sum_points(const PointCloud& points, const std::vector<uint32_t>& labels, d
   }
 }
 
+inline uint64_t tile_key(int64_t x, int64_t y) {
+  return static_cast<uint64_t>(x) << 32 ^ static_cast<uint32_t>(y);
+}
+
 }  // namespace
 
+// The voxels are kept per tile (a small table each), so that a crop visits only the tiles near
+// the cylinder, not every voxel of the ~180 m of route whose scans still reach it, and a scan's
+// points (grouped by tile) are summed into a table that stays in cache.
 struct VoxelAccumulator::Impl {
   LocalCloudConfig local;
   VoxelGridConfig voxel;
   double leaf = 0.1;
   std::deque<Scan> scans;
-  VoxelTable table;
+  std::unordered_map<uint64_t, VoxelTable> tiles;
   bool has_last = false;
   Eigen::Vector3d last_position = Eigen::Vector3d::Zero();
+
+  // Adds (+1) or subtracts (-1) a scan's points, tile by tile.
+  void sum_scan(const Scan& s, int sign) {
+    for (size_t t = 0; t + 1 < s.tiles.size(); ++t) {
+      const uint64_t key = tile_key(s.tiles[t].x, s.tiles[t].y);
+      const uint32_t b = s.tiles[t].begin, e = s.tiles[t + 1].begin;
+      VoxelTable* table;
+      if (sign > 0) {
+        table = &tiles[key];
+      } else {
+        const auto it = tiles.find(key);
+        if (it == tiles.end()) continue;  // cannot happen: the scan was added
+        table = &it->second;
+      }
+      sum_points(s.points, s.labels, b, e, leaf, sign, table);
+      if (sign < 0 && table->live() == 0) tiles.erase(key);
+    }
+  }
 };
 
 VoxelAccumulator::VoxelAccumulator(const LocalCloudConfig& local, const VoxelGridConfig& voxel)
@@ -291,8 +318,6 @@ bool VoxelAccumulator::add_scan(const PointCloud& scan_sensor, const Pose3d& T_w
   m.has_last = true;
   m.last_position = position;
 
-  sum_points(world, world_labels, m.leaf, +1, &m.table);
-
   // Group the points by tile (stable radix sort on tile keys relative to the scan's first tile).
   const size_t n = world.size();
   std::vector<int64_t> tx(n), ty(n);
@@ -328,6 +353,7 @@ bool VoxelAccumulator::add_scan(const PointCloud& scan_sensor, const Pose3d& T_w
     }
   }
   scan.tiles.push_back({0, 0, static_cast<uint32_t>(n)});
+  m.sum_scan(scan, +1);
   m.scans.push_back(std::move(scan));
   return true;
 }
@@ -349,7 +375,7 @@ PointCloud VoxelAccumulator::crop(const Pose3d& T_world_sensor, std::vector<uint
     return (nx - cx) * (nx - cx) + (ny - cy) * (ny - cy) > r2;
   };
   for (const Scan& s : m.scans)
-    if (outside(s)) sum_points(s.points, s.labels, leaf, -1, &m.table);
+    if (outside(s)) m.sum_scan(s, -1);
   m.scans.erase(std::remove_if(m.scans.begin(), m.scans.end(), outside), m.scans.end());
   if (m.scans.empty()) return {};
 
@@ -382,62 +408,66 @@ PointCloud VoxelAccumulator::crop(const Pose3d& T_world_sensor, std::vector<uint
       }
     }
   }
-  sum_points(ring, ring_labels, leaf, +1, &boundary);
+  sum_points(ring, ring_labels, 0, ring.size(), leaf, +1, &boundary);
 
   // Occupied voxels of inside tiles (from the table) and of boundary tiles (recomputed).
   const int64_t centre[3] = {static_cast<int64_t>(std::floor(cx / leaf)), static_cast<int64_t>(std::floor(cy / leaf)),
                              static_cast<int64_t>(std::floor(T_world_sensor.translation().z() / leaf))};
-  struct Entry {
-    int64_t v[3];
-    const Slot* slot;
-    const VoxelTable* table;
-  };
-  std::vector<Entry> entries;
+  // Each voxel's point is computed while its table is read in slot order; only the points
+  // (and voxel coordinates) are then permuted into key order.
+  std::vector<int64_t> coords;  // x, y, z per voxel
+  PointCloud points;
+  std::vector<uint32_t> labels;
   const uint32_t min_points = static_cast<uint32_t>(m.voxel.min_points_per_voxel);
-  const auto collect = [&](const VoxelTable& table, bool from_boundary) {
+  const auto collect = [&](const VoxelTable& table) {
     for (size_t s = 0; s < table.capacity(); ++s) {
       const Slot& v = table.slot(s);
       if (v.key == kEmpty || v.n < min_points) continue;
-      Entry e{{unwrap(v.key, 0, centre[0]), unwrap(v.key, 1, centre[1]), unwrap(v.key, 2, centre[2])}, &v, &table};
-      if (!from_boundary && classify(e.v[0] >> kTileShift, e.v[1] >> kTileShift) != 1) continue;
-      entries.push_back(e);
+      const double n = v.n;
+      double p[3];
+      for (int a = 0; a < 3; ++a) {
+        const int64_t c = unwrap(v.key, a, centre[a]);
+        coords.push_back(c);
+        p[a] = (double(c) + double(v.s[a]) / kFracScale / n) * leaf;
+      }
+      points.push_back({float(p[0]), float(p[1]), float(p[2]), float(v.i / n)});
+      if (labels_out) labels.push_back(table.majority(v));
     }
   };
-  collect(m.table, false);
-  collect(boundary, true);
+  for (const auto& [key, table] : m.tiles) {
+    const int64_t x = static_cast<int64_t>(key) >> 32;  // arithmetic shift undoes tile_key's
+    const int64_t y = static_cast<int32_t>(static_cast<uint32_t>(key));
+    if (classify(x, y) == 1) collect(table);
+  }
+  collect(boundary);
 
   // Voxel key order (x, then y, then z), as voxel_filter.
+  const size_t count = points.size();
   int64_t lo[3], hi[3];
   for (int a = 0; a < 3; ++a) {
     lo[a] = std::numeric_limits<int64_t>::max();
     hi[a] = std::numeric_limits<int64_t>::min();
   }
-  for (const Entry& e : entries)
-    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], e.v[a]), hi[a] = std::max(hi[a], e.v[a]);
+  for (size_t k = 0; k < count; ++k)
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], coords[3 * k + a]), hi[a] = std::max(hi[a], coords[3 * k + a]);
   int bits[3] = {0, 0, 0};
   for (int a = 0; a < 3; ++a)
-    while (!entries.empty() && (int64_t{1} << bits[a]) <= hi[a] - lo[a]) ++bits[a];
-  std::vector<uint64_t> keys(entries.size());
-  std::vector<uint32_t> order(entries.size());
-  for (size_t k = 0; k < entries.size(); ++k) {
+    while (count > 0 && (int64_t{1} << bits[a]) <= hi[a] - lo[a]) ++bits[a];
+  std::vector<uint64_t> keys(count);
+  std::vector<uint32_t> order(count);
+  for (size_t k = 0; k < count; ++k) {
     uint64_t packed = 0;
-    for (int a = 0; a < 3; ++a) packed = (packed << bits[a]) | static_cast<uint64_t>(entries[k].v[a] - lo[a]);
+    for (int a = 0; a < 3; ++a) packed = (packed << bits[a]) | static_cast<uint64_t>(coords[3 * k + a] - lo[a]);
     keys[k] = packed;
     order[k] = static_cast<uint32_t>(k);
   }
   detail::radix_sort(keys, order, std::max(bits[0] + bits[1] + bits[2], 1));
 
-  PointCloud out;
-  out.reserve(entries.size());
-  if (labels_out) labels_out->reserve(entries.size());
-  for (uint32_t k : order) {
-    const Entry& e = entries[k];
-    const double n = e.slot->n;
-    out.push_back({float((double(e.v[0]) + double(e.slot->s[0]) / kFracScale / n) * leaf),
-                   float((double(e.v[1]) + double(e.slot->s[1]) / kFracScale / n) * leaf),
-                   float((double(e.v[2]) + double(e.slot->s[2]) / kFracScale / n) * leaf),
-                   float(e.slot->i / n)});
-    if (labels_out) labels_out->push_back(e.table->majority(*e.slot));
+  PointCloud out(count);
+  for (size_t k = 0; k < count; ++k) out[k] = points[order[k]];
+  if (labels_out) {
+    labels_out->resize(count);
+    for (size_t k = 0; k < count; ++k) (*labels_out)[k] = labels[order[k]];
   }
   return out;
 }
@@ -450,11 +480,15 @@ size_t VoxelAccumulator::point_count() const {
   return n;
 }
 
-size_t VoxelAccumulator::voxel_count() const { return impl_->table.live(); }
+size_t VoxelAccumulator::voxel_count() const {
+  size_t n = 0;
+  for (const auto& tile : impl_->tiles) n += tile.second.live();
+  return n;
+}
 
 void VoxelAccumulator::clear() {
   impl_->scans.clear();
-  impl_->table.clear();
+  impl_->tiles.clear();
   impl_->has_last = false;
 }
 

@@ -1,6 +1,7 @@
 // Building a segment map from a mapping traversal (paper III-A and IV-A): scans are
-// accumulated into a local cloud, and every map_every_m of driving the cylinder around the
-// vehicle is segmented and described; the segments (world frame) go into a SegmentMap, which
+// accumulated into a local cloud, kept voxelized incrementally (VoxelAccumulator: the same
+// voxels as voxel_filter of the cropped cloud, without re-voxelizing millions of points), and
+// every map_every_m of driving the cylinder around the vehicle is segmented and described; the segments (world frame) go into a SegmentMap, which
 // keeps one segment per object, its most complete view. Knows no files: the caller reads the
 // scans and writes the map.
 #pragma once
@@ -8,8 +9,10 @@
 #include "segmatch/core/local_cloud.h"
 #include "segmatch/core/localizer.h"
 #include "segmatch/core/segment_map.h"
+#include "segmatch/core/voxel_accumulator.h"
 
 #include <cstdint>
+#include <unordered_map>
 #include <vector>
 
 namespace segmatch {
@@ -28,9 +31,10 @@ struct MapBuilderConfig {
 
 // Wall-clock time summed over the whole build, per stage (milliseconds).
 struct MapBuilderTimings {
-  double accumulate_ms = 0;  // LocalCloud::add_scan
-  double crop_ms = 0;        // cylinder extraction
-  double voxel_ms = 0, ground_ms = 0, segment_ms = 0, describe_ms = 0;  // extract_segments
+  double accumulate_ms = 0;  // VoxelAccumulator::add_scan (the scans' points summed into voxels)
+  double crop_ms = 0;        // VoxelAccumulator::crop: the voxelized cylinder
+  // voxel_ms stays 0: the voxel grid is maintained by add_scan and crop above.
+  double voxel_ms = 0, ground_ms = 0, segment_ms = 0, describe_ms = 0;  // extract_segments_from_voxels
   double merge_ms = 0;       // SegmentMap::add
   double total_ms() const {
     return accumulate_ms + crop_ms + voxel_ms + ground_ms + segment_ms + describe_ms + merge_ms;
@@ -52,12 +56,9 @@ class MapBuilder {
   // one, so that the objects of the final stretch reach the map. Returns whether it did.
   bool finish();
 
-  // The map: one segment per object, world frame, with descriptors. SegmentMap merges a view
-  // into the nearest segment, but a merge moves that segment's centroid and can bring it
-  // within duplicate_distance_m of another view of the same object; these are resolved here
-  // (the view with more points is kept), lazily, so call after the last add_scan / finish.
-  // Not thread-safe (the result is cached).
-  const Segments& segments() const;
+  // The map: one segment per object, world frame, with descriptors (SegmentMap keeps no two
+  // segments within duplicate_distance_m of each other).
+  const Segments& segments() const { return map_.segments(); }
   // For each segment, the scan index of the local cloud its kept view came from.
   const std::vector<uint32_t>& keyframe_of_segment() const;
   size_t local_clouds() const { return local_clouds_; }
@@ -69,16 +70,16 @@ class MapBuilder {
 
  private:
   void segment_local_cloud();
-  void consolidate() const;
 
+  struct View {
+    uint32_t keyframe;
+    size_t points;  // to see which segments a merge replaced
+  };
   MapBuilderConfig config_;
-  LocalCloud local_;
+  VoxelAccumulator local_;
   SegmentMap map_;
-  std::vector<uint32_t> keyframe_of_segment_;
-  std::vector<size_t> points_of_segment_;  // to see which segments a merge replaced
-  mutable Segments segments_;                 // consolidated map (see segments())
-  mutable std::vector<uint32_t> keyframes_;  // of segments_
-  mutable bool consolidated_ = false;
+  std::unordered_map<uint64_t, View> view_of_id_;
+  std::vector<uint32_t> keyframe_of_segment_;  // in the map's order
   MapBuilderTimings timings_;
   size_t local_clouds_ = 0, extracted_segments_ = 0;
   bool has_scan_ = false, has_labels_ = false;
