@@ -3,6 +3,7 @@
 // queried with the revisit's full local clouds (HDL-64E, 60 m cylinder). L2 matcher (no
 // classifier to train). Prints figures, asserts nothing.
 #include <segmatch/api/client.h>
+#include <segmatch/core/preprocess.h>
 #include <segmatch/io/pipeline_config.h>
 #include <segmatch/server/server.h>
 #include <segmatch/sim/city.h>
@@ -17,6 +18,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <mutex>
 #include <thread>
 
@@ -25,7 +27,8 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
-std::vector<api::LocalizeRequest> revisit_requests(const sim::City& city, const LocalCloudConfig& local_cloud, double every_m) {
+std::vector<api::LocalizeRequest> revisit_requests(const sim::City& city, const LocalCloudConfig& local_cloud,
+                                                   const VoxelGridConfig* voxel, double every_m) {
   const sim::RayCaster caster(city.changed.scene());
   const Pose3d T_local_world = city.second.T_world_lidar.front().inverse();
   sim::LocalCloudSchedule schedule;
@@ -41,12 +44,17 @@ std::vector<api::LocalizeRequest> revisit_requests(const sim::City& city, const 
       const Eigen::Vector3f v = T_local_world.cast<float>() * p.xyz();
       p.x = v.x(), p.y = v.y(), p.z = v.z();
     }
+    // What a vehicle sends (docs/protocol.md 5.4): its local cloud voxelized with the map's grid.
+    if (voxel) {
+      r.points = voxel_filter(r.points, *voxel);
+      r.flags |= api::kFlagVoxelized;
+    }
     out.push_back(std::move(r));
   });
   return out;
 }
 
-std::string build_map(const sim::City& city, const io::PipelineConfig& config) {
+std::string build_map(const sim::City& city, const io::PipelineConfig& config, const std::string& model) {
   const std::string path = (std::filesystem::temp_directory_path() / ("segmatch_bench_server_" + std::to_string(::getpid()) + ".sqlite")).string();
   sim::SegmentsAlongConfig along;
   along.schedule.every_m = 5.0;
@@ -57,6 +65,7 @@ std::string build_map(const sim::City& city, const io::PipelineConfig& config) {
   meta.parameters_json = io::to_json(config);
   storage::MapWriter writer = storage::MapWriter::create(path, meta, true);
   writer.add_segments(sim::segments_along(city.world, city.first, sim::hdl64e(), along), {});
+  if (!model.empty()) writer.set_classifier({"opencv-rtrees-yaml", model});
   writer.commit();
   return path;
 }
@@ -106,20 +115,37 @@ int main(int argc, char** argv) {
   CLI::App app{"segmatch-bench-server: loopback throughput and latency of segmatch-server"};
   int workers = 0, queries_per_level = 32;
   uint64_t seed = 3;
-  double subsample_leaf_m = 0.1;
+  double subsample_leaf_m = 0.0;
+  bool raw = false, l2 = false;
+  std::string model_path = SEGMATCH_SOURCE_DIR "/maps/models/default-rf.yml";
   app.add_option("--workers", workers, "server localization threads (0 = cores)");
   app.add_option("--queries", queries_per_level, "queries per level, spread over its clients (at least one each)");
   app.add_option("--seed", seed, "city seed");
-  app.add_option("--subsample-leaf-m", subsample_leaf_m, "per-scan subsampling of the local cloud, 0 = full scans (60-230 MB clouds)");
+  app.add_option("--subsample-leaf-m", subsample_leaf_m, "per-scan subsampling of the local cloud (0 = full scans)");
+  app.add_flag("--raw", raw, "send raw points (60-230 MB clouds: use with --subsample-leaf-m 0.1) instead of voxels");
+  app.add_flag("--l2", l2, "L2 matcher on eigen features instead of the shipped RF_eigen+shapes");
+  app.add_option("--model", model_path, "RF model file");
   CLI11_PARSE(app, argc, argv);
   io::PipelineConfig config = io::pipeline_preset("kitti-hdl64");
-  config.localizer.matcher.type = MatcherType::kL2;
-  config.localizer.matcher.use_shapes = false;
+  std::string model;
+  if (l2) {
+    config.localizer.matcher.type = MatcherType::kL2;
+    config.localizer.matcher.use_shapes = false;
+  } else {
+    std::ifstream f(model_path, std::ios::binary);
+    if (!f) {
+      std::fprintf(stderr, "segmatch-bench-server: cannot read %s (give --model or --l2)\n", model_path.c_str());
+      return 1;
+    }
+    model.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+  }
   config.local_cloud.subsample_leaf_m = subsample_leaf_m;
+  std::printf("matcher %s, %s queries\n", l2 ? "L2 (eigen)" : "RF_eigen+shapes", raw ? "raw" : "voxelized");
   const auto t0 = Clock::now();
   const sim::City city = sim::make_city(sim::dataset_preset("tiny", seed));
-  const std::string map_path = build_map(city, config);
-  const std::vector<api::LocalizeRequest> requests = revisit_requests(city, config.local_cloud, 10.0);
+  const std::string map_path = build_map(city, config, model);
+  const VoxelGridConfig& voxel = config.localizer.segmentation.voxel;
+  const std::vector<api::LocalizeRequest> requests = revisit_requests(city, config.local_cloud, raw ? nullptr : &voxel, 10.0);
   size_t points = 0;
   for (const auto& r : requests) points += r.points.size();
   std::printf("set-up %.0f s: %zu revisit local clouds, %.0f points on average\n",

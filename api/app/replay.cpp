@@ -21,14 +21,14 @@ void print_reply(const api::LocalizeReply& r, double round_trip_ms) {
 
 namespace {
 
-// The map's local cloud parameters, so the vehicle accumulates what the map was built from.
-LocalCloudConfig local_cloud_of(api::Client& client) {
+// The map's parameters, so the vehicle accumulates and voxelizes as the map was built.
+io::PipelineConfig parameters_of(api::Client& client) {
   const api::InfoReply info = client.info();
   try {
-    return io::parse_pipeline_config(info.parameters_json, "INFO_REPLY").local_cloud;
+    return io::parse_pipeline_config(info.parameters_json, "INFO_REPLY");
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "warning: server parameters unreadable (%s); default local cloud\n", e.what());
-    return LocalCloudConfig{};
+    std::fprintf(stderr, "warning: server parameters unreadable (%s); default parameters\n", e.what());
+    return io::PipelineConfig{};
   }
 }
 
@@ -46,12 +46,15 @@ int replay(api::Client& client, const ReplayOptions& options) {
   config.every_m = options.every_m;
   config.first = options.first;
   config.last = options.last;
-  config.local_cloud = local_cloud_of(client);
+  const io::PipelineConfig map_parameters = parameters_of(client);
+  config.local_cloud = map_parameters.local_cloud;
+  config.voxel = map_parameters.localizer.segmentation.voxel;
   size_t queries = 0, localized = 0, errors = 0;
   std::vector<double> latencies_ms;
   io::replay_sequence(seq, config, [&](const io::ReplayQuery& q) {
     api::LocalizeRequest request;
     request.request_id = q.frame;
+    if (q.voxelized) request.flags |= api::kFlagVoxelized;
     request.sensor_position_local = q.T_odom_sensor.translation();
     request.sensor_orientation_local = Eigen::Quaterniond(q.T_odom_sensor.linear()).normalized();
     request.points = q.cloud_odom;

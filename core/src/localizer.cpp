@@ -146,7 +146,8 @@ Localizer::Localizer(const LocalizerConfig& config, Segments targets,
   index_.build(targets_);
 }
 
-LocalizationResult Localizer::localize(const PointCloud& cloud, const Eigen::Vector3f& sensor_position) const {
+LocalizationResult Localizer::localize(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
+                                       CloudKind kind) const {
   LocalizationResult r;
   Stopwatch total, clock;
   auto finish = [&](LocalizationResult res) {
@@ -154,7 +155,9 @@ LocalizationResult Localizer::localize(const PointCloud& cloud, const Eigen::Vec
     return res;
   };
   const int min_inliers = config_.verification.min_inliers;
-  r.query = extract_segments(cloud, sensor_position, config_.segmentation, nullptr, &r.timings);
+  r.query = kind == CloudKind::kVoxelized
+                ? extract_segments_from_voxels(cloud, sensor_position, config_.segmentation, nullptr, &r.timings)
+                : extract_segments(cloud, sensor_position, config_.segmentation, nullptr, &r.timings);
   clock.lap();
   r.query_segments = r.query.size();
   if (targets_.empty()) return finish(refuse(std::move(r), "the map has no segments"));

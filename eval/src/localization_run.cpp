@@ -2,6 +2,7 @@
 
 #include "segmatch/cli/progress.h"
 #include "segmatch/eval/plots.h"
+#include "segmatch/io/pipeline_config.h"
 #include "segmatch/io/pose_io.h"
 #include "segmatch/storage/map_reader.h"
 
@@ -53,6 +54,7 @@ double distance_to(const std::vector<Eigen::Vector3d>& path, const Eigen::Vector
 api::LocalizeRequest request_of(const io::ReplayQuery& q) {
   api::LocalizeRequest r;
   r.request_id = q.frame;
+  if (q.voxelized) r.flags |= api::kFlagVoxelized;
   r.sensor_position_local = q.T_odom_sensor.translation();
   r.sensor_orientation_local = Eigen::Quaterniond(q.T_odom_sensor.linear()).normalized();
   r.points = q.cloud_odom;
@@ -72,14 +74,18 @@ void add_timings(std::map<std::string, std::vector<double>>& t, const api::Modul
 LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeFn& localize) {
   const storage::MapReader map = storage::MapReader::open(c.map_path);
   LocalizationRun run;
+  // The vehicle accumulates and voxelizes exactly as the map was built.
   run.replay = c.replay;
+  const io::PipelineConfig parameters = io::parse_pipeline_config(map.metadata().parameters_json, c.map_path);
+  run.replay.local_cloud = parameters.local_cloud;
+  run.replay.voxel = parameters.localizer.segmentation.voxel;
   for (const storage::Keyframe& k : map.trajectory()) run.map_trajectory.push_back(k.T_map_sensor.translation());
   const Truth truth = open_truth(c);
   run.title = map.metadata().name + ": " + (c.sim_dataset.empty() ? c.query_folder : c.sim_dataset + " (01)");
   std::map<std::string, std::vector<double>> timings;
   std::unique_ptr<cli::Progress> progress;
   io::replay_sequence(
-      truth.sequence, c.replay,
+      truth.sequence, run.replay,
       [&](const io::ReplayQuery& q) {
         const auto start = std::chrono::steady_clock::now();
         const api::LocalizeReply reply = localize(request_of(q));

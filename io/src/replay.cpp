@@ -1,5 +1,7 @@
 #include "segmatch/io/replay.h"
 
+#include "segmatch/core/voxel_accumulator.h"
+
 #include <cmath>
 #include <stdexcept>
 
@@ -12,6 +14,7 @@ void ReplayConfig::validate() const {
   if (stride == 0) throw std::invalid_argument("ReplayConfig.stride must be >= 1");
   if (last < first) throw std::invalid_argument("ReplayConfig.last must be >= first");
   local_cloud.validate();
+  voxel.validate();
 }
 
 void replay_sequence(const Sequence& sequence, const ReplayConfig& config,
@@ -24,7 +27,9 @@ void replay_sequence(const Sequence& sequence, const ReplayConfig& config,
   const size_t last = std::min(config.last, sequence.size() - 1);
   const size_t total = (last - config.first) / config.stride + 1;
   const Pose3d T_odom_world = sequence.poses()[config.first].inverse();
-  LocalCloud local(config.local_cloud);
+  // One of the two accumulates, as configured.
+  LocalCloud raw(config.local_cloud);
+  VoxelAccumulator voxels(config.local_cloud, config.voxel);
   double odometer_m = 0.0, next_query_m = std::max(config.warmup_m, 0.0);
   Eigen::Vector3d previous = sequence.poses()[config.first].translation();
   size_t done = 0;
@@ -33,7 +38,9 @@ void replay_sequence(const Sequence& sequence, const ReplayConfig& config,
     odometer_m += (T_world_sensor.translation() - previous).norm();
     previous = T_world_sensor.translation();
     const Pose3d T_odom_sensor = T_odom_world * T_world_sensor;
-    local.add_scan(sequence.scan(i).points, T_odom_sensor);
+    const PointCloud scan = sequence.scan(i).points;
+    if (config.voxelize) voxels.add_scan(scan, T_odom_sensor);
+    else raw.add_scan(scan, T_odom_sensor);
     if (progress) progress(++done, total);
     if (odometer_m + 1e-9 < next_query_m) continue;
     next_query_m = odometer_m + config.every_m;
@@ -42,7 +49,8 @@ void replay_sequence(const Sequence& sequence, const ReplayConfig& config,
     q.odometer_m = odometer_m;
     q.T_odom_sensor = T_odom_sensor;
     q.T_world_sensor = T_world_sensor;
-    q.cloud_odom = local.crop(T_odom_sensor);
+    q.cloud_odom = config.voxelize ? voxels.crop(T_odom_sensor) : raw.crop(T_odom_sensor);
+    q.voxelized = config.voxelize;
     if (!visit(q)) return;
   }
 }

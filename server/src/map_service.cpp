@@ -114,7 +114,8 @@ api::LocalizeReply localize_request(const LoadedMap& map, const api::LocalizeReq
   const auto start = std::chrono::steady_clock::now();
   const PointCloud cloud =
       crop_cylinder(request.points, request.sensor_position_local, map.config.local_cloud.radius_m);
-  const LocalizationResult r = map.localizer->localize(cloud, request.sensor_position_local.cast<float>());
+  const CloudKind kind = (request.flags & api::kFlagVoxelized) ? CloudKind::kVoxelized : CloudKind::kRaw;
+  const LocalizationResult r = map.localizer->localize(cloud, request.sensor_position_local.cast<float>(), kind);
   api::LocalizeReply reply;
   reply.request_id = request.request_id;
   reply.status = r.localized() ? api::LocalizeStatus::kLocalized : api::LocalizeStatus::kNotLocalized;

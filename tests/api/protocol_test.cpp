@@ -251,6 +251,12 @@ TEST(Protocol, RejectsReservedFlagsAndOverlongStrings) {
   std::vector<uint8_t> f = encode(some_request());
   put_u32(f, kOffFlags, 0x80000001u);
   EXPECT_EQ(decode_request(f), DecodeStatus::kBadField);
+  put_u32(f, kOffFlags, 1u << 2);  // the first bit not defined by protocol version 1
+  EXPECT_EQ(decode_request(f), DecodeStatus::kBadField);
+  put_u32(f, kOffFlags, kFlagHasPrior | kFlagVoxelized);
+  LocalizeRequest both;
+  ASSERT_EQ(decode_frame(f, kLimits, both), DecodeStatus::kOk);
+  EXPECT_EQ(both.flags, kFlagHasPrior | kFlagVoxelized);
   Limits limits;
   limits.max_string_bytes = 4;
   HelloRequest hello;

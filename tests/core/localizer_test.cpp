@@ -91,6 +91,28 @@ TEST(Localizer, LocalizesAStreetOfDistinctObjectsAtTheTruePose) {
   EXPECT_GE(r.timings.total_ms, r.timings.voxel_ms + r.timings.verify_ms);
 }
 
+TEST(Localizer, AVoxelizedQueryGivesTheSamePoseAsTheRawOne) {
+  // A vehicle may send its local cloud already voxelized with the map's grid (protocol flag
+  // bit 1): the voxel stage is then skipped and the answer must not change.
+  const LocalizerConfig c = config();
+  const PointCloud map_cloud = pole_street(true);
+  const Localizer localizer(c, extract_segments(map_cloud, Eigen::Vector3f(25, 0, 2), c.segmentation));
+  const Pose3d T = T_query_map();
+  const PointCloud query = transformed(map_cloud, T);
+  const Eigen::Vector3f sensor = T.cast<float>() * Eigen::Vector3f(25, 0, 2);
+  const LocalizationResult raw = localizer.localize(query, sensor);
+  const PointCloud voxels = voxel_filter(query, c.segmentation.voxel);
+  ASSERT_LT(voxels.size(), query.size() / 2);
+  const LocalizationResult vox = localizer.localize(voxels, sensor, CloudKind::kVoxelized);
+  ASSERT_TRUE(raw.localized()) << raw.reason;
+  ASSERT_TRUE(vox.localized()) << vox.reason;
+  EXPECT_EQ(vox.query_segments, raw.query_segments);
+  EXPECT_LT((vox.T_map_query.translation() - raw.T_map_query.translation()).norm(), 1e-4);
+  EXPECT_EQ(vox.timings.voxel_ms, 0.0);
+  // Sending voxels without saying so re-voxelizes centroids: most voxels hold one point, < 2.
+  EXPECT_FALSE(localizer.localize(voxels, sensor).localized());
+}
+
 TEST(Localizer, RefusesAStreetOfIdenticalPolesAsAmbiguous) {
   const LocalizerConfig c = config();
   const PointCloud map_cloud = pole_street(false);

@@ -109,7 +109,10 @@ struct InfoReply {
 
 // Flag bits of LocalizeRequest::flags.
 constexpr uint32_t kFlagHasPrior = 1u << 0;
-constexpr uint32_t kKnownFlags = kFlagHasPrior;
+// The points are voxel centroids of the map's voxel grid (docs/protocol.md 5.4): the server
+// skips its voxel grid.
+constexpr uint32_t kFlagVoxelized = 1u << 1;
+constexpr uint32_t kKnownFlags = kFlagHasPrior | kFlagVoxelized;
 
 struct LocalizeRequest {
   uint64_t request_id = 0;

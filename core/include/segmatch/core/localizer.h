@@ -89,6 +89,9 @@ Segments extract_segments_from_voxels(const PointCloud& voxels, const Eigen::Vec
                                       const std::vector<uint32_t>* voxel_labels = nullptr,
                                       ModuleTimings* timings = nullptr);
 
+// What a query cloud holds: raw points, or one point per occupied voxel of the map's grid.
+enum class CloudKind { kRaw, kVoxelized };
+
 class Localizer {
  public:
   // targets: the map's described segments (map frame). classifier: required for the random
@@ -98,7 +101,10 @@ class Localizer {
 
   // cloud: local cloud in the query (vehicle odometry) frame; sensor_position: the sensor in
   // that frame. Thread-safe: many queries may run at once.
-  LocalizationResult localize(const PointCloud& cloud, const Eigen::Vector3f& sensor_position) const;
+  // With CloudKind::kVoxelized the cloud is already voxel_filter'ed with
+  // config().segmentation.voxel (e.g. a vehicle's VoxelAccumulator): the voxel grid is skipped.
+  LocalizationResult localize(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
+                              CloudKind kind = CloudKind::kRaw) const;
 
   const Segments& targets() const { return targets_; }
   const LocalizerConfig& config() const { return config_; }

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <segmatch/core/local_cloud.h>
+#include <segmatch/core/preprocess.h>
 #include <segmatch/io/sequence.h>
 
 #include <cstddef>
@@ -22,6 +23,11 @@ struct ReplayConfig {
   size_t last = SIZE_MAX;  // last scan used (inclusive; clipped to the sequence)
   size_t stride = 1;       // use every stride-th scan
   LocalCloudConfig local_cloud;
+  // Hand out the voxelized cylinder (VoxelAccumulator with this grid, which must be the map's)
+  // instead of raw points: a vehicle sends a few hundred thousand voxel centroids rather than
+  // millions of points (docs/protocol.md 5.4, flag bit 1).
+  bool voxelize = true;
+  VoxelGridConfig voxel;
   void validate() const;   // throws std::invalid_argument naming the field
 };
 
@@ -31,6 +37,7 @@ struct ReplayQuery {
   Pose3d T_odom_sensor = Pose3d::Identity();
   Pose3d T_world_sensor = Pose3d::Identity();  // the sequence's own pose of that scan
   PointCloud cloud_odom;                    // the local cylinder, odometry frame
+  bool voxelized = false;                   // cloud_odom holds voxel centroids (config.voxelize)
 };
 
 // Calls visit(query) for every query in order; visit returns false to stop early. progress
