@@ -16,8 +16,8 @@ bash "$root/scripts/build.sh" segmatch-sim segmatch-mapbuilder segmatch-mapinfo 
 # The same lengths are in tests/eval/regression_test.cpp (kLength00M, kLength01M).
 "$bin/segmatch-sim" --preset tiny --seed 3 --length-00-m 250 --length-01-m 200 --no-images --out "$tmp/world"
 mkdir -p "$dest"
-# Only the stretch of 00 that 01 revisits (its last ~130 m) is mapped, to keep the file small.
-"$bin/segmatch-mapbuilder" --input "$tmp/world/sequences/00" --first 190 --output "$dest/map.sqlite" --name tiny-3 \
+# Only the stretch of 00 that 01 revisits (its last ~80 m) is mapped, to keep the file small.
+"$bin/segmatch-mapbuilder" --input "$tmp/world/sequences/00" --first 245 --output "$dest/map.sqlite" --name tiny-3 \
   --classifier "$root/maps/models/default-rf.yml" --force
 "$bin/segmatch-mapinfo" "$dest/map.sqlite" --check --png "$dest/map.png"
 "$bin/segmatch-eval" localize --map "$dest/map.sqlite" --sim "$tmp/world" --every-m 10 --quiet --out "$tmp/report"
