@@ -10,6 +10,12 @@
 namespace segmatch {
 namespace {
 
+// The map builder's map never holds two segments within the duplicate distance.
+SegmentMapConfig resolving(SegmentMapConfig c) {
+  c.resolve_moved_duplicates = true;
+  return c;
+}
+
 double ms_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
@@ -27,7 +33,7 @@ void MapBuilderConfig::validate() const {
 MapBuilder::MapBuilder(const MapBuilderConfig& config)
     : config_((config.validate(), config)),
       local_(config.local_cloud, config.segmentation.voxel),
-      map_(config.segment_map) {}
+      map_(resolving(config.segment_map)) {}
 
 bool MapBuilder::add_scan(const PointCloud& points_sensor, const Pose3d& T_world_sensor, uint32_t scan_index,
                           const std::vector<uint32_t>* labels) {

@@ -85,6 +85,7 @@ size_t SegmentMap::add(Segments segments) {
     s.id = old.id;
     old = std::move(s);
     grid_.emplace(cell_of(old.centroid), dup);
+    if (!config_.resolve_moved_duplicates) continue;
     // The moved centroid may now lie within the duplicate distance of other segments (the
     // others are pairwise far enough apart already): keep the one with more points.
     int self = dup;

@@ -12,6 +12,12 @@ using namespace segmatch;
 
 namespace {
 
+SegmentMapConfig resolving() {
+  SegmentMapConfig c;
+  c.resolve_moved_duplicates = true;
+  return c;
+}
+
 Segment segment(float x, float y, size_t points) {
   Segment s;
   s.centroid = Eigen::Vector3f(x, y, 0.f);
@@ -48,7 +54,7 @@ TEST(SegmentMap, AddsNewSegmentsAndReplacesByFullerViewsKeepingTheId) {
 }
 
 TEST(SegmentMap, AReplacementLandingOnAFullerSegmentIsDropped) {
-  SegmentMap map;  // duplicate distance 1 m
+  SegmentMap map(resolving());  // duplicate distance 1 m
   map.add({segment(0, 0, 10), segment(1.6f, 0, 20)});
   // Nearest is A (0.7 m, B is 0.9 m away): it replaces A, moving it within 0.9 m of B, which
   // has more points and stays.
@@ -64,7 +70,7 @@ TEST(SegmentMap, AReplacementLandingOnAFullerSegmentIsDropped) {
 }
 
 TEST(SegmentMap, AReplacementWithMorePointsRemovesTheSegmentsItLandedOn) {
-  SegmentMap map;
+  SegmentMap map(resolving());
   map.add({segment(0, 0, 10), segment(1.6f, 0, 20), segment(0.7f, 0.95f, 5), segment(10, 0, 1)});
   ASSERT_EQ(map.size(), 4u);
   // Replaces A (id 0) at (0.7, 0): B (0.9 m) and C (0.95 m) are now too close and smaller.
@@ -82,7 +88,7 @@ TEST(SegmentMap, AReplacementWithMorePointsRemovesTheSegmentsItLandedOn) {
 }
 
 TEST(SegmentMap, EqualPointCountsKeepTheOlderSegment) {
-  SegmentMap map;
+  SegmentMap map(resolving());
   map.add({segment(0, 0, 10), segment(1.6f, 0, 15)});
   map.add({segment(0.7f, 0, 15)});  // replaces id 0, ties with id 1: id 0 (older) stays
   ASSERT_EQ(map.size(), 1u);
@@ -90,7 +96,7 @@ TEST(SegmentMap, EqualPointCountsKeepTheOlderSegment) {
 }
 
 TEST(SegmentMap, NeverHoldsTwoSegmentsWithinTheDuplicateDistance) {
-  SegmentMapConfig config;
+  SegmentMapConfig config = resolving();
   config.duplicate_distance_m = 1.0f;
   SegmentMap map(config);
   std::mt19937 rng(5);
@@ -103,4 +109,12 @@ TEST(SegmentMap, NeverHoldsTwoSegmentsWithinTheDuplicateDistance) {
   }
   EXPECT_GT(map.size(), 30u);
   expect_no_duplicates(map, config.duplicate_distance_m);
+}
+
+TEST(SegmentMap, WithoutResolutionAReplacementMayLandNextToAnotherSegment) {
+  SegmentMap map;  // the default keeps the previous behaviour
+  map.add({segment(0, 0, 10), segment(1.6f, 0, 20)});
+  map.add({segment(0.7f, 0, 15)});
+  ASSERT_EQ(map.size(), 2u);
+  EXPECT_LT((map.segments()[0].centroid - map.segments()[1].centroid).norm(), 1.0f);
 }

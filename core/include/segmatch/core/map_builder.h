@@ -56,8 +56,9 @@ class MapBuilder {
   // one, so that the objects of the final stretch reach the map. Returns whether it did.
   bool finish();
 
-  // The map: one segment per object, world frame, with descriptors (SegmentMap keeps no two
-  // segments within duplicate_distance_m of each other).
+  // The map: one segment per object, world frame, with descriptors (its SegmentMap runs with
+  // resolve_moved_duplicates on, whatever config.segment_map says, so no two segments lie
+  // within duplicate_distance_m of each other).
   const Segments& segments() const { return map_.segments(); }
   // For each segment, the scan index of the local cloud its kept view came from.
   const std::vector<uint32_t>& keyframe_of_segment() const;

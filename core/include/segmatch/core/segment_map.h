@@ -12,6 +12,12 @@ namespace segmatch {
 struct SegmentMapConfig {
   // Two segments whose centroids are closer than this are views of the same object.
   float duplicate_distance_m = 1.0f;
+  // After a replacement moved a segment's centroid, resolve the segments now within
+  // duplicate_distance_m of it (keep the one with more points), so that no two segments of
+  // the map are closer than that. MapBuilder always turns this on. Off by default: the
+  // simulated training maps (sim::labelled_city) and the end-to-end test's map keep their
+  // previous contents, which the default classifier and that test's thresholds were tuned on.
+  bool resolve_moved_duplicates = false;
   void validate() const;
 };
 
@@ -23,9 +29,9 @@ class SegmentMap {
   // duplicate_distance_m) replaces it when it has more points (keeping the existing id), and
   // is dropped otherwise. New segments get new ids. A replacement moves the centroid, which
   // can land within the duplicate distance of other segments (views of the same object):
-  // those are resolved at once, keeping the one with more points (ties: the older, smaller
-  // id), so no two segments of the map are ever closer than duplicate_distance_m. Segments
-  // stay in id order. Returns how many segments were new.
+  // with resolve_moved_duplicates those are resolved at once, keeping the one with more
+  // points (ties: the older, smaller id), so no two segments of the map are ever closer than
+  // duplicate_distance_m. Segments stay in id order. Returns how many segments were new.
   size_t add(Segments segments);
 
   const Segments& segments() const { return segments_; }

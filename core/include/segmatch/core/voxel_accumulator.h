@@ -11,17 +11,21 @@
 // up to the float rounding of the centroid sums: same voxels, same order (voxel key: x, then
 // y, then z), same majority labels (non-zero majority, ties to the smaller label, 0 if none).
 //
-// How: every added scan's points are summed into one hash table voxel -> (count, sums of the
-// position inside the voxel in 32.32 fixed point, intensity sum, label votes); a dropped scan
-// is subtracted (its points are kept, world frame, sorted by 1.6 m tile). Fixed-point sums
-// make addition and subtraction exact and order-independent, so the table does not drift.
-// The crop is exact, not by voxel centroid: the plane is cut into tiles of 16 x 16 voxel
-// columns; voxels of tiles wholly inside the cylinder come from the table, tiles wholly
-// outside are skipped, and the voxels of the tiles the cylinder's boundary crosses (a ring of
-// ~1.6-2.3 m at R = 60 m) are summed again from the raw points that pass LocalCloud's point
-// test (horizontal distance <= radius_m). So a voxel cut by the boundary gets the centroid and
-// count of its points inside, exactly as cropping raw points first (a crop by voxel centroid
-// would instead keep or drop whole voxels and differ there; see voxel_accumulator_test.cpp).
+// How: the plane is cut into tiles of 16 x 16 voxel columns (1.6 m at 0.1 m), each with a
+// small hash table voxel -> (count, sums of the position inside the voxel in 32.32 fixed
+// point, intensity sum, label votes). Every added scan's points are summed in; a dropped scan
+// is subtracted (its points are kept, world frame, grouped by tile). Fixed-point sums make
+// addition and subtraction exact and order-independent, so the tables do not drift.
+// The crop is exact, not by voxel centroid: voxels of tiles wholly inside the cylinder come
+// from the tables, tiles wholly outside are skipped, and the voxels of the tiles the
+// cylinder's boundary crosses (a ring ~1.6-2.3 m wide) are summed again from the raw points
+// that pass LocalCloud's point test (horizontal distance <= radius_m). So a voxel cut by the
+// boundary gets the centroid and count of its points inside, exactly as cropping raw points
+// first; a crop by voxel centroid would keep or drop such a voxel whole, with all its points
+// (see voxel_accumulator_test.cpp). Cost per crop: the tiles near the cylinder plus the raw
+// points of the boundary ring, not the millions of points held.
+// Memory: the held scans' points (as LocalCloud) plus ~48 bytes per held voxel (at most 70 %
+// of each table used).
 //
 // Limits: points more than 20 km (any axis) from their sensor are refused (invalid_argument);
 // voxel keys wrap every 2^21 voxels (210 km at 0.1 m) and are unwrapped around the crop
