@@ -95,14 +95,18 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
         o.odometer_m = q.odometer_m;
         o.localized = reply.status == api::LocalizeStatus::kLocalized;
         o.status = api::to_string(reply.status);
+        o.inliers = reply.inliers;
+        o.support = reply.support;
+        o.confidence = reply.confidence;
         const Pose3d& T_map_sensor_truth = truth.T_map_sensor[q.frame];
         o.mapped = distance_to(run.map_trajectory, T_map_sensor_truth.translation()) <= c.thresholds.mapped_radius_m;
         score(o, reply.T_map_local * q.T_odom_sensor, T_map_sensor_truth, c.thresholds);
         add_timings(timings, reply.timings);
         if (c.print_each)
-          std::printf("frame %5zu  %7.1f m  %-13s %s inliers %3u  error %6.3f m %5.2f deg  %6.1f ms%s%s\n", q.frame,
-                      q.odometer_m, o.status.c_str(), o.localized ? (o.correct ? "TRUE " : "FALSE") : "     ",
-                      reply.inliers, o.error_m, o.error_deg, o.latency_ms, o.mapped ? "" : "  (unmapped street)",
+          std::printf("frame %5zu  %7.1f m  %-13s %s inliers %3u support %3u conf %.2f  error %6.3f m %5.2f deg  %6.1f ms%s%s\n",
+                      q.frame, q.odometer_m, o.status.c_str(), o.localized ? (o.correct ? "TRUE " : "FALSE") : "     ",
+                      reply.inliers, reply.support, reply.confidence, o.error_m, o.error_deg, o.latency_ms,
+                      o.mapped ? "" : "  (unmapped street)",
                       reply.reason.empty() ? "" : ("  " + reply.reason).c_str());
         run.outcomes.push_back(o);
         return true;
@@ -158,7 +162,8 @@ void write_localization_report(const LocalizationRun& run, const std::string& ou
   for (const QueryOutcome& o : run.outcomes) {
     nlohmann::json q = {{"frame", o.frame},         {"odometer_m", o.odometer_m}, {"mapped", o.mapped},
                         {"status", o.status},       {"correct", o.correct},       {"error_m", o.error_m},
-                        {"error_deg", o.error_deg}, {"latency_ms", o.latency_ms}};
+                        {"error_deg", o.error_deg}, {"latency_ms", o.latency_ms}, {"inliers", o.inliers},
+                        {"support", o.support},     {"confidence", o.confidence}};
     if (o.localized) {
       const Eigen::Quaterniond r(o.T_map_sensor.linear());
       const Eigen::Vector3d& t = o.T_map_sensor.translation();

@@ -31,6 +31,8 @@ struct QueryOutcome {
   bool correct = false;              // localized and within the thresholds
   double error_m = 0.0, error_deg = 0.0;  // when localized
   double latency_ms = 0.0;
+  uint32_t inliers = 0, support = 0;  // the localizer's evidence (LocalizeReply)
+  float confidence = 0.f;
   std::string status;                // the localizer's status word, for reports
   Eigen::Vector3d truth_xy = Eigen::Vector3d::Zero();     // map-frame truth position
   Eigen::Vector3d estimate_xy = Eigen::Vector3d::Zero();  // map-frame estimate when localized
