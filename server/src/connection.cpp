@@ -170,9 +170,11 @@ void serve_connection(Server::State& s, api::Socket socket, const std::string& p
               ? error_reply(ErrorCode::kUnknownType, "unknown message type " + std::to_string(header.type), !authed)
               : handle_frame(s, header, payload, authed, start);
     }
-    r = api::write_all(socket.fd(), h.reply.data(), h.reply.size(), api::deadline_after(s.config.write_timeout_s));
+    // Counted before the reply leaves: a client that reads its reply and then asks for the
+    // counters must see its own request in them.
     const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     s.stats.record(h.is_localize, h.localized, h.error, ms);
+    r = api::write_all(socket.fd(), h.reply.data(), h.reply.size(), api::deadline_after(s.config.write_timeout_s));
     const char* type_name = d == DecodeStatus::kOk ? api::to_string(static_cast<MessageType>(header.type)) : "FRAME";
     log_request(s, peer, type_name, h, ms);
     if (r != api::IoResult::kOk || h.close_after) return;
