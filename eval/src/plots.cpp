@@ -106,7 +106,7 @@ void plot_trajectory(const std::string& png, const std::vector<Eigen::Vector3d>&
 void plot_px(const std::string& png, const PxCurve& c, const std::string& title) {
   const double xmax = std::max(10.0, std::ceil((c.gaps_m.empty() ? 10.0 : *std::max_element(c.gaps_m.begin(), c.gaps_m.end())) / 10.0) * 10.0 + 10.0);
   cv::Mat img(500, 700, CV_8UC3, kWhite);
-  const Axes ax{cv::Rect(80, 50, 580, 370), 0.0, xmax, 0.0, 1.0};
+  const Axes ax{cv::Rect(80, 70, 580, 355), 0.0, xmax, 0.0, 1.0};
   ax.draw(img, "x: distance travelled without localization (m)", "P(x)");
   cv::Point prev = ax(0, c.p_of(0));
   for (int i = 1; i <= 400; ++i) {
@@ -134,7 +134,7 @@ void plot_error_histogram(const std::string& png, const std::vector<QueryOutcome
   for (double e : cm) ++count[std::min(bins - 1, static_cast<int>(e / top * bins))];
   const int most = std::max(1, *std::max_element(count.begin(), count.end()));
   cv::Mat img(500, 700, CV_8UC3, kWhite);
-  const Axes ax{cv::Rect(80, 50, 580, 370), 0.0, top, 0.0, static_cast<double>(most)};
+  const Axes ax{cv::Rect(80, 70, 580, 355), 0.0, top, 0.0, static_cast<double>(most)};
   ax.draw(img, "translation error of correct localizations (cm)", "queries");
   for (int b = 0; b < bins; ++b)
     if (count[b] > 0) cv::rectangle(img, ax(top * b / bins, count[b]), ax(top * (b + 1) / bins, 0) + cv::Point(-1, 0), kPalette[0], cv::FILLED);
@@ -144,7 +144,7 @@ void plot_error_histogram(const std::string& png, const std::vector<QueryOutcome
 
 void plot_roc(const std::string& png, const std::vector<RocCurve>& curves, const std::string& title) {
   cv::Mat img(600, 650, CV_8UC3, kWhite);
-  const Axes ax{cv::Rect(80, 50, 500, 450), 0.0, 1.0, 0.0, 1.0};
+  const Axes ax{cv::Rect(80, 70, 500, 430), 0.0, 1.0, 0.0, 1.0};
   ax.draw(img, "false positive rate", "true positive rate");
   cv::line(img, ax(0, 0), ax(1, 1), kGrey, 1);
   for (size_t k = 0; k < curves.size(); ++k) {
