@@ -8,10 +8,8 @@
 #include "seg_grid.h"
 
 namespace segmatch {
-namespace {
 
-// Keeps the first point of every occupied cube of edge leaf_m (input order preserved).
-std::vector<uint32_t> subsample_indices(const PointCloud& scan, double leaf_m) {
+std::vector<uint32_t> detail::subsample_indices(const PointCloud& scan, double leaf_m) {
   std::vector<uint32_t> keep;
   keep.reserve(scan.size());
   if (leaf_m <= 0.0) {
@@ -30,8 +28,6 @@ std::vector<uint32_t> subsample_indices(const PointCloud& scan, double leaf_m) {
   }
   return keep;
 }
-
-}  // namespace
 
 void LocalCloudConfig::validate() const {
   if (!(radius_m > 0.0) || !std::isfinite(radius_m)) {
@@ -60,7 +56,7 @@ bool LocalCloud::add_scan(const PointCloud& scan_sensor, const Pose3d& T_world_s
   last_position_ = position;
 
   Scan scan;
-  const std::vector<uint32_t> keep = subsample_indices(scan_sensor, config_.subsample_leaf_m);
+  const std::vector<uint32_t> keep = detail::subsample_indices(scan_sensor, config_.subsample_leaf_m);
   scan.points.reserve(keep.size());
   if (labels) scan.labels.reserve(keep.size());
   const Eigen::Matrix3d R = T_world_sensor.linear();

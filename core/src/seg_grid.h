@@ -129,5 +129,10 @@ std::vector<uint32_t> neighbour_table(const CellGrid& grid);
 uint32_t majority_label(const std::vector<uint32_t>& labels, const uint32_t* indices, size_t count,
                         std::vector<uint32_t>* scratch);
 
+// Indices of the finite points of a scan, keeping only the first point of every occupied cube
+// of edge leaf_m (leaf_m <= 0: all finite points), in input order. LocalCloud and
+// VoxelAccumulator admit scans through this one function so that they hold the same points.
+std::vector<uint32_t> subsample_indices(const PointCloud& scan, double leaf_m);
+
 }  // namespace detail
 }  // namespace segmatch

@@ -172,27 +172,6 @@ class VoxelTable {
   int shift_ = 58;
 };
 
-// As LocalCloud: keeps the first point of every occupied cube of edge leaf_m (input order).
-std::vector<uint32_t> subsample_indices(const PointCloud& scan, double leaf_m) {
-  std::vector<uint32_t> keep;
-  keep.reserve(scan.size());
-  if (leaf_m <= 0.0) {
-    for (size_t i = 0; i < scan.size(); ++i) {
-      if (detail::is_finite(scan[i])) keep.push_back(static_cast<uint32_t>(i));
-    }
-    return keep;
-  }
-  const detail::GridFrame frame =
-      detail::GridFrame::fit(scan, leaf_m, false, "LocalCloudConfig.subsample_leaf_m");
-  detail::FlatHashMap seen(scan.size() / 4 + 1);
-  for (size_t i = 0; i < scan.size(); ++i) {
-    if (!detail::is_finite(scan[i])) continue;
-    const uint32_t id = static_cast<uint32_t>(keep.size());
-    if (seen.insert(frame.key_of(scan[i]), id) == id) keep.push_back(static_cast<uint32_t>(i));
-  }
-  return keep;
-}
-
 struct Tile {
   int64_t x, y;    // tile coordinates (voxel column >> kTileShift)
   uint32_t begin;  // first point of the tile in the scan; the next tile's begin ends it
@@ -290,7 +269,7 @@ bool VoxelAccumulator::add_scan(const PointCloud& scan_sensor, const Pose3d& T_w
   if (m.has_last && (position - m.last_position).norm() < m.local.min_travel_between_scans_m) return false;
 
   // World-frame points exactly as LocalCloud::add_scan computes them.
-  const std::vector<uint32_t> keep = subsample_indices(scan_sensor, m.local.subsample_leaf_m);
+  const std::vector<uint32_t> keep = detail::subsample_indices(scan_sensor, m.local.subsample_leaf_m);
   PointCloud world;
   world.reserve(keep.size());
   std::vector<uint32_t> world_labels;
