@@ -36,21 +36,6 @@ double quantile(std::vector<double> v, double q) {
   return v[std::min(v.size() - 1, static_cast<size_t>(q * v.size()))];
 }
 
-std::vector<sim::SimulatedScan> simulate(const sim::RayCaster& caster, const sim::Traversal& t,
-                                         const std::vector<size_t>& frames, int threads) {
-  std::vector<sim::SimulatedScan> scans(frames.size());
-  std::atomic<size_t> next{0};
-  auto work = [&] {
-    for (size_t k; (k = next++) < frames.size();)
-      scans[k] = sim::simulate_scan(caster, sim::hdl64e(), t.T_world_lidar[frames[k]], frames[k]);
-  };
-  std::vector<std::thread> pool;
-  for (int i = 1; i < threads; ++i) pool.emplace_back(work);
-  work();
-  for (auto& th : pool) th.join();
-  return scans;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -86,7 +71,7 @@ int main(int argc, char** argv) {
     size_t loops = 0;
     for (size_t b = 0; b < frames.size(); b += 32) {
       const std::vector<size_t> batch(frames.begin() + b, frames.begin() + std::min(frames.size(), b + 32));
-      const auto scans = simulate(caster, t, batch, threads);
+      const auto scans = sim::simulate_scans(caster, sim::hdl64e(), t.T_world_lidar, batch, threads);
       for (size_t k = 0; k < batch.size(); ++k) {
         const double c0 = thread_cpu_ms();
         const auto w0 = std::chrono::steady_clock::now();

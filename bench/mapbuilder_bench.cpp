@@ -54,22 +54,6 @@ std::vector<size_t> kept_frames(const sim::Traversal& t, double route_m, double 
   return frames;
 }
 
-std::vector<sim::SimulatedScan> simulate(const sim::World& world, const sim::Traversal& t,
-                                         const std::vector<size_t>& frames, int threads) {
-  const sim::RayCaster caster(world.scene());
-  std::vector<sim::SimulatedScan> scans(frames.size());
-  std::atomic<size_t> next{0};
-  auto work = [&] {
-    for (size_t k; (k = next++) < frames.size();)
-      scans[k] = sim::simulate_scan(caster, sim::hdl64e(), t.T_world_lidar[frames[k]], frames[k]);
-  };
-  std::vector<std::thread> pool;
-  for (int i = 1; i < threads; ++i) pool.emplace_back(work);
-  work();
-  for (auto& th : pool) th.join();
-  return scans;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -100,7 +84,8 @@ int main(int argc, char** argv) {
   const std::vector<size_t> frames = kept_frames(t, route_m, config.local_cloud.min_travel_between_scans_m);
   std::fprintf(stderr, "simulating %zu scans (%s world, seed %llu)...\n", frames.size(), preset.c_str(),
                static_cast<unsigned long long>(seed));
-  const auto scans = simulate(world, t, frames, threads);
+  const sim::RayCaster caster(world.scene());
+  const auto scans = sim::simulate_scans(caster, sim::hdl64e(), t.T_world_lidar, frames, threads);
 
   MapBuilder builder(config);
   std::vector<double> cloud_ms;

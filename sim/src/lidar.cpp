@@ -18,9 +18,11 @@
 #include "segmatch/core/random.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cctype>
 #include <cmath>
 #include <stdexcept>
+#include <thread>
 
 namespace segmatch::sim {
 namespace {
@@ -199,6 +201,21 @@ SimulatedScan simulate_scan(const RayCaster& caster, const LidarModel& model,
     }
   }
   return scan;
+}
+
+std::vector<SimulatedScan> simulate_scans(const RayCaster& caster, const LidarModel& model, const Poses& T_world_sensor,
+                                          const std::vector<size_t>& frames, int threads) {
+  std::vector<SimulatedScan> scans(frames.size());
+  std::atomic<size_t> next{0};
+  auto work = [&] {
+    for (size_t k; (k = next++) < frames.size();)
+      scans[k] = simulate_scan(caster, model, T_world_sensor[frames[k]], frames[k]);
+  };
+  std::vector<std::thread> pool;
+  for (int i = 1; i < threads; ++i) pool.emplace_back(work);
+  work();
+  for (auto& th : pool) th.join();
+  return scans;
 }
 
 }  // namespace segmatch::sim

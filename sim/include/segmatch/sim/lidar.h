@@ -43,4 +43,9 @@ struct SimulatedScan {
 SimulatedScan simulate_scan(const RayCaster& caster, const LidarModel& model,
                             const Pose3d& T_world_sensor, uint64_t seed);
 
+// Scans at T_world_sensor[frames[k]] for every k, seeded with the frame index, simulated on
+// `threads` threads (the calling thread included; < 2 means the calling thread only).
+std::vector<SimulatedScan> simulate_scans(const RayCaster& caster, const LidarModel& model, const Poses& T_world_sensor,
+                                          const std::vector<size_t>& frames, int threads);
+
 }  // namespace segmatch::sim
