@@ -26,7 +26,33 @@ void Client::send_raw(const std::vector<uint8_t>& bytes) {
   if (broken_) throw ClientError(ClientError::Kind::kClosed, where_ + ": connection is closed");
   const IoResult r = write_all(socket_.fd(), bytes.data(), bytes.size(), deadline_after(options_.send_timeout_s));
   if (r == IoResult::kTimeout) fail(ClientError::Kind::kTimeout, "send timed out");
-  if (r != IoResult::kOk) fail(ClientError::Kind::kClosed, std::string("send failed: ") + to_string(r));
+  if (r != IoResult::kOk) {
+    // A server that refuses a request before reading all of it (too large, bad header) replies
+    // with ERROR and closes: that ERROR, when it made it here, says more than "send failed".
+    rethrow_pending_error();
+    fail(ClientError::Kind::kClosed, std::string("send failed: ") + to_string(r));
+  }
+}
+
+void Client::rethrow_pending_error() {
+  uint8_t header[kHeaderBytes];
+  const Clock::time_point deadline = deadline_after(0.5);
+  Frame f;
+  if (read_exact(socket_.fd(), header, kHeaderBytes, deadline) != IoResult::kOk) return;
+  if (decode_header(header, kHeaderBytes, options_.limits, f.header) != DecodeStatus::kOk) return;
+  if (f.header.type != static_cast<uint16_t>(MessageType::kError)) return;
+  f.payload.resize(f.header.payload_bytes);
+  if (read_exact(socket_.fd(), f.payload.data(), f.payload.size(), deadline) != IoResult::kOk) return;
+  ErrorReply e;
+  if (decode(f.payload.data(), f.payload.size(), options_.limits, e) != DecodeStatus::kOk) return;
+  broken_ = true;
+  socket_.close();
+  throw_server_error(e);
+}
+
+void Client::throw_server_error(const ErrorReply& e) const {
+  throw ClientError(ClientError::Kind::kServer, where_ + ": server error " +
+                    std::to_string(static_cast<int>(e.code)) + ": " + e.message, e.code);
 }
 
 Frame Client::read_frame() {
@@ -53,8 +79,7 @@ Reply Client::expect(MessageType type) {
     ErrorReply e;
     if (decode(f.payload.data(), f.payload.size(), options_.limits, e) != DecodeStatus::kOk)
       fail(ClientError::Kind::kProtocol, "undecodable ERROR reply");
-    throw ClientError(ClientError::Kind::kServer, where_ + ": server error " +
-                      std::to_string(static_cast<int>(e.code)) + ": " + e.message, e.code);
+    throw_server_error(e);
   }
   if (f.header.type != static_cast<uint16_t>(type))
     fail(ClientError::Kind::kProtocol, std::string("expected ") + to_string(type) + ", got type " +

@@ -86,6 +86,17 @@ IoResult read_exact(int fd, uint8_t* data, size_t n, Clock::time_point deadline,
   return IoResult::kOk;
 }
 
+size_t read_some(int fd, uint8_t* data, size_t n, Clock::time_point deadline) {
+  for (;;) {
+    bool stopped = false;
+    if (wait_for(fd, POLLIN, deadline, nullptr, stopped) == 0) return 0;
+    const ssize_t got = ::recv(fd, data, n, 0);
+    if (got > 0) return static_cast<size_t>(got);
+    if (got < 0 && (errno == EINTR || errno == EAGAIN || errno == EWOULDBLOCK)) continue;
+    return 0;
+  }
+}
+
 IoResult write_all(int fd, const uint8_t* data, size_t n, Clock::time_point deadline) {
   size_t done = 0;
   while (done < n) {

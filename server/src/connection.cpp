@@ -8,6 +8,8 @@
 #include <cstdio>
 #include <future>
 
+#include <sys/socket.h>
+
 namespace segmatch {
 namespace server {
 namespace {
@@ -136,6 +138,23 @@ api::IoResult read_payload(int fd, size_t n, double timeout_s, std::vector<uint8
   return api::IoResult::kOk;
 }
 
+// Closing right after an ERROR while the client is still sending (an oversized frame, say)
+// would make the kernel answer the unread bytes with a reset, and a reset can destroy the ERROR
+// before the client reads it. So: stop writing, then read and drop what is still coming for a
+// bounded time and byte count, and only then close (a "lingering close").
+void linger_close(int fd) {
+  constexpr double kLingerS = 2.0;
+  constexpr size_t kLingerMaxBytes = 256u << 20;
+  ::shutdown(fd, SHUT_WR);
+  const api::Clock::time_point deadline = api::deadline_after(kLingerS);
+  std::vector<uint8_t> sink(64u << 10);
+  for (size_t dropped = 0; dropped < kLingerMaxBytes;) {
+    const size_t n = api::read_some(fd, sink.data(), sink.size(), deadline);
+    if (n == 0) return;
+    dropped += n;
+  }
+}
+
 void log_request(Server::State& s, const std::string& peer, const char* type, const Handled& h, double ms) {
   if (!s.config.log_requests) return;
   char latency[48];
@@ -177,7 +196,8 @@ void serve_connection(Server::State& s, api::Socket socket, const std::string& p
     r = api::write_all(socket.fd(), h.reply.data(), h.reply.size(), api::deadline_after(s.config.write_timeout_s));
     const char* type_name = d == DecodeStatus::kOk ? api::to_string(static_cast<MessageType>(header.type)) : "FRAME";
     log_request(s, peer, type_name, h, ms);
-    if (r != api::IoResult::kOk || h.close_after) return;
+    if (r != api::IoResult::kOk) return;
+    if (h.close_after) return linger_close(socket.fd());
   }
 }
 

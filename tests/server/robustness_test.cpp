@@ -169,16 +169,24 @@ TEST(ServerRobustness, MalformedFramesGetErrorsAndServingGoesOn) {
   api::Socket big = raw_connection(s);  // over max_frame_bytes: refused before reading it
   api::LocalizeRequest huge = small_request(8);
   huge.points.resize(100000);
-  send(big, api::encode(huge));
+  send(big, api::encode(huge));  // the server drains what it refused, so the send completes
   ASSERT_TRUE((f = read_raw(big)));
   EXPECT_EQ(error_code(*f), api::ErrorCode::kFrameTooLarge);
+  EXPECT_TRUE(closed_by_server(big, 3.0));
+  try {  // what a client library user sees: the server's reason, not "connection reset"
+    s.client().localize(huge);
+    ADD_FAILURE() << "an oversized request was answered";
+  } catch (const api::ClientError& e) {
+    EXPECT_EQ(e.kind, api::ClientError::Kind::kServer) << e.what();
+    EXPECT_EQ(e.server_code, api::ErrorCode::kFrameTooLarge) << e.what();
+  }
   api::Socket garbage = raw_connection(s);
   send(garbage, std::vector<uint8_t>(64, 0xAB));
   ASSERT_TRUE((f = read_raw(garbage)));
   EXPECT_EQ(error_code(*f), api::ErrorCode::kBadMagic);
   EXPECT_TRUE(closed_by_server(garbage, 2.0)) << "a stream without framing cannot be resynchronised";
   EXPECT_EQ(s.client().ping(3), 3u);
-  EXPECT_EQ(s.server->counters().errors, 6u);
+  EXPECT_EQ(s.server->counters().errors, 7u);
 }
 
 TEST(ServerRobustness, StopFinishesRequestsInFlight) {

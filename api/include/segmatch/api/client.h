@@ -65,6 +65,9 @@ class Client {
   template <typename Reply>
   Reply expect(MessageType type);
   [[noreturn]] void fail(ClientError::Kind kind, const std::string& message);
+  // After a failed send: throws the server's ERROR if one is waiting; returns otherwise.
+  void rethrow_pending_error();
+  [[noreturn]] void throw_server_error(const ErrorReply& e) const;
 
   ClientOptions options_;
   std::string where_;

@@ -46,6 +46,9 @@ const char* to_string(IoResult r);
 // kStopped (a server shutting down leaves idle connections, never half-read frames).
 IoResult read_exact(int fd, uint8_t* data, size_t n, Clock::time_point deadline,
                     const std::atomic<bool>* stop = nullptr);
+// Reads whatever has arrived, up to n bytes, waiting until `deadline` for the first byte.
+// Returns the count; 0 means the peer closed, the deadline passed or the socket failed.
+size_t read_some(int fd, uint8_t* data, size_t n, Clock::time_point deadline);
 // Writes all n bytes before `deadline` (MSG_NOSIGNAL: a dead peer gives kClosed, no SIGPIPE).
 IoResult write_all(int fd, const uint8_t* data, size_t n, Clock::time_point deadline);
 
