@@ -44,8 +44,8 @@ std::vector<float> pair_features(const Segment& query, const Segment& target, bo
   check_descriptors(target, use_shapes, "target");
   std::vector<float> out(pair_feature_count(use_shapes));
   if (use_shapes) {
-    const EsfDescriptor q = detail::normalise_esf(query.esf);
-    const EsfDescriptor t = detail::normalise_esf(target.esf);
+    const detail::ScaledEsf q = detail::scaled_esf(query.esf);
+    const detail::ScaledEsf t = detail::scaled_esf(target.esf);
     detail::write_pair_features(query.eigen, target.eigen, &q, &t, out.data());
   } else {
     detail::write_pair_features(query.eigen, target.eigen, nullptr, nullptr, out.data());
@@ -79,12 +79,12 @@ Matches filter_rf(const Segments& queries, const Segments& targets, const Matche
                   const MatcherConfig& config, const RandomForestMatcher& rf) {
   const bool shapes = config.use_shapes;
   const int dim = pair_feature_count(shapes);
-  // Normalise every involved ESF once rather than once per pair.
-  std::vector<int> q_slot(queries.size(), -1), t_slot(targets.size(), -1);
-  std::vector<EsfDescriptor> q_esf, t_esf;
+  // Histogram scales of every involved ESF, once rather than once per pair.
+  std::vector<int> q_slot, t_slot;
+  std::vector<detail::ScaledEsf> q_esf, t_esf;
   if (shapes) {
-    q_esf.reserve(std::min(queries.size(), candidates.size()));
-    t_esf.reserve(std::min(targets.size(), candidates.size()));
+    q_slot.assign(queries.size(), -1);
+    t_slot.assign(targets.size(), -1);
   }
   std::vector<float> rows(candidates.size() * dim);
   for (size_t i = 0; i < candidates.size(); ++i) {
@@ -92,18 +92,18 @@ Matches filter_rf(const Segments& queries, const Segments& targets, const Matche
     check_candidate(m, queries, targets);
     const Segment& q = queries[m.query];
     const Segment& t = targets[m.target];
-    const EsfDescriptor* eq = nullptr;
-    const EsfDescriptor* et = nullptr;
+    const detail::ScaledEsf* eq = nullptr;
+    const detail::ScaledEsf* et = nullptr;
     if (shapes) {
       if (q_slot[m.query] < 0) {
         check_descriptors(q, true, "query");
         q_slot[m.query] = static_cast<int>(q_esf.size());
-        q_esf.push_back(detail::normalise_esf(q.esf));
+        q_esf.push_back(detail::scaled_esf(q.esf));
       }
       if (t_slot[m.target] < 0) {
         check_descriptors(t, true, "target");
         t_slot[m.target] = static_cast<int>(t_esf.size());
-        t_esf.push_back(detail::normalise_esf(t.esf));
+        t_esf.push_back(detail::scaled_esf(t.esf));
       }
       eq = &q_esf[q_slot[m.query]];
       et = &t_esf[t_slot[m.target]];

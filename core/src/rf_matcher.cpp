@@ -6,6 +6,8 @@
 #include <opencv2/core.hpp>
 #include <opencv2/ml.hpp>
 
+#include <algorithm>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -54,6 +56,46 @@ struct RandomForestMatcher::Impl {
       f.right = s.inversed ? n.left : n.right;
     }
     roots = forest->getRoots();
+    build_complete();
+  }
+
+  // The same trees padded to complete binary trees of one depth (a leaf above the bottom
+  // becomes a split that always goes left, down to a copy of the leaf): every walk takes
+  // `depth` steps of index arithmetic, no branch to mispredict, and walks of several rows
+  // interleave. Used when the forest is shallow enough (SegMatch's: max depth 8).
+  static constexpr int kMaxCompleteDepth = 12;
+  int depth = -1;                  // -1: forest too deep, use the node walk
+  std::vector<int> split_var;      // per tree 2^depth - 1 splits, heap order
+  std::vector<float> split_c;
+  std::vector<uint8_t> leaf_same;  // per tree 2^depth leaves
+
+  int depth_of(int n) const { return nodes[n].var < 0 ? 0 : 1 + std::max(depth_of(nodes[n].left), depth_of(nodes[n].right)); }
+
+  void pad(int tree, int n, size_t i, int level) {
+    const size_t splits = (size_t{1} << depth) - 1;
+    if (level == depth) {
+      leaf_same[tree * (splits + 1) + (i - splits)] = static_cast<uint8_t>(nodes[n].same);
+      return;
+    }
+    const bool leaf = nodes[n].var < 0;
+    split_var[tree * splits + i] = leaf ? 0 : nodes[n].var;
+    split_c[tree * splits + i] = leaf ? std::numeric_limits<float>::infinity() : nodes[n].c;
+    pad(tree, leaf ? n : nodes[n].left, 2 * i + 1, level + 1);
+    pad(tree, leaf ? n : nodes[n].right, 2 * i + 2, level + 1);
+  }
+
+  void build_complete() {
+    depth = 0;
+    for (int r : roots) depth = std::max(depth, depth_of(r));
+    if (depth > kMaxCompleteDepth) {
+      depth = -1;
+      return;
+    }
+    const size_t splits = (size_t{1} << depth) - 1;
+    split_var.assign(roots.size() * splits, 0);
+    split_c.assign(roots.size() * splits, 0.f);
+    leaf_same.assign(roots.size() * (splits + 1), 0);
+    for (size_t t = 0; t < roots.size(); ++t) pad(static_cast<int>(t), roots[t], 0, 0);
   }
 
   int votes(const float* x) const {
@@ -64,6 +106,32 @@ struct RandomForestMatcher::Impl {
       same_votes += n->same;
     }
     return same_votes;
+  }
+
+  // Votes of rows [0, n) of `rows` (dim floats each) into out[0..n).
+  void votes(const float* rows, int dim, int n, int* out) const {
+    if (depth < 0) {
+      for (int i = 0; i < n; ++i) out[i] = votes(rows + static_cast<size_t>(i) * dim);
+      return;
+    }
+    const size_t splits = (size_t{1} << depth) - 1;
+    constexpr int kLanes = 8;  // independent walks in flight
+    for (int i0 = 0; i0 < n; i0 += kLanes) {
+      const int lanes = std::min(kLanes, n - i0);
+      const float* x[kLanes];
+      for (int l = 0; l < kLanes; ++l) x[l] = rows + static_cast<size_t>(i0 + std::min(l, lanes - 1)) * dim;
+      int sum[kLanes] = {};
+      for (size_t t = 0; t < roots.size(); ++t) {
+        const int* var = split_var.data() + t * splits;
+        const float* c = split_c.data() + t * splits;
+        size_t at[kLanes] = {};
+        for (int d = 0; d < depth; ++d)
+          for (int l = 0; l < kLanes; ++l) at[l] = 2 * at[l] + 1 + !(x[l][var[at[l]]] <= c[at[l]]);
+        const uint8_t* leaf = leaf_same.data() + t * (splits + 1) - splits;
+        for (int l = 0; l < kLanes; ++l) sum[l] += leaf[at[l]];
+      }
+      for (int l = 0; l < lanes; ++l) out[i0 + l] = sum[l];
+    }
   }
 };
 
@@ -151,7 +219,9 @@ std::vector<float> RandomForestMatcher::probabilities(const std::vector<float>& 
   std::vector<float> out(n, 0.f);
   if (n == 0) return out;
   const float trees = static_cast<float>(impl_->roots.size());
-  for (int i = 0; i < n; ++i) out[i] = static_cast<float>(impl_->votes(&rows[i * dim])) / trees;
+  std::vector<int> votes(n);
+  impl_->votes(rows.data(), dim, n, votes.data());
+  for (int i = 0; i < n; ++i) out[i] = static_cast<float>(votes[i]) / trees;
   return out;
 }
 
