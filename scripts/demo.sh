@@ -7,10 +7,11 @@
 #   5. replays 01 through the client as a vehicle would, scoring every answer against the
 #      exact ground truth, and writes a report folder with plots,
 #   6. stops the server.
-# Usage: scripts/demo.sh [output folder, default out/demo]
+# Usage: scripts/demo.sh [output folder, default out/demo] [world seed, default 1]
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 out="${1:-$root/out/demo}"
+seed="${2:-1}"
 bin="$root/build/bin"
 mkdir -p "$out/report"
 out="$(cd "$out" && pwd)"
@@ -21,7 +22,7 @@ step "1/5 build"
 bash "$root/scripts/build.sh" segmatch-sim segmatch-mapbuilder segmatch-mapinfo segmatch-server segmatch-eval
 
 step "2/5 simulate the demo city (two traversals, KITTI layout, exact ground truth)"
-"$bin/segmatch-sim" --preset demo --seed 1 --out "$out/world" --force
+"$bin/segmatch-sim" --preset demo --seed "$seed" --out "$out/world" --force
 
 step "3/5 build the map from sequence 00"
 "$bin/segmatch-mapbuilder" --input "$out/world/sequences/00" --output "$out/demo-map.sqlite" --name demo --force

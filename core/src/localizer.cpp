@@ -3,6 +3,7 @@
 #include <chrono>
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 
 namespace segmatch {
@@ -92,6 +93,8 @@ void LocalizerConfig::validate() const {
   refine.validate();
   if (!(min_refine_fitness >= 0.0f && min_refine_fitness <= 1.0f))
     throw std::invalid_argument("min_refine_fitness must be in 0..1");
+  if (!(min_confidence >= 0.0f && min_confidence <= 1.0f))
+    throw std::invalid_argument("min_confidence must be in 0..1");
   if (!(support_radius_m > 0.0f) || !std::isfinite(support_radius_m))
     throw std::invalid_argument("support_radius_m must be finite and > 0");
   if (min_support < verification.min_inliers)
@@ -207,6 +210,11 @@ LocalizationResult Localizer::localize(const PointCloud& cloud, const Eigen::Vec
     r.T_map_query = refined.T_target_query;
   }
   r.confidence = confidence_of(r.support, config_.min_support, r.refine_fitness);
+  if (r.confidence < config_.min_confidence) {
+    char why[96];
+    std::snprintf(why, sizeof(why), "confidence %.2f below min_confidence %.2f", r.confidence, config_.min_confidence);
+    return finish(refuse(std::move(r), why));
+  }
   r.status = LocalizationStatus::kLocalized;
   return finish(std::move(r));
 }

@@ -45,6 +45,10 @@ struct LocalizerConfig {
   // Refined poses whose point fitness falls below this are reported as not localized: the
   // centroids agreed but the surfaces do not.
   float min_refine_fitness = 0.5f;
+  // Localized results whose confidence (LocalizationResult::confidence) falls below this are
+  // reported as not localized. 0 (the core's default) keeps every pose that passed the checks
+  // above; the kitti-hdl64 preset sets 0.8 (see io/pipeline_config.cpp for why).
+  float min_confidence = 0.0f;
   void validate() const;
 };
 

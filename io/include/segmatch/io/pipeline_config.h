@@ -33,6 +33,7 @@ namespace segmatch {
 namespace io {
 
 struct PipelineConfig {
+  PipelineConfig();  // the "kitti-hdl64" preset
   std::string preset = "kitti-hdl64";
   LocalCloudConfig local_cloud;
   LocalizerConfig localizer;
