@@ -1,10 +1,12 @@
-// segmatch-train: labelled segment pairs from simulated cities (exact instance ids), then the
+// segmatch-train: labelled segment pairs from simulated cities (exact instance ids) or from a
+// real recording (--real: labels by centroid distance under its poses, real_pairs.h), then the
 // random forest of the paper (section III-D, IV-B), saved as a model file.
 //
 // For every city: the map is the merged segments of the mapping traversal (one local cloud
 // every 5 m), the queries are the unmerged segments of the revisit (every 10 m, changed
 // world, other lane). Each query segment's k nearest map segments in feature space are its
 // candidate pairs; same instance = positive; negatives are kept at 1:50 (paper IV-B).
+#include "real_pairs.h"
 #include "segmatch/cli/progress.h"
 #include "segmatch/core/training.h"
 #include "segmatch/io/pipeline_config.h"
@@ -12,6 +14,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -46,17 +49,46 @@ void write_atomically(const std::string& path, const std::string& bytes) {
   fs::rename(tmp, path);
 }
 
+RandomForestMatcher load_model(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw std::runtime_error(path + ": cannot open the model file");
+  const std::string bytes((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  return RandomForestMatcher::load(bytes);
+}
+
 // True and false positive rates of the model on held-out pairs at its threshold.
-void report_holdout(const RandomForestMatcher& rf, const TrainingPairs& p) {
+// Area under the ROC curve: the probability that a random positive scores above a random
+// negative (ties count half), by ranks.
+double roc_auc(const std::vector<float>& score, const std::vector<bool>& positive) {
+  std::vector<size_t> order(score.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return score[a] < score[b]; });
+  double rank_sum = 0.0, positives = 0.0;
+  for (size_t i = 0; i < order.size();) {
+    size_t j = i;
+    while (j < order.size() && score[order[j]] == score[order[i]]) ++j;
+    const double mid_rank = 0.5 * static_cast<double>(i + j + 1);  // ranks are 1-based
+    for (size_t k = i; k < j; ++k)
+      if (positive[order[k]]) rank_sum += mid_rank, positives += 1.0;
+    i = j;
+  }
+  const double negatives = static_cast<double>(score.size()) - positives;
+  if (positives == 0.0 || negatives == 0.0) return 0.0;
+  return (rank_sum - positives * (positives + 1.0) / 2.0) / (positives * negatives);
+}
+
+// AUC, and true and false positive rates at the model's threshold, on held-out pairs.
+void report_holdout(const std::string& name, const RandomForestMatcher& rf, const TrainingPairs& p) {
   size_t tp = 0, fp = 0;
   const float threshold = rf.config().rf_threshold;
+  std::vector<float> score(p.pairs.size());
   for (size_t i = 0; i < p.pairs.size(); ++i) {
-    const bool accepted = rf.probability(*p.pairs[i].first, *p.pairs[i].second) >= threshold;
-    (p.same_object[i] ? tp : fp) += accepted;
+    score[i] = rf.probability(*p.pairs[i].first, *p.pairs[i].second);
+    (p.same_object[i] ? tp : fp) += score[i] >= threshold;
   }
-  std::printf("held-out city: %zu positives, %zu negatives; at threshold %.2f: TPR %.3f, FPR %.4f\n", p.positives,
-              p.negatives, threshold, p.positives ? double(tp) / p.positives : 0.0,
-              p.negatives ? double(fp) / p.negatives : 0.0);
+  std::printf("%s: held out %zu positives, %zu negatives: AUC %.3f; at threshold %.2f: TPR %.3f, FPR %.4f\n",
+              name.c_str(), p.positives, p.negatives, roc_auc(score, p.same_object), threshold,
+              p.positives ? double(tp) / p.positives : 0.0, p.negatives ? double(fp) / p.negatives : 0.0);
 }
 
 }  // namespace
@@ -67,7 +99,8 @@ int main(int argc, char** argv) {
   std::vector<uint64_t> seeds = {101, 102, 103, 105, 106};
   uint64_t holdout = 104;
   bool eigen_only = false;
-  std::string eigen_out;
+  std::string eigen_out, real_dir;
+  std::vector<std::string> baselines;
   app.add_option("-o,--out", out, "model file to write (e.g. maps/models/default-rf.yml)")->required();
   app.add_option("--config", config_path, "pipeline config JSON (default: the kitti-hdl64 preset)");
   app.add_option("--preset", preset, "simulated city size: tiny, demo, city")->check(CLI::IsMember(sim::dataset_preset_names()));
@@ -76,32 +109,53 @@ int main(int argc, char** argv) {
   app.add_option("--sensor", sensor, "hdl64e, vlp16, os1-64");
   app.add_flag("--eigen-only", eigen_only, "train RF_eigen (21 pair features) instead of RF_eigen+shapes (31)");
   app.add_option("--eigen-out", eigen_out, "also train RF_eigen on the same pairs and write it here");
+  app.add_option("--real", real_dir,
+                 "train on a real keyframe folder instead (e.g. ../shared/data/real/riverside02): map side from the even "
+                 "keyframes, queries from the odd ones, labels by centroid distance; every 3rd 300 m stretch of the drive "
+                 "is held out (default config: the sparse-keyframes preset)");
+  app.add_option("--baseline", baselines, "also report these existing model files on the same held-out pairs");
   CLI11_PARSE(app, argc, argv);
   try {
-    io::PipelineConfig config = config_path.empty() ? io::pipeline_preset("kitti-hdl64") : io::read_pipeline_config(config_path);
+    io::PipelineConfig config = !config_path.empty() ? io::read_pipeline_config(config_path)
+                                : io::pipeline_preset(real_dir.empty() ? "kitti-hdl64" : "sparse-keyframes");
     config.localizer.matcher.use_shapes = !eigen_only;
     if (eigen_only) config.localizer.matcher.rf_threshold = 0.81f;  // paper Table I
     config.validate();
     const auto start = std::chrono::steady_clock::now();
     std::vector<std::unique_ptr<sim::LabelledCity>> cities;
+    std::unique_ptr<train::RealPairs> real;
     std::vector<std::pair<const Segment*, const Segment*>> pairs;
     std::vector<bool> same;
-    cli::Progress progress("cities", seeds.size(), "cities");
-    for (uint64_t seed : seeds) {
-      cities.push_back(city_pairs(preset, seed, config, sensor));
-      const TrainingPairs& p = cities.back()->pairs;
-      pairs.insert(pairs.end(), p.pairs.begin(), p.pairs.end());
-      same.insert(same.end(), p.same_object.begin(), p.same_object.end());
-      progress.advance();
+    if (!real_dir.empty()) {
+      train::RealPairsConfig rc;
+      rc.pairs.k = config.localizer.retrieval.k;
+      real = train::real_pairs(real_dir, config, rc);
+      pairs = real->train.pairs;
+      same = real->train.same_object;
+      std::printf("real drive %.0f m: training stretch %zu map / %zu query segments, held out %zu / %zu\n",
+                  real->drive_m, real->targets_train.size(), real->queries_train.size(), real->targets_held_out.size(),
+                  real->queries_held_out.size());
+      seeds.clear();
     }
-    progress.finish();
+    if (!seeds.empty()) {
+      cli::Progress progress("cities", seeds.size(), "cities");
+      for (uint64_t seed : seeds) {
+        cities.push_back(city_pairs(preset, seed, config, sensor));
+        const TrainingPairs& p = cities.back()->pairs;
+        pairs.insert(pairs.end(), p.pairs.begin(), p.pairs.end());
+        same.insert(same.end(), p.same_object.begin(), p.same_object.end());
+        progress.advance();
+      }
+      progress.finish();
+    }
     RandomForestMatcher rf(config.localizer.matcher);
     rf.train(pairs, same);
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     size_t positives = 0;
     for (bool s : same) positives += s;
-    std::printf("trained %s on %zu cities: %zu positives, %zu negatives, %.0f s\n",
-                eigen_only ? "RF_eigen" : "RF_eigen+shapes", seeds.size(), positives, pairs.size() - positives, seconds);
+    std::printf("trained %s on %s: %zu positives, %zu negatives, %.0f s\n", eigen_only ? "RF_eigen" : "RF_eigen+shapes",
+                real ? real_dir.c_str() : (std::to_string(seeds.size()) + " cities").c_str(), positives,
+                pairs.size() - positives, seconds);
     write_atomically(out, rf.save());
     std::printf("model written to %s\n", out.c_str());
     std::unique_ptr<RandomForestMatcher> rf_eigen;
@@ -114,10 +168,19 @@ int main(int argc, char** argv) {
       write_atomically(eigen_out, rf_eigen->save());
       std::printf("RF_eigen model written to %s\n", eigen_out.c_str());
     }
-    if (holdout != 0) {
-      const auto held_out = city_pairs(preset, holdout, config, sensor);
-      report_holdout(rf, held_out->pairs);
-      if (rf_eigen) report_holdout(*rf_eigen, held_out->pairs);
+    std::unique_ptr<sim::LabelledCity> held_out_city;
+    const TrainingPairs* held_out = nullptr;
+    if (real) {
+      std::printf("held out: every 3rd 300 m stretch of the drive\n");
+      held_out = &real->held_out;
+    } else if (holdout != 0) {
+      held_out_city = city_pairs(preset, holdout, config, sensor);
+      held_out = &held_out_city->pairs;
+    }
+    if (held_out) {
+      report_holdout("new", rf, *held_out);
+      if (rf_eigen) report_holdout("new RF_eigen", *rf_eigen, *held_out);
+      for (const std::string& path : baselines) report_holdout(path, load_model(path), *held_out);
     }
     return 0;
   } catch (const std::exception& e) {

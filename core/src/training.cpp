@@ -10,7 +10,27 @@ void TrainingPairConfig::validate() const {
   if (k < 1) throw std::invalid_argument("k must be at least 1");
   if (negatives_per_positive < 1) throw std::invalid_argument("negatives_per_positive must be at least 1");
   if (!(max_centroid_distance_m >= 0.f)) throw std::invalid_argument("max_centroid_distance_m must be >= 0");
+  if (!(min_negative_distance_m >= max_centroid_distance_m))
+    throw std::invalid_argument("min_negative_distance_m must be >= max_centroid_distance_m");
 }
+
+namespace {
+
+// Appends a random subset of the negatives at the configured ratio (deterministic by seed).
+void keep_negatives(const Segments& queries, const Segments& targets, std::vector<std::pair<int, int>>& negatives,
+                    const TrainingPairConfig& config, TrainingPairs& out) {
+  Rng rng(config.seed);
+  const size_t keep = std::min(negatives.size(), out.positives * static_cast<size_t>(config.negatives_per_positive));
+  for (size_t i = 0; i < keep; ++i) {
+    const size_t j = i + rng.index(negatives.size() - i);
+    std::swap(negatives[i], negatives[j]);
+    out.pairs.emplace_back(&queries[negatives[i].first], &targets[negatives[i].second]);
+    out.same_object.push_back(false);
+    ++out.negatives;
+  }
+}
+
+}  // namespace
 
 TrainingPairs label_pairs_by_instance(const Segments& queries, const Segments& targets,
                                       const FeatureIndex& index, const TrainingPairConfig& config) {
@@ -38,16 +58,28 @@ TrainingPairs label_pairs_by_instance(const Segments& queries, const Segments& t
       }
     }
   }
-  // Keep a random subset of negatives at the configured ratio (deterministic by seed).
-  Rng rng(config.seed);
-  const size_t keep = std::min(negatives.size(), out.positives * static_cast<size_t>(config.negatives_per_positive));
-  for (size_t i = 0; i < keep; ++i) {
-    const size_t j = i + rng.index(negatives.size() - i);
-    std::swap(negatives[i], negatives[j]);
-    out.pairs.emplace_back(&queries[negatives[i].first], &targets[negatives[i].second]);
-    out.same_object.push_back(false);
-    ++out.negatives;
+  keep_negatives(queries, targets, negatives, config, out);
+  return out;
+}
+
+TrainingPairs label_pairs_by_distance(const Segments& queries, const Segments& targets,
+                                      const FeatureIndex& index, const TrainingPairConfig& config) {
+  config.validate();
+  TrainingPairs out;
+  std::vector<std::pair<int, int>> negatives;
+  for (size_t q = 0; q < queries.size(); ++q) {
+    for (const auto& [t, dist] : index.knn(queries[q].eigen, config.k)) {
+      const float d = (queries[q].centroid - targets[t].centroid).norm();
+      if (d <= config.max_centroid_distance_m) {
+        out.pairs.emplace_back(&queries[q], &targets[t]);
+        out.same_object.push_back(true);
+        ++out.positives;
+      } else if (d > config.min_negative_distance_m) {
+        negatives.emplace_back(static_cast<int>(q), t);
+      }
+    }
   }
+  keep_negatives(queries, targets, negatives, config, out);
   return out;
 }
 

@@ -126,5 +126,30 @@ TEST(TrainingPairs, PositivesAreTheSameInstanceNearbyNegativesOtherInstances) {
   EXPECT_EQ(pairs.negatives, 1u);
 }
 
+TEST(TrainingPairs, RealDataLabelsByCentroidDistanceAndLeavesTheMiddleOut) {
+  Segments queries{at(0, 0, 0, 0u), at(100, 0, 0, 0u)};
+  Segments targets{at(0.4f, 0, 0, 0u),   // within 1.5 m: the same object seen again
+                   at(2.5f, 0, 0, 0u),   // 1.5..4 m: a neighbouring piece or a pose error, left out
+                   at(9.0f, 0, 0, 0u),   // beyond 4 m: negative
+                   at(100, 1, 0, 0u)};   // the second query's positive
+  FeatureIndex index;
+  index.build(targets);
+  TrainingPairConfig config;
+  config.negatives_per_positive = 50;
+  const TrainingPairs pairs = label_pairs_by_distance(queries, targets, index, config);
+  EXPECT_EQ(pairs.positives, 2u);
+  // Negatives: q0 with t2, t3; q1 with t0, t1, t2 (all far): 5, all kept at 1:50.
+  EXPECT_EQ(pairs.negatives, 5u);
+  for (size_t i = 0; i < pairs.pairs.size(); ++i) {
+    const float d = (pairs.pairs[i].first->centroid - pairs.pairs[i].second->centroid).norm();
+    EXPECT_EQ(pairs.same_object[i], d <= 1.5f) << "pair " << i;
+    EXPECT_FALSE(d > 1.5f && d <= 4.0f) << "an ambiguous pair was labelled";
+  }
+  config.negatives_per_positive = 1;  // the ratio caps the negatives
+  EXPECT_EQ(label_pairs_by_distance(queries, targets, index, config).negatives, 2u);
+  config.min_negative_distance_m = 1.0f;
+  EXPECT_THROW(label_pairs_by_distance(queries, targets, index, config), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace segmatch

@@ -21,6 +21,10 @@ struct TrainingPairConfig {
   // Same-instance pairs farther apart are left out (neither positive nor negative).
   // 0 disables the check.
   float max_centroid_distance_m = 1.5f;
+  // label_pairs_by_distance() only (real data, no instance ids): candidates whose centroids
+  // are farther apart than this are negatives; between max_centroid_distance_m and this the
+  // pair is ambiguous (a neighbouring piece of the same object, or a pose error) and left out.
+  float min_negative_distance_m = 4.0f;
   void validate() const;
 };
 
@@ -34,6 +38,13 @@ struct TrainingPairs {
 // (Segment::label, SemanticKITTI encoding) and their centroids are within
 // max_centroid_distance_m. Segments with instance 0 (ground, unknown) give no pairs. Pointers refer into `queries` and `targets`, which must outlive the result.
 TrainingPairs label_pairs_by_instance(const Segments& queries, const Segments& targets,
+                                      const FeatureIndex& index, const TrainingPairConfig& config);
+
+// Real data (paper IV-B on KITTI): queries and targets already in one frame by the ground-truth
+// poses; a candidate is positive when the centroids are within max_centroid_distance_m,
+// negative beyond min_negative_distance_m, left out in between. Same k-NN candidates and 1:N
+// negative subsampling as label_pairs_by_instance().
+TrainingPairs label_pairs_by_distance(const Segments& queries, const Segments& targets,
                                       const FeatureIndex& index, const TrainingPairConfig& config);
 
 }  // namespace segmatch
