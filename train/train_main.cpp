@@ -6,9 +6,9 @@
 // every 5 m), the queries are the unmerged segments of the revisit (every 10 m, changed
 // world, other lane). Each query segment's k nearest map segments in feature space are its
 // candidate pairs; same instance = positive; negatives are kept at 1:50 (paper IV-B).
-#include "real_pairs.h"
 #include "segmatch/cli/progress.h"
 #include "segmatch/core/training.h"
+#include "segmatch/eval/real_pairs.h"
 #include "segmatch/io/pipeline_config.h"
 #include "segmatch/sim/city.h"
 
@@ -123,13 +123,13 @@ int main(int argc, char** argv) {
     config.validate();
     const auto start = std::chrono::steady_clock::now();
     std::vector<std::unique_ptr<sim::LabelledCity>> cities;
-    std::unique_ptr<train::RealPairs> real;
+    std::unique_ptr<eval::RealPairs> real;
     std::vector<std::pair<const Segment*, const Segment*>> pairs;
     std::vector<bool> same;
     if (!real_dir.empty()) {
-      train::RealPairsConfig rc;
+      eval::RealPairsConfig rc;
       rc.pairs.k = config.localizer.retrieval.k;
-      real = train::real_pairs(real_dir, config, rc);
+      real = eval::real_pairs(real_dir, config, rc);
       pairs = real->train.pairs;
       same = real->train.same_object;
       std::printf("real drive %.0f m: training stretch %zu map / %zu query segments, held out %zu / %zu\n",

@@ -1,8 +1,10 @@
 // segmatch-eval: how well localization works, in the paper's terms.
 //   segmatch-eval localize   replay a traversal against a map (in-process or through a server)
 //   segmatch-eval classifier ROC of L2, RF_eigen, RF_eigen+shapes on a held-out simulated city
+//                            (or, with --real, on the held-out stretches of a real recording)
 #include "segmatch/api/client.h"
 #include "segmatch/eval/localization_run.h"
+#include "segmatch/eval/real_pairs.h"
 #include "segmatch/eval/roc.h"
 #include "segmatch/io/pipeline_config.h"
 #include "segmatch/server/map_service.h"
@@ -58,7 +60,7 @@ int run_localize(const eval::LocalizationRunConfig& config, const std::string& s
 }
 
 struct ClassifierOptions {
-  std::string preset = "tiny", config_path, model_shapes, model_eigen, out_dir, sensor = "hdl64e";
+  std::string preset = "tiny", config_path, model_shapes, model_eigen, out_dir, sensor = "hdl64e", real_dir;
   uint64_t seed = 104;
 };
 
@@ -70,19 +72,33 @@ RandomForestMatcher load_model(const std::string& path) {
 }
 
 int run_classifier(const ClassifierOptions& o) {
-  const io::PipelineConfig config = o.config_path.empty() ? io::pipeline_preset("kitti-hdl64") : io::read_pipeline_config(o.config_path);
-  sim::SegmentsAlongConfig along;
-  along.local_cloud = config.local_cloud;
-  along.segmentation = config.localizer.segmentation;
-  along.segment_map = config.segment_map;
+  const io::PipelineConfig config =
+      !o.config_path.empty() ? io::read_pipeline_config(o.config_path)
+                             : io::pipeline_preset(o.real_dir.empty() ? "kitti-hdl64" : "sparse-keyframes");
   TrainingPairConfig pc;
   pc.k = config.localizer.retrieval.k;
   pc.seed = o.seed;
   pc.negatives_per_positive = 1000000;  // evaluate on every candidate, not a 1:50 sample
-  std::fprintf(stderr, "simulating held-out city %llu (%s)...\n", static_cast<unsigned long long>(o.seed), o.preset.c_str());
-  const auto city = sim::labelled_city(sim::dataset_preset(o.preset, o.seed), sim::lidar_model_by_name(o.sensor), along, pc);
-  const TrainingPairs& p = city->pairs;
-  const FeatureScaling scaling = FeatureScaling::fit(city->targets);
+  std::unique_ptr<sim::LabelledCity> city;
+  std::unique_ptr<eval::RealPairs> real;
+  std::string title;
+  if (o.real_dir.empty()) {
+    sim::SegmentsAlongConfig along;
+    along.local_cloud = config.local_cloud;
+    along.segmentation = config.localizer.segmentation;
+    along.segment_map = config.segment_map;
+    std::fprintf(stderr, "simulating held-out city %llu (%s)...\n", static_cast<unsigned long long>(o.seed), o.preset.c_str());
+    city = sim::labelled_city(sim::dataset_preset(o.preset, o.seed), sim::lidar_model_by_name(o.sensor), along, pc);
+    title = "ROC on held-out city " + std::to_string(o.seed);
+  } else {
+    eval::RealPairsConfig rc;  // the stretches segmatch-train --real holds out
+    rc.pairs = pc;
+    real = eval::real_pairs(o.real_dir, config, rc);
+    title = "ROC on held-out stretches of " + fs::path(o.real_dir).filename().string();
+  }
+  const TrainingPairs& p = city ? city->pairs : real->held_out;
+  const Segments& targets = city ? city->targets : real->targets_held_out;
+  const FeatureScaling scaling = FeatureScaling::fit(targets);
   std::vector<std::pair<std::string, std::function<double(const Segment&, const Segment&)>>> scorers = {
       {"L2", [&](const Segment& q, const Segment& t) { return -scaling.distance(q.eigen, t.eigen); }}};
   std::vector<std::unique_ptr<RandomForestMatcher>> models;
@@ -94,7 +110,9 @@ int run_classifier(const ClassifierOptions& o) {
   }
   std::vector<eval::RocCurve> curves;
   nlohmann::json j;
-  j["pairs"] = {{"positives", p.positives}, {"negatives", p.negatives}, {"city_seed", o.seed}, {"preset", o.preset}};
+  j["pairs"] = {{"positives", p.positives}, {"negatives", p.negatives}};
+  if (real) j["pairs"]["real"] = o.real_dir;
+  else j["pairs"]["city_seed"] = o.seed, j["pairs"]["preset"] = o.preset;
   for (const auto& [name, scorer] : scorers) {
     std::vector<eval::ScoredPair> scored;
     for (size_t i = 0; i < p.pairs.size(); ++i) scored.push_back({scorer(*p.pairs[i].first, *p.pairs[i].second), p.same_object[i]});
@@ -108,7 +126,7 @@ int run_classifier(const ClassifierOptions& o) {
   std::printf("held-out pairs: %zu positives, %zu negatives\n", p.positives, p.negatives);
   if (!o.out_dir.empty()) {
     fs::create_directories(o.out_dir);
-    eval::plot_roc((fs::path(o.out_dir) / "roc.png").string(), curves, "ROC on held-out city " + std::to_string(o.seed));
+    eval::plot_roc((fs::path(o.out_dir) / "roc.png").string(), curves, title);
     std::ofstream(fs::path(o.out_dir) / "roc.json") << j.dump(2) << "\n";
     std::printf("report: %s/{roc.png, roc.json}\n", o.out_dir.c_str());
   }
@@ -136,12 +154,15 @@ int main(int argc, char** argv) {
   loc->add_flag("!--quiet", lc.print_each, "no line per query");
   loc->add_option("--out", out_dir, "report folder (JSON + PNG)");
   ClassifierOptions co;
-  auto* cls = app.add_subcommand("classifier", "ROC curves of the match classifiers on a held-out simulated city");
+  auto* cls = app.add_subcommand("classifier", "ROC curves of the match classifiers on a held-out simulated city or real stretches");
   cls->add_option("--model", co.model_shapes, "RF_eigen+shapes model file");
   cls->add_option("--model-eigen", co.model_eigen, "RF_eigen model file");
   cls->add_option("--preset", co.preset, "city size: tiny, demo, city");
   cls->add_option("--seed", co.seed, "held-out city seed (not one the models were trained on)");
   cls->add_option("--config", co.config_path, "pipeline config JSON");
+  cls->add_option("--real", co.real_dir,
+                  "real keyframe folder instead of a city: every candidate pair of the stretches segmatch-train --real "
+                  "holds out, labelled by centroid distance (default config: sparse-keyframes)");
   cls->add_option("--out", co.out_dir, "report folder");
   CLI11_PARSE(app, argc, argv);
   try {

@@ -1,4 +1,4 @@
-#include "real_pairs.h"
+#include "segmatch/eval/real_pairs.h"
 
 #include "segmatch/cli/progress.h"
 #include "segmatch/core/map_builder.h"
@@ -7,7 +7,7 @@
 
 #include <vector>
 
-namespace segmatch::train {
+namespace segmatch::eval {
 namespace {
 
 // Distance driven at each keyframe (sum of the steps between consecutive poses).
@@ -98,4 +98,4 @@ std::unique_ptr<RealPairs> real_pairs(const std::string& folder, const io::Pipel
   return out;
 }
 
-}  // namespace segmatch::train
+}  // namespace segmatch::eval

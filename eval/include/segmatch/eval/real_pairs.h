@@ -14,7 +14,7 @@
 #include <memory>
 #include <string>
 
-namespace segmatch::train {
+namespace segmatch::eval {
 
 struct RealPairsConfig {
   double map_every_m = 5.0;      // targets: a segmented local cloud every this many metres
@@ -35,4 +35,4 @@ struct RealPairs {
 std::unique_ptr<RealPairs> real_pairs(const std::string& folder, const io::PipelineConfig& config,
                                       const RealPairsConfig& rc);
 
-}  // namespace segmatch::train
+}  // namespace segmatch::eval
