@@ -42,10 +42,10 @@ class Graph {
     bits_[i * words_ + j / 64] |= uint64_t{1} << (j % 64);
     bits_[j * words_ + i / 64] |= uint64_t{1} << (i % 64);
   }
-  bool connected(size_t i, size_t j) const {
-    return (bits_[i * words_ + j / 64] >> (j % 64)) & 1u;
-  }
   size_t size() const { return n_; }
+  size_t words() const { return words_; }
+  const uint64_t* row(size_t i) const { return &bits_[i * words_]; }
+  uint64_t* row(size_t i) { return &bits_[i * words_]; }
 
  private:
   size_t n_, words_;
@@ -114,6 +114,83 @@ void keep_distinct(std::vector<Fit>& kept, Fit fit, size_t max_kept, const Vec3&
   if (kept.size() > max_kept) kept.pop_back();
 }
 
+// Fills the consistency graph: the O(n^2) pair test runs on centred float copies laid out per
+// coordinate, so for each i the test against every j > i vectorises (thousands of L2 matches
+// made this loop most of a query's time). Centring each side on its own mean keeps float
+// precision at the millimetre level for maps kilometres from their origin.
+void build_consistency(const Points& q, const Points& t, const Matches& candidates, float res, Graph& graph,
+                       std::vector<int>& degree) {
+  const size_t n = q.size();
+  Vec3 q_mean = Vec3::Zero(), t_mean = Vec3::Zero();
+  for (size_t i = 0; i < n; ++i) q_mean += q[i] / static_cast<double>(n), t_mean += t[i] / static_cast<double>(n);
+  std::vector<float> c[6];
+  for (std::vector<float>& v : c) v.resize(n);
+  std::vector<int> qi(n), ti(n);
+  for (size_t i = 0; i < n; ++i) {
+    for (int k = 0; k < 3; ++k) {
+      c[k][i] = static_cast<float>(q[i][k] - q_mean[k]);
+      c[3 + k][i] = static_cast<float>(t[i][k] - t_mean[k]);
+    }
+    qi[i] = candidates[i].query;
+    ti[i] = candidates[i].target;
+  }
+  const float *qx = c[0].data(), *qy = c[1].data(), *qz = c[2].data();
+  const float *tx = c[3].data(), *ty = c[4].data(), *tz = c[5].data();
+  const size_t words = graph.words();
+  std::vector<uint8_t> agree(words * 64, 0);
+  for (size_t i = 0; i < n; ++i) {
+    // The upper triangle: agree[j] for j > i (vectorised: no branch, no errno for sqrt, see
+    // -fno-math-errno in CMakeLists.txt), then packed into row i 64 at a time.
+    const size_t w0 = (i + 1) / 64;
+    std::fill(agree.begin() + static_cast<long>(w0 * 64), agree.begin() + static_cast<long>(i + 1), uint8_t{0});
+    for (size_t j = i + 1; j < n; ++j) {
+      const float ax = qx[i] - qx[j], ay = qy[i] - qy[j], az = qz[i] - qz[j];
+      const float bx = tx[i] - tx[j], by = ty[i] - ty[j], bz = tz[i] - tz[j];
+      const float dq = std::sqrt(ax * ax + ay * ay + az * az), dt = std::sqrt(bx * bx + by * by + bz * bz);
+      agree[j] = (qi[i] != qi[j]) & (ti[i] != ti[j]) & (std::abs(dq - dt) < res);
+    }
+    uint64_t* row = graph.row(i);
+    for (size_t w = w0; w < words; ++w) {
+      uint64_t bits = 0;
+      for (size_t b = 0; b < 64; ++b) bits |= uint64_t{agree[w * 64 + b]} << b;
+      row[w] = bits;
+      degree[i] += __builtin_popcountll(bits);
+    }
+    for (size_t j = i + 1; j < n; ++j) degree[j] += agree[j];
+  }
+  // Mirror the upper triangle (work in proportion to the edges).
+  for (size_t i = 0; i < n; ++i) {
+    const uint64_t* row = graph.row(i);
+    for (size_t w = (i + 1) / 64; w < words; ++w)
+      for (uint64_t bits = row[w]; bits != 0; bits &= bits - 1) {
+        const size_t j = w * 64 + static_cast<size_t>(__builtin_ctzll(bits));
+        if (j > i) graph.row(j)[i / 64] |= uint64_t{1} << (i % 64);
+      }
+  }
+}
+
+// Greedy clique from seed s: its neighbours in growth order (rank), each joining when it agrees
+// with every member so far. `mask` holds the candidates that agree with all members (the AND
+// of their rows), so each test is one bit instead of one per member.
+void grow_clique(const Graph& graph, int s, const std::vector<int>& rank, std::vector<int>& clique,
+                 std::vector<int>& neighbours, std::vector<uint64_t>& mask) {
+  const size_t words = graph.words();
+  const uint64_t* row = graph.row(static_cast<size_t>(s));
+  mask.assign(row, row + words);
+  neighbours.clear();
+  for (size_t w = 0; w < words; ++w)
+    for (uint64_t bits = row[w]; bits != 0; bits &= bits - 1)
+      neighbours.push_back(static_cast<int>(w * 64 + static_cast<size_t>(__builtin_ctzll(bits))));
+  std::sort(neighbours.begin(), neighbours.end(), [&](int a, int b) { return rank[a] < rank[b]; });
+  clique.assign(1, s);
+  for (int c : neighbours) {
+    if (!((mask[static_cast<size_t>(c) / 64] >> (c % 64)) & 1u)) continue;
+    clique.push_back(c);
+    const uint64_t* rc = graph.row(static_cast<size_t>(c));
+    for (size_t w = 0; w < words; ++w) mask[w] &= rc[w];
+  }
+}
+
 }  // namespace
 
 VerificationResult verify_matches(const Segments& queries, const Segments& targets,
@@ -142,17 +219,7 @@ VerificationResult verify_matches(const Segments& queries, const Segments& targe
   const double res = config.resolution_m;
   Graph graph(n);
   std::vector<int> degree(n, 0);
-  for (size_t i = 0; i < n; ++i) {
-    for (size_t j = i + 1; j < n; ++j) {
-      if (candidates[i].query == candidates[j].query || candidates[i].target == candidates[j].target)
-        continue;
-      if (std::abs((q[i] - q[j]).norm() - (t[i] - t[j]).norm()) < res) {
-        graph.connect(i, j);
-        ++degree[i];
-        ++degree[j];
-      }
-    }
-  }
+  build_consistency(q, t, candidates, static_cast<float>(res), graph, degree);
 
   // Seeds and growth order: most-connected first (ties by candidate order) - deterministic.
   std::vector<int> order(n);
@@ -179,17 +246,13 @@ VerificationResult verify_matches(const Segments& queries, const Segments& targe
   std::vector<char> in_kept(n, 0);
   const size_t max_kept = static_cast<size_t>(config.max_hypotheses);
   auto smallest_kept = [&] { return kept.size() < max_kept ? size_t{0} : kept.back().members.size(); };
-  std::vector<int> clique;
+  std::vector<int> rank(n), clique, neighbours;
+  for (size_t k = 0; k < n; ++k) rank[order[k]] = static_cast<int>(k);
+  std::vector<uint64_t> mask;
   for (int s : seeds) {
     const size_t reach = static_cast<size_t>(degree[s]) + 1;
     if (in_kept[s] || reach < min_inliers || reach <= smallest_kept()) continue;
-    clique.assign(1, s);
-    for (int c : order) {
-      if (c == s || !graph.connected(s, c)) continue;
-      bool all = true;
-      for (size_t k = 1; k < clique.size() && all; ++k) all = graph.connected(clique[k], c);
-      if (all) clique.push_back(c);
-    }
+    grow_clique(graph, s, rank, clique, neighbours, mask);
     if (clique.size() < min_inliers || clique.size() <= smallest_kept()) continue;
     Fit fit = fit_and_prune(q, t, clique, res, min_inliers);
     if (fit.members.size() < min_inliers || fit.members.size() <= smallest_kept()) continue;
