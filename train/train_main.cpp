@@ -9,6 +9,7 @@
 #include "segmatch/cli/progress.h"
 #include "segmatch/core/training.h"
 #include "segmatch/eval/real_pairs.h"
+#include "segmatch/io/error.h"
 #include "segmatch/io/pipeline_config.h"
 #include "segmatch/sim/city.h"
 
@@ -50,10 +51,7 @@ void write_atomically(const std::string& path, const std::string& bytes) {
 }
 
 RandomForestMatcher load_model(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw std::runtime_error(path + ": cannot open the model file");
-  const std::string bytes((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
-  return RandomForestMatcher::load(bytes);
+  return RandomForestMatcher::load(io::read_file_bytes(path, "model file"));
 }
 
 // True and false positive rates of the model on held-out pairs at its threshold.

@@ -30,30 +30,25 @@ void keep_negatives(const Segments& queries, const Segments& targets, std::vecto
   }
 }
 
-}  // namespace
+enum class PairLabel { kPositive, kNegative, kLeftOut };
 
-TrainingPairs label_pairs_by_instance(const Segments& queries, const Segments& targets,
-                                      const FeatureIndex& index, const TrainingPairConfig& config) {
+// Paper IV-B: each query segment's k nearest targets in feature space are its candidates, the
+// only pairs the classifier sees at run time (taking positives from anywhere would teach it
+// that pairs far apart in feature space are the same object); label(q, t) says what each is.
+template <typename Label>
+TrainingPairs label_candidates(const Segments& queries, const Segments& targets, const FeatureIndex& index,
+                               const TrainingPairConfig& config, Label label) {
   config.validate();
   TrainingPairs out;
   std::vector<std::pair<int, int>> negatives;
   for (size_t q = 0; q < queries.size(); ++q) {
-    const uint16_t inst = label_instance(queries[q].label);
-    if (inst == 0) continue;
-    // Positives and negatives both come from the k-NN candidates, the only pairs the
-    // classifier sees at run time. (Taking positives from anywhere would teach it that
-    // pairs far apart in feature space are the same object.)
     for (const auto& [t, dist] : index.knn(queries[q].eigen, config.k)) {
-      const uint16_t other = label_instance(targets[t].label);
-      if (other == 0) continue;
-      if (other == inst && config.max_centroid_distance_m > 0.f &&
-          (queries[q].centroid - targets[t].centroid).norm() > config.max_centroid_distance_m)
-        continue;  // same object, different part: ambiguous, left out
-      if (other == inst) {
+      const PairLabel l = label(queries[q], targets[t]);
+      if (l == PairLabel::kPositive) {
         out.pairs.emplace_back(&queries[q], &targets[t]);
         out.same_object.push_back(true);
         ++out.positives;
-      } else {
+      } else if (l == PairLabel::kNegative) {
         negatives.emplace_back(static_cast<int>(q), t);
       }
     }
@@ -62,25 +57,27 @@ TrainingPairs label_pairs_by_instance(const Segments& queries, const Segments& t
   return out;
 }
 
+}  // namespace
+
+TrainingPairs label_pairs_by_instance(const Segments& queries, const Segments& targets,
+                                      const FeatureIndex& index, const TrainingPairConfig& config) {
+  return label_candidates(queries, targets, index, config, [&](const Segment& q, const Segment& t) {
+    const uint16_t inst = label_instance(q.label), other = label_instance(t.label);
+    if (inst == 0 || other == 0) return PairLabel::kLeftOut;  // ground, unknown
+    if (other != inst) return PairLabel::kNegative;
+    if (config.max_centroid_distance_m > 0.f && (q.centroid - t.centroid).norm() > config.max_centroid_distance_m)
+      return PairLabel::kLeftOut;  // same object, different part: ambiguous
+    return PairLabel::kPositive;
+  });
+}
+
 TrainingPairs label_pairs_by_distance(const Segments& queries, const Segments& targets,
                                       const FeatureIndex& index, const TrainingPairConfig& config) {
-  config.validate();
-  TrainingPairs out;
-  std::vector<std::pair<int, int>> negatives;
-  for (size_t q = 0; q < queries.size(); ++q) {
-    for (const auto& [t, dist] : index.knn(queries[q].eigen, config.k)) {
-      const float d = (queries[q].centroid - targets[t].centroid).norm();
-      if (d <= config.max_centroid_distance_m) {
-        out.pairs.emplace_back(&queries[q], &targets[t]);
-        out.same_object.push_back(true);
-        ++out.positives;
-      } else if (d > config.min_negative_distance_m) {
-        negatives.emplace_back(static_cast<int>(q), t);
-      }
-    }
-  }
-  keep_negatives(queries, targets, negatives, config, out);
-  return out;
+  return label_candidates(queries, targets, index, config, [&](const Segment& q, const Segment& t) {
+    const float d = (q.centroid - t.centroid).norm();
+    if (d <= config.max_centroid_distance_m) return PairLabel::kPositive;
+    return d > config.min_negative_distance_m ? PairLabel::kNegative : PairLabel::kLeftOut;
+  });
 }
 
 }  // namespace segmatch

@@ -6,6 +6,7 @@
 #include "segmatch/eval/localization_run.h"
 #include "segmatch/eval/real_pairs.h"
 #include "segmatch/eval/roc.h"
+#include "segmatch/io/error.h"
 #include "segmatch/io/pipeline_config.h"
 #include "segmatch/server/map_service.h"
 #include "segmatch/sim/city.h"
@@ -65,10 +66,7 @@ struct ClassifierOptions {
 };
 
 RandomForestMatcher load_model(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw std::runtime_error(path + ": cannot open the model file");
-  const std::string bytes((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
-  return RandomForestMatcher::load(bytes);
+  return RandomForestMatcher::load(io::read_file_bytes(path, "model file"));
 }
 
 int run_classifier(const ClassifierOptions& o) {

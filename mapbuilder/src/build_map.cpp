@@ -54,15 +54,6 @@ MapBuilderConfig builder_config(const io::PipelineConfig& pipeline, double map_e
   return c;
 }
 
-std::string read_file_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw io::IoError(path + ": cannot open the classifier model file");
-  std::ostringstream bytes;
-  bytes << in.rdbuf();
-  if (in.bad()) throw io::IoError(path + ": read error");
-  return bytes.str();
-}
-
 // The explicit model must be valid; the default one is optional (a fresh checkout has none).
 std::optional<storage::ClassifierBlob> load_classifier(const BuildOptions& o) {
   if (o.no_classifier) return std::nullopt;
@@ -77,7 +68,7 @@ std::optional<storage::ClassifierBlob> load_classifier(const BuildOptions& o) {
       return std::nullopt;
     }
   }
-  storage::ClassifierBlob blob{kClassifierFormat, read_file_bytes(path)};
+  storage::ClassifierBlob blob{kClassifierFormat, io::read_file_bytes(path, "classifier model file")};
   try {
     RandomForestMatcher::load(blob.bytes);
   } catch (const std::exception& e) {

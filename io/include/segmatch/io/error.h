@@ -16,5 +16,8 @@ class IoError : public std::runtime_error {
   explicit IoError(const std::string& message) : std::runtime_error(message) {}
 };
 
+// The whole file as bytes. IoError "<path>: cannot open the <what>" or "<path>: read error".
+std::string read_file_bytes(const std::string& path, const std::string& what = "file");
+
 }  // namespace io
 }  // namespace segmatch
