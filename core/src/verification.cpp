@@ -114,58 +114,88 @@ void keep_distinct(std::vector<Fit>& kept, Fit fit, size_t max_kept, const Vec3&
   if (kept.size() > max_kept) kept.pop_back();
 }
 
-// Fills the consistency graph: the O(n^2) pair test runs on centred float copies laid out per
-// coordinate, so for each i the test against every j > i vectorises (thousands of L2 matches
-// made this loop most of a query's time). Centring each side on its own mean keeps float
-// precision at the millimetre level for maps kilometres from their origin.
+// Fills the consistency graph. Two matches can only agree if their target centroids are closer
+// than the query's extent plus the resolution, so the targets are bucketed in square xy cells
+// at least that wide and only pairs in neighbouring cells are tested: against a map of
+// kilometres most of the O(n^2) pairs are never looked at (thousands of L2 matches made this
+// loop most of a query's time). The test runs on centred float copies laid out per coordinate
+// in cell order, so each row of it vectorises; centring each side on its own mean keeps float
+// precision at the millimetre level for maps kilometres from their origin. The graph and the
+// degrees are the same as from testing every pair.
 void build_consistency(const Points& q, const Points& t, const Matches& candidates, float res, Graph& graph,
                        std::vector<int>& degree) {
   const size_t n = q.size();
   Vec3 q_mean = Vec3::Zero(), t_mean = Vec3::Zero();
-  for (size_t i = 0; i < n; ++i) q_mean += q[i] / static_cast<double>(n), t_mean += t[i] / static_cast<double>(n);
+  Vec3 q_lo = q[0], q_hi = q[0];
+  for (size_t i = 0; i < n; ++i) {
+    q_mean += q[i] / static_cast<double>(n), t_mean += t[i] / static_cast<double>(n);
+    q_lo = q_lo.cwiseMin(q[i]), q_hi = q_hi.cwiseMax(q[i]);
+  }
+  // Cell side: the largest query distance (bounded by the box diagonal) plus the resolution,
+  // with a margin for rounding; pairs farther apart in xy than that never agree.
+  const double cell_m = (q_hi - q_lo).norm() + 2.0 * res + 1e-3;
+  // Cell numbers offset to stay positive and clamped (a clamped cell only gets more pairs
+  // tested), packed x << 32 | y so that cells (x, y - 1 .. y + 1) are one key range.
+  auto cell = [&](double v) {
+    const double c = std::floor(v / cell_m);
+    return static_cast<uint64_t>(std::isfinite(c) ? std::clamp(c, -1e6, 1e6) + 1048576.0 : 1048576.0);
+  };
+  std::vector<uint64_t> key(n);
+  for (size_t i = 0; i < n; ++i) key[i] = cell(t[i].x() - t_mean.x()) << 32 | cell(t[i].y() - t_mean.y());
+  std::vector<int> order(n);  // candidates in cell order
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return key[a] < key[b]; });
   std::vector<float> c[6];
   for (std::vector<float>& v : c) v.resize(n);
   std::vector<int> qi(n), ti(n);
-  for (size_t i = 0; i < n; ++i) {
+  std::vector<uint64_t> sorted_key(n);
+  for (size_t p = 0; p < n; ++p) {
+    const size_t i = static_cast<size_t>(order[p]);
     for (int k = 0; k < 3; ++k) {
-      c[k][i] = static_cast<float>(q[i][k] - q_mean[k]);
-      c[3 + k][i] = static_cast<float>(t[i][k] - t_mean[k]);
+      c[k][p] = static_cast<float>(q[i][k] - q_mean[k]);
+      c[3 + k][p] = static_cast<float>(t[i][k] - t_mean[k]);
     }
-    qi[i] = candidates[i].query;
-    ti[i] = candidates[i].target;
+    qi[p] = candidates[i].query;
+    ti[p] = candidates[i].target;
+    sorted_key[p] = key[i];
   }
   const float *qx = c[0].data(), *qy = c[1].data(), *qz = c[2].data();
   const float *tx = c[3].data(), *ty = c[4].data(), *tz = c[5].data();
-  const size_t words = graph.words();
-  std::vector<uint8_t> agree(words * 64, 0);
-  for (size_t i = 0; i < n; ++i) {
-    // The upper triangle: agree[j] for j > i (vectorised: no branch, no errno for sqrt, see
-    // -fno-math-errno in CMakeLists.txt), then packed into row i 64 at a time.
-    const size_t w0 = (i + 1) / 64;
-    std::fill(agree.begin() + static_cast<long>(w0 * 64), agree.begin() + static_cast<long>(i + 1), uint8_t{0});
-    for (size_t j = i + 1; j < n; ++j) {
-      const float ax = qx[i] - qx[j], ay = qy[i] - qy[j], az = qz[i] - qz[j];
-      const float bx = tx[i] - tx[j], by = ty[i] - ty[j], bz = tz[i] - tz[j];
+  std::vector<uint8_t> agree(n);
+  // Tests position p against positions [b, e) (all > p), then records the agreeing pairs.
+  auto test_range = [&](size_t p, size_t b, size_t e) {
+    for (size_t r = b; r < e; ++r) {  // vectorised: no branch, no errno for sqrt (-fno-math-errno)
+      const float ax = qx[p] - qx[r], ay = qy[p] - qy[r], az = qz[p] - qz[r];
+      const float bx = tx[p] - tx[r], by = ty[p] - ty[r], bz = tz[p] - tz[r];
       const float dq = std::sqrt(ax * ax + ay * ay + az * az), dt = std::sqrt(bx * bx + by * by + bz * bz);
-      agree[j] = (qi[i] != qi[j]) & (ti[i] != ti[j]) & (std::abs(dq - dt) < res);
+      agree[r] = (qi[p] != qi[r]) & (ti[p] != ti[r]) & (std::abs(dq - dt) < res);
     }
-    uint64_t* row = graph.row(i);
-    for (size_t w = w0; w < words; ++w) {
-      uint64_t bits = 0;
-      for (size_t b = 0; b < 64; ++b) bits |= uint64_t{agree[w * 64 + b]} << b;
-      row[w] = bits;
-      degree[i] += __builtin_popcountll(bits);
+    const size_t i = static_cast<size_t>(order[p]);
+    for (size_t r = b; r < e; ++r) {
+      if (!agree[r]) continue;
+      const size_t j = static_cast<size_t>(order[r]);
+      graph.connect(i, j);
+      ++degree[i];
+      ++degree[j];
     }
-    for (size_t j = i + 1; j < n; ++j) degree[j] += agree[j];
-  }
-  // Mirror the upper triangle (work in proportion to the edges).
-  for (size_t i = 0; i < n; ++i) {
-    const uint64_t* row = graph.row(i);
-    for (size_t w = (i + 1) / 64; w < words; ++w)
-      for (uint64_t bits = row[w]; bits != 0; bits &= bits - 1) {
-        const size_t j = w * 64 + static_cast<size_t>(__builtin_ctzll(bits));
-        if (j > i) graph.row(j)[i / 64] |= uint64_t{1} << (i % 64);
-      }
+  };
+  auto lower = [&](uint64_t k) {
+    return static_cast<size_t>(std::lower_bound(sorted_key.begin(), sorted_key.end(), k) - sorted_key.begin());
+  };
+  for (size_t cell_begin = 0; cell_begin < n;) {
+    const uint64_t k = sorted_key[cell_begin];
+    const size_t cell_end = lower(k + 1);
+    // The three strips of neighbouring cells (x - 1, x, x + 1; y - 1 .. y + 1), each contiguous
+    // in cell order; only positions after p, so each pair is tested once.
+    size_t strip[3][2];
+    for (int dx = -1; dx <= 1; ++dx) {
+      const uint64_t base = k + (static_cast<uint64_t>(static_cast<int64_t>(dx)) << 32);
+      strip[dx + 1][0] = lower(base - 1);
+      strip[dx + 1][1] = lower(base + 2);
+    }
+    for (size_t p = cell_begin; p < cell_end; ++p)
+      for (const auto& s : strip) test_range(p, std::max(s[0], p + 1), s[1]);
+    cell_begin = cell_end;
   }
 }
 

@@ -122,6 +122,38 @@ TEST(VerificationTest, DeterministicAndSeededBeyondIterationBudget) {
   EXPECT_TRUE(a.T_target_query.isApprox(b.T_target_query, 0.0));
 }
 
+// A query of 60 m radius against a map of kilometres, thousands of L2-style candidates: the
+// pair test only looks at targets in neighbouring cells of about the query's size. The true
+// set is planted at places all over the map, so it also straddles cell borders.
+TEST(VerificationTest, FindsTheTrueSetAmongThousandsOfCandidatesOnAWideMap) {
+  Rng rng(21);
+  Segments queries(60), targets(3000);
+  for (Segment& q : queries) {
+    const double a = rng.uniform(0, 2 * M_PI), r = rng.uniform(3, 60);
+    q.centroid = Eigen::Vector3f(r * std::cos(a), r * std::sin(a), rng.uniform(0, 5));
+  }
+  for (Segment& t : targets) t.centroid = Eigen::Vector3f(rng.uniform(0, 3000), rng.uniform(0, 900), rng.uniform(0, 5));
+  for (int place = 0; place < 6; ++place) {
+    Pose3d T = Pose3d::Identity();
+    T.linear() = Eigen::AngleAxisd(rng.uniform(-M_PI, M_PI), Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    T.translation() = Eigen::Vector3d(rng.uniform(100, 2900), rng.uniform(100, 800), 0.5);
+    Segments map = targets;
+    Matches candidates;
+    std::set<std::pair<int, int>> truth;
+    for (int i = 0; i < 8; ++i) {  // query i is map segment i
+      map[i].centroid = (T * queries[i].centroid.cast<double>()).cast<float>();
+      candidates.push_back({i, i, 1.f});
+      truth.insert({i, i});
+    }
+    for (int k = 0; k < 4000; ++k)
+      candidates.push_back({rng.uniform_int(0, 59), rng.uniform_int(8, 2999), 0.5f});
+    const VerificationResult r = verify_matches(queries, map, candidates, {});
+    ASSERT_TRUE(r.found) << place;
+    EXPECT_EQ(as_set(r.inliers), truth) << place;
+    EXPECT_LT((r.T_target_query.translation() - T.translation()).norm(), 1e-3) << place;
+  }
+}
+
 TEST(VerificationTest, ConfigValidation) {
   VerificationConfig c;
   EXPECT_NO_THROW(c.validate());
