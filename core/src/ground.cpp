@@ -52,15 +52,48 @@ struct ColumnCoord {
   }
 };
 
+// Packed key -> value with the answers of FlatHashMap for every key (even keys packed from
+// out-of-range coordinates), but a dense table indexed by the key itself when the frame
+// is small (a 120 m local cloud at 0.5 m packs into 16 bits): a lookup is then one load
+// instead of a hash probe with a likely cache miss.
+class KeyIndex {
+ public:
+  static constexpr uint32_t kMissing = FlatHashMap::kMissing;
+  KeyIndex() = default;
+  KeyIndex(int key_bits, size_t points) {
+    const uint64_t dense_limit = std::max<uint64_t>(uint64_t{1} << 18, 2 * uint64_t{points});
+    if (key_bits < 32 && (uint64_t{1} << key_bits) <= dense_limit) {
+      dense_.assign(size_t{1} << key_bits, kMissing);
+    } else {
+      hash_.reserve(points / 8 + 16);
+    }
+  }
+  // Inserted keys are packed from in-range coordinates, hence below 2^key_bits.
+  uint32_t insert(uint64_t key, uint32_t value) {
+    if (dense_.empty()) return hash_.insert(key, value);
+    uint32_t& v = dense_[key];
+    if (v == kMissing) v = value;
+    return v;
+  }
+  uint32_t find(uint64_t key) const {
+    if (dense_.empty()) return hash_.find(key);
+    return key < dense_.size() ? dense_[key] : kMissing;
+  }
+
+ private:
+  std::vector<uint32_t> dense_;
+  FlatHashMap hash_;
+};
+
 struct ColumnStats {
   float zmin = 0.f, zmax = 0.f, mean = 0.f, stddev = 0.f;
 };
 
 // The occupied columns, numbered in order of first appearance (no sort: every step below is
-// independent of the numbering), with a hash lookup by integer coordinates.
+// independent of the numbering), with a lookup by integer coordinates.
 struct Columns {
   GridFrame frame;
-  FlatHashMap index;             // packed (x, y) -> column
+  KeyIndex index;                // packed (x, y) -> column
   std::vector<int64_t> x, y;     // coordinates per column
   std::vector<uint32_t> of;      // column of each point (kMissing if not finite)
   std::vector<ColumnStats> stats;
@@ -70,42 +103,99 @@ struct Columns {
   }
 };
 
-// Step 1 in one pass over the points; the sums run in input order per column.
+// bounds[k] = the least float that ColumnCoord maps to k or above, along one axis, so that
+// column k holds exactly [bounds[k], bounds[k + 1]) (ColumnCoord is monotone): two float
+// compares per axis then tell whether a point stays in the column of the previous one.
+// The ends are -FLT_MAX and +inf, so the test also rejects infinities and NaN. Empty (no
+// test) if the axis has so many columns that the table would cost more than it saves.
+std::vector<float> column_bounds(const ColumnCoord& coord, int axis, size_t points) {
+  const int64_t extent = coord.frame.extent[axis];
+  if (extent > int64_t(1024 + points / 16)) return {};
+  std::vector<float> bounds(size_t(extent) + 1);
+  bounds[0] = -std::numeric_limits<float>::max();
+  bounds[extent] = std::numeric_limits<float>::infinity();
+  const float down = -std::numeric_limits<float>::infinity(), up = -down;
+  for (int64_t k = 1; k < extent; ++k) {
+    float f = float(double(coord.frame.base[axis] + k) * coord.frame.cell_m);
+    while (coord(f, axis) >= k) f = std::nextafter(f, down);
+    while (coord(f, axis) < k) f = std::nextafter(f, up);
+    bounds[k] = f;
+  }
+  return bounds;
+}
+
+struct ColumnSums {
+  double sum = 0, sum2 = 0;
+  float lo = 0, hi = 0;
+  uint32_t n = 0;
+  void add(float z) {
+    sum += z;
+    sum2 += double(z) * z;
+    lo = std::min(lo, z);
+    hi = std::max(hi, z);
+    ++n;
+  }
+};
+
+// Float box [x_lo, x_hi) x [y_lo, y_hi) of one column; the default is empty.
+struct ColumnBox {
+  float x_lo = 1.f, x_hi = 0.f, y_lo = 1.f, y_hi = 0.f;
+  bool holds(const Point& p) const {
+    return p.x >= x_lo && p.x < x_hi && p.y >= y_lo && p.y < y_hi;
+  }
+};
+
+// Adds point i (in column c) and the run of points after it that lie in the box of c;
+// returns the index after the run. A local copy keeps the sums in registers.
+size_t add_run(const PointCloud& cloud, size_t i, const ColumnBox& box, uint32_t c,
+               ColumnSums* column, uint32_t* of) {
+  ColumnSums s = *column;
+  s.add(cloud[i].z);
+  of[i] = c;
+  for (++i; i < cloud.size() && box.holds(cloud[i]); ++i) {
+    if (!std::isfinite(cloud[i].z)) continue;
+    s.add(cloud[i].z);
+    of[i] = c;
+  }
+  *column = s;
+  return i;
+}
+
+// Step 1 in one pass over the points; the sums run in input order per column. Voxelized
+// input comes in voxel order, so runs of points share a column: those skip the coordinates
+// and the lookup.
 Columns build_columns(const PointCloud& cloud, double column_m) {
   Columns cols;
   cols.frame = GridFrame::fit(cloud, column_m, true, "GroundConfig.column_size_m");
-  cols.index.reserve(cloud.size() / 8 + 16);
+  cols.index = KeyIndex(cols.frame.total_bits, cloud.size());
   cols.of.assign(cloud.size(), FlatHashMap::kMissing);
-  struct Sums {
-    double sum = 0, sum2 = 0;
-    float lo = 0, hi = 0;
-    uint32_t n = 0;
-  };
-  std::vector<Sums> sums;
   const ColumnCoord coord{cols.frame};
+  const std::vector<float> bx = column_bounds(coord, 0, cloud.size());
+  const std::vector<float> by = column_bounds(coord, 1, cloud.size());
+  const bool bounded = !bx.empty() && !by.empty();
+  std::vector<ColumnSums> sums;
   uint64_t last_key = ~uint64_t{0};
-  uint32_t last = 0;
-  for (size_t i = 0; i < cloud.size(); ++i) {
+  uint32_t column = 0;
+  for (size_t i = 0; i < cloud.size();) {
     const Point& p = cloud[i];
-    if (!detail::is_finite(p)) continue;
+    if (!detail::is_finite(p)) {
+      ++i;
+      continue;
+    }
     const int64_t cx = coord(p.x, 0), cy = coord(p.y, 1);
     const uint64_t key = cols.frame.pack(cx, cy, 0);
-    if (key != last_key) {  // consecutive points often share a column
-      last = cols.index.insert(key, static_cast<uint32_t>(sums.size()));
+    if (key != last_key) {
+      column = cols.index.insert(key, static_cast<uint32_t>(sums.size()));
       last_key = key;
-      if (last == sums.size()) {
+      if (column == sums.size()) {
         sums.push_back({0, 0, p.z, p.z, 0});
         cols.x.push_back(cx);
         cols.y.push_back(cy);
       }
     }
-    Sums& s = sums[last];
-    s.sum += p.z;
-    s.sum2 += double(p.z) * p.z;
-    s.lo = std::min(s.lo, p.z);
-    s.hi = std::max(s.hi, p.z);
-    ++s.n;
-    cols.of[i] = last;
+    ColumnBox box;
+    if (bounded) box = {bx[cx], bx[cx + 1], by[cy], by[cy + 1]};
+    i = add_run(cloud, i, box, column, &sums[column], cols.of.data());
   }
   cols.stats.resize(sums.size());
   for (size_t c = 0; c < sums.size(); ++c) {
@@ -119,7 +209,7 @@ Columns build_columns(const PointCloud& cloud, double column_m) {
 // Lowest point among the 3 x 3 tiles (tile = tile_cols x tile_cols columns) around each
 // column: the local bottom of the scene.
 std::vector<float> lower_envelope(const Columns& cols, int64_t tile_cols) {
-  FlatHashMap tile_index(cols.size() / 4 + 1);
+  KeyIndex tile_index(cols.frame.total_bits, cols.of.size());
   std::vector<float> tile_min;
   std::vector<uint32_t> column_tile(cols.size());
   const auto tile_key = [&](int64_t tx, int64_t ty) { return cols.frame.pack(tx, ty, 0); };
@@ -208,16 +298,18 @@ std::vector<bool> column_variance_mask(const PointCloud& cloud, const GroundConf
       std::max<int64_t>(1, std::llround(cfg.envelope_tile_m / cfg.column_size_m));
   const std::vector<float> envelope = lower_envelope(cols, tile_cols);
   const std::vector<char> ground = ground_columns(cols, envelope, cfg);
-  // Per column: points below `limit` are ground (+inf: the whole column).
-  std::vector<float> limit(cols.size(), std::numeric_limits<float>::infinity());
+  // Per column c: points below limit[c + 1] are ground (+inf: the whole column). Entry 0
+  // is read for the non-finite points (column kMissing + 1 wraps to 0), so that the loop
+  // below has no branch; its comparison is overridden.
+  std::vector<float> limit(cols.size() + 1, std::numeric_limits<float>::infinity());
   for (uint32_t c = 0; c < cols.size(); ++c) {
     if (ground[c]) continue;
-    limit[c] = ground_height(cols, c, ground, envelope[c], cfg.max_search_rings) +
-               cfg.ground_margin_m;
+    limit[c + 1] = ground_height(cols, c, ground, envelope[c], cfg.max_search_rings) +
+                   cfg.ground_margin_m;
   }
   for (size_t i = 0; i < cloud.size(); ++i) {
     const uint32_t c = cols.of[i];
-    if (c != FlatHashMap::kMissing) mask[i] = cloud[i].z < limit[c];
+    mask[i] = (cloud[i].z < limit[uint32_t(c + 1)]) | (c == FlatHashMap::kMissing);
   }
   return mask;
 }
