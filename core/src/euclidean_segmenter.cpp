@@ -2,8 +2,11 @@
 // 100 .. 15000 points) and the segment_cloud() dispatch.
 //
 // Points are bucketed into cubic cells of edge cluster_distance_m, so every neighbour of a
-// point lies in its own or one of the 26 adjacent cells (found by a sweep, no hashing).
+// point lies in its own or one of the 26 adjacent cells (found by a sweep over the sorted
+// (x, y) columns, no hashing).
 // Each cell pair is visited once and close pairs are merged with union-find; no search tree.
+#include <emmintrin.h>
+
 #include <algorithm>
 #include <stdexcept>
 #include <string>
@@ -27,6 +30,7 @@ class UnionFind {
     }
     return i;
   }
+  void set_parent(uint32_t i, uint32_t root) { parent_[i] = root; }
   // The smaller root wins, so the result does not depend on the merge order.
   void unite(uint32_t a, uint32_t b) {
     a = find(a);
@@ -40,64 +44,264 @@ class UnionFind {
   std::vector<uint32_t> parent_;
 };
 
-// Merges the close pairs between the grid-order ranges [a0, a1) and [b0, b1).
-void link_ranges(const std::vector<Eigen::Vector3f>& xyz, uint32_t a0, uint32_t a1, uint32_t b0,
-                 uint32_t b1, float d2, bool same, UnionFind* uf) {
+// Point positions per slot as separate x, y, z arrays, padded by kPad so that 4-wide loads
+// may run past the last slot.
+constexpr uint32_t kPad = 3;
+struct Positions {
+  std::vector<float> x, y, z;
+  void resize(size_t n) { x.resize(n + kPad), y.resize(n + kPad), z.resize(n + kPad); }
+};
+
+// Bit k set if slot j + k (k < 4, j + k < end) is within sqrt(d2) of slot i. The squares are
+// summed as Eigen's squaredNorm() sums them, x + (y + z), so every close / not close
+// decision is bitwise the one of (a - b).squaredNorm().
+int close_mask4(const Positions& p, uint32_t i, uint32_t j, uint32_t end, __m128 d2) {
+  const __m128 dx = _mm_sub_ps(_mm_loadu_ps(&p.x[j]), _mm_set1_ps(p.x[i]));
+  const __m128 dy = _mm_sub_ps(_mm_loadu_ps(&p.y[j]), _mm_set1_ps(p.y[i]));
+  const __m128 dz = _mm_sub_ps(_mm_loadu_ps(&p.z[j]), _mm_set1_ps(p.z[i]));
+  const __m128 s = _mm_add_ps(_mm_mul_ps(dx, dx),
+                              _mm_add_ps(_mm_mul_ps(dy, dy), _mm_mul_ps(dz, dz)));
+  const int mask = _mm_movemask_ps(_mm_cmple_ps(s, d2));
+  return end - j >= 4 ? mask : mask & ((1 << (end - j)) - 1);
+}
+
+// Merges the close pairs between the slot ranges [a0, a1) and [b0, b1).
+void link_ranges(const Positions& p, uint32_t a0, uint32_t a1, uint32_t b0, uint32_t b1,
+                 __m128 d2, bool same, UnionFind* uf) {
   for (uint32_t i = a0; i < a1; ++i) {
-    for (uint32_t j = same ? i + 1 : b0; j < b1; ++j) {
-      if ((xyz[i] - xyz[j]).squaredNorm() <= d2) uf->unite(i, j);
+    for (uint32_t j = same ? i + 1 : b0; j < b1; j += 4) {
+      for (int m = close_mask4(p, i, j, b1, d2); m; m &= m - 1) uf->unite(i, j + __builtin_ctz(m));
     }
   }
 }
 
 // True if some point of [a0, a1) is within sqrt(d2) of some point of [b0, b1).
-bool any_close(const std::vector<Eigen::Vector3f>& xyz, uint32_t a0, uint32_t a1, uint32_t b0,
-               uint32_t b1, float d2) {
+bool any_close(const Positions& p, uint32_t a0, uint32_t a1, uint32_t b0, uint32_t b1,
+               __m128 d2) {
   for (uint32_t i = a0; i < a1; ++i) {
-    for (uint32_t j = b0; j < b1; ++j) {
-      if ((xyz[i] - xyz[j]).squaredNorm() <= d2) return true;
+    for (uint32_t j = b0; j < b1; j += 4) {
+      if (close_mask4(p, i, j, b1, d2)) return true;
     }
   }
   return false;
 }
 
-// Per cell: bounding box of its points and whether they already form one component.
-struct CellInfo {
-  Eigen::Vector3f lo, hi;
-  bool connected;
+// Points bucketed into cubic cells, in key order: the cells of one (x, y) column are
+// contiguous and sorted by z, so neighbours are found per column pair rather than per cell.
+struct Cells {
+  std::vector<uint32_t> order;           // input index of each slot
+  Positions xyz;                         // position of each slot
+  std::vector<uint32_t> begin;           // cell c spans slots [begin[c], begin[c + 1])
+  std::vector<uint32_t> z;               // z coordinate of each cell
+  std::vector<uint64_t> column;          // (x, y) key of each column
+  std::vector<uint32_t> column_begin;    // column k spans cells [column_begin[k], ...[k + 1])
+  int y_bits = 0;
+  int64_t x_extent = 1, y_extent = 1;
 };
 
-float box_gap2(const CellInfo& a, const CellInfo& b) {
-  const Eigen::Vector3f gap = (b.lo - a.hi).cwiseMax(a.lo - b.hi).cwiseMax(0.f);
-  return gap.squaredNorm();
+// GridFrame::key_of() with an inline floor (std::floor is a libm call without SSE4.1).
+uint64_t cell_key(const GridFrame& f, const Point& p) {
+  const auto coord = [&](float v, int axis) {
+    const double q = double(v) / f.cell_m;
+    const int64_t t = static_cast<int64_t>(q);
+    return t - (double(t) > q) - f.base[axis];
+  };
+  return f.pack(coord(p.x, 0), coord(p.y, 1), f.bits[2] ? coord(p.z, 2) : 0);
 }
 
-// Calls fn(c, nb) once per pair of adjacent occupied cells (26-neighbourhood), nb after c in
-// key order: the 13 "forward" neighbours lie in the columns (0, 0) (dz = +1 only), (0, +1),
-// (+1, -1), (+1, 0) and (+1, +1) (dz = -1..1). Cells are sorted by key, so one cursor per
-// column only moves forward: no table, no hashing.
+// Stable LSD sort of (key << 32 | index) words by key. All digit histograms come from one
+// read, and digits of up to 13 bits make a 60 m cloud at 0.2 m (25-bit keys) two passes
+// where radix_sort() takes three.
+void sort_packed(std::vector<uint64_t>* words, int key_bits) {
+  if (key_bits == 0) return;
+  const int passes = (key_bits + 12) / 13, digit = (key_bits + passes - 1) / passes;
+  const uint64_t mask = (uint64_t{1} << digit) - 1;
+  std::vector<uint32_t> count(static_cast<size_t>(passes) << digit, 0);
+  for (uint64_t w : *words) {
+    for (int p = 0; p < passes; ++p) {
+      ++count[(static_cast<size_t>(p) << digit) + ((w >> (32 + p * digit)) & mask)];
+    }
+  }
+  std::vector<uint64_t> tmp(words->size());
+  for (int p = 0; p < passes; ++p) {
+    uint32_t* c = &count[static_cast<size_t>(p) << digit];
+    uint32_t sum = 0;
+    for (uint64_t b = 0; b <= mask; ++b) {
+      const uint32_t n = c[b];
+      c[b] = sum;
+      sum += n;
+    }
+    for (uint64_t w : *words) tmp[c[(w >> (32 + p * digit)) & mask]++] = w;
+    words->swap(tmp);
+  }
+}
+
+// Cell keys of the finite points, sorted, with the points' input indices alongside.
+void sorted_keys(const PointCloud& cloud, const GridFrame& f, std::vector<uint64_t>* keys,
+                 std::vector<uint32_t>* order) {
+  keys->resize(cloud.size());
+  size_t n = 0;
+  for (size_t i = 0; i < cloud.size(); ++i) {
+    if (!is_finite(cloud[i])) continue;
+    (*keys)[n++] = f.total_bits <= 32 ? cell_key(f, cloud[i]) << 32 | i : cell_key(f, cloud[i]);
+  }
+  keys->resize(n);
+  order->resize(n);
+  if (f.total_bits > 32) {  // does not fit beside the index: the general sort
+    for (size_t i = 0, s = 0; i < cloud.size(); ++i) {
+      if (is_finite(cloud[i])) (*order)[s++] = static_cast<uint32_t>(i);
+    }
+    radix_sort(*keys, *order, f.total_bits);
+    return;
+  }
+  sort_packed(keys, f.total_bits);
+  for (size_t s = 0; s < n; ++s) {
+    (*order)[s] = static_cast<uint32_t>((*keys)[s]);
+    (*keys)[s] >>= 32;
+  }
+}
+
+// Same cells (and GridFrame::fit() errors) as CellGrid::build(), without its per-point
+// cell index and lookup table, which clustering does not need.
+Cells bucket_points(const PointCloud& cloud, float cell_m) {
+  const GridFrame f = GridFrame::fit(cloud, cell_m, false, "SegmenterConfig.cluster_distance_m");
+  Cells g;
+  std::vector<uint64_t> keys;
+  sorted_keys(cloud, f, &keys, &g.order);
+  const uint64_t z_mask = (uint64_t{1} << f.bits[2]) - 1;
+  g.xyz.resize(keys.size());
+  for (size_t s = 0; s < keys.size(); ++s) {
+    const Point& pt = cloud[g.order[s]];
+    g.xyz.x[s] = pt.x;
+    g.xyz.y[s] = pt.y;
+    g.xyz.z[s] = pt.z;
+    if (s > 0 && keys[s] == keys[s - 1]) continue;
+    if (s == 0 || (keys[s] >> f.bits[2]) != (keys[s - 1] >> f.bits[2])) {
+      g.column.push_back(keys[s] >> f.bits[2]);
+      g.column_begin.push_back(static_cast<uint32_t>(g.z.size()));
+    }
+    g.begin.push_back(static_cast<uint32_t>(s));
+    g.z.push_back(static_cast<uint32_t>(keys[s] & z_mask));
+  }
+  g.begin.push_back(static_cast<uint32_t>(keys.size()));
+  g.column_begin.push_back(static_cast<uint32_t>(g.z.size()));
+  g.y_bits = f.bits[1];
+  g.x_extent = f.extent[0];
+  g.y_extent = f.extent[1];
+  return g;
+}
+
+// Calls fn(c, nb) for the cells c of [a0, a1) and nb of [b0, b1) (two columns) whose z
+// differs by at most one.
 template <typename Fn>
-void for_each_forward_pair(const CellGrid& grid, Fn&& fn) {
-  static constexpr int64_t kColumns[5][2] = {{0, 0}, {0, 1}, {1, -1}, {1, 0}, {1, 1}};
-  const GridFrame& f = grid.frame;
-  const uint32_t n = static_cast<uint32_t>(grid.cell_count());
-  uint32_t cursor[5] = {0, 0, 0, 0, 0};
-  for (uint32_t c = 0; c < n; ++c) {
-    int64_t x, y, z;
-    grid.cell_coords(c, &x, &y, &z);
-    for (int col = 0; col < 5; ++col) {
-      const int64_t nx = x + kColumns[col][0], ny = y + kColumns[col][1];
-      const int64_t z0 = col == 0 ? z + 1 : std::max<int64_t>(z - 1, 0);
-      const int64_t z1 = std::min<int64_t>(z + 1, f.extent[2] - 1);
-      if (!f.inside(nx, ny, 0) || z0 > z1) continue;
-      const uint64_t first = f.pack(nx, ny, z0), last = f.pack(nx, ny, z1);
-      uint32_t& k = cursor[col];
-      while (k < n && grid.cell_key[k] < first) ++k;
-      for (uint32_t j = k; j < n && grid.cell_key[j] <= last; ++j) fn(c, j);
+void for_each_pair_in_columns(const std::vector<uint32_t>& z, uint32_t a0, uint32_t a1,
+                              uint32_t b0, uint32_t b1, Fn& fn) {
+  for (uint32_t c = a0; c < a1 && b0 < b1; ++c) {
+    while (b0 < b1 && z[b0] + 1 < z[c]) ++b0;
+    for (uint32_t j = b0; j < b1 && z[j] <= z[c] + 1; ++j) fn(c, j);
+  }
+}
+
+// Calls fn(c, nb) once per pair of adjacent occupied cells (26-neighbourhood): within a
+// column, and towards the 4 "forward" columns (0, +1), (+1, -1), (+1, 0), (+1, +1). Columns
+// are sorted by key, so one cursor per direction only moves forward.
+template <typename Fn>
+void for_each_adjacent_pair(const Cells& g, Fn&& fn) {
+  static constexpr int64_t kForward[4][2] = {{0, 1}, {1, -1}, {1, 0}, {1, 1}};
+  const uint64_t y_mask = (uint64_t{1} << g.y_bits) - 1;
+  const size_t columns = g.column.size();
+  size_t cursor[4] = {0, 0, 0, 0};
+  for (size_t a = 0; a < columns; ++a) {
+    const uint32_t c0 = g.column_begin[a], c1 = g.column_begin[a + 1];
+    for (uint32_t c = c0; c + 1 < c1; ++c) {
+      if (g.z[c + 1] == g.z[c] + 1) fn(c, c + 1);
+    }
+    const int64_t x = static_cast<int64_t>(g.column[a] >> g.y_bits);
+    const int64_t y = static_cast<int64_t>(g.column[a] & y_mask);
+    for (int d = 0; d < 4; ++d) {
+      const int64_t nx = x + kForward[d][0], ny = y + kForward[d][1];
+      if (nx >= g.x_extent || ny < 0 || ny >= g.y_extent) continue;
+      const uint64_t target = (static_cast<uint64_t>(nx) << g.y_bits) | static_cast<uint64_t>(ny);
+      size_t& b = cursor[d];
+      while (b < columns && g.column[b] < target) ++b;
+      if (b == columns || g.column[b] != target) continue;
+      for_each_pair_in_columns(g.z, c0, c1, g.column_begin[b], g.column_begin[b + 1], fn);
     }
   }
 }
 
+// Links the points of a cell of at most 32 points through adjacency bit masks, without
+// union-find traffic: each point's parent becomes the first point of its component (the
+// component's smallest slot, as unite() would choose). Returns true if that is one component.
+bool link_small_cell(const Positions& p, uint32_t a0, uint32_t n, __m128 d2, UnionFind* uf) {
+  uint32_t adj[32];  // the distance is symmetric, so row i is also column i
+  for (uint32_t i = 0; i < n; ++i) {
+    adj[i] = 0;
+    for (uint32_t j = 0; j < n; j += 4) {
+      adj[i] |= static_cast<uint32_t>(close_mask4(p, a0 + i, a0 + j, a0 + n, d2)) << j;
+    }
+  }
+  const uint32_t all = n == 32 ? ~0u : (1u << n) - 1;
+  uint32_t left = all;
+  while (left) {
+    const int seed = __builtin_ctz(left);
+    uint32_t comp = adj[seed], done = 1u << seed;
+    while (comp != done) {
+      const int k = __builtin_ctz(comp & ~done);
+      done |= 1u << k;
+      comp |= adj[k];
+    }
+    for (uint32_t m = comp; m; m &= m - 1) uf->set_parent(a0 + __builtin_ctz(m), a0 + seed);
+    if (comp == all) return true;
+    left &= ~comp;
+  }
+  return false;
+}
+
+// Bounding box of a cell's points as (x, y, z, 0) lanes.
+struct CellBox {
+  __m128 lo, hi;
+};
+
+// Squared distance between two boxes, summed in close_mask4()'s order: no pair of points of the
+// boxes is closer, also after rounding, so a pair skipped on this is never a close pair.
+float box_gap2(const CellBox& a, const CellBox& b) {
+  const __m128 gap = _mm_max_ps(_mm_max_ps(_mm_sub_ps(b.lo, a.hi), _mm_sub_ps(a.lo, b.hi)),
+                                _mm_setzero_ps());
+  const __m128 sq = _mm_mul_ps(gap, gap);
+  const __m128 yz = _mm_add_ss(_mm_shuffle_ps(sq, sq, 1), _mm_shuffle_ps(sq, sq, 2));
+  return _mm_cvtss_f32(_mm_add_ss(sq, yz));
+}
+
+// Links the points within each cell; returns the cells' boxes and whether each cell is
+// already one component.
+std::vector<CellBox> link_cells(const Cells& g, float d2, UnionFind* uf,
+                                std::vector<uint8_t>* connected) {
+  const __m128 d2x4 = _mm_set1_ps(d2);
+  const uint32_t cells = static_cast<uint32_t>(g.z.size());
+  std::vector<CellBox> boxes(cells);
+  connected->resize(cells);
+  const Positions& p = g.xyz;
+  for (uint32_t c = 0; c < cells; ++c) {
+    const uint32_t a0 = g.begin[c], a1 = g.begin[c + 1];
+    __m128 lo = _mm_set_ps(0.f, p.z[a0], p.y[a0], p.x[a0]), hi = lo;
+    for (uint32_t i = a0 + 1; i < a1; ++i) {
+      const __m128 v = _mm_set_ps(0.f, p.z[i], p.y[i], p.x[i]);
+      lo = _mm_min_ps(lo, v);
+      hi = _mm_max_ps(hi, v);
+    }
+    boxes[c] = {lo, hi};
+    if (a1 - a0 <= 32) {
+      (*connected)[c] = link_small_cell(p, a0, a1 - a0, d2x4, uf);
+      continue;
+    }
+    link_ranges(p, a0, a1, a0, a1, d2x4, true, uf);
+    bool one = true;
+    for (uint32_t i = a0 + 1; i < a1; ++i) one = one && uf->find(i) == uf->find(a0);
+    (*connected)[c] = one;
+  }
+  return boxes;
+}
 }  // namespace
 
 Clusters collect_clusters(const std::vector<uint32_t>& order, std::vector<uint32_t> root,
@@ -133,38 +337,25 @@ Clusters collect_clusters(const std::vector<uint32_t>& order, std::vector<uint32
 // cells already lie in one component, and otherwise searched only until the first close pair.
 // Nearly all pairs of a surface take the shortcut.
 Clusters euclidean_clusters(const PointCloud& cloud, const SegmenterConfig& config) {
-  const CellGrid grid = CellGrid::build(cloud, config.cluster_distance_m, false,
-                                        "SegmenterConfig.cluster_distance_m", false);
-  std::vector<Eigen::Vector3f> xyz(grid.order.size());
-  for (size_t k = 0; k < grid.order.size(); ++k) xyz[k] = cloud[grid.order[k]].xyz();
+  const Cells g = bucket_points(cloud, config.cluster_distance_m);
   const float d2 = config.cluster_distance_m * config.cluster_distance_m;
-  UnionFind uf(grid.order.size());
-  std::vector<CellInfo> info(grid.cell_count());
-  for (uint32_t c = 0; c < grid.cell_count(); ++c) {
-    const uint32_t a0 = grid.begin[c], a1 = grid.begin[c + 1];
-    link_ranges(xyz, a0, a1, a0, a1, d2, true, &uf);
-    CellInfo& ci = info[c];
-    ci.lo = ci.hi = xyz[a0];
-    ci.connected = true;
-    for (uint32_t i = a0 + 1; i < a1; ++i) {
-      ci.lo = ci.lo.cwiseMin(xyz[i]);
-      ci.hi = ci.hi.cwiseMax(xyz[i]);
-      ci.connected = ci.connected && uf.find(i) == uf.find(a0);
-    }
-  }
-  for_each_forward_pair(grid, [&](uint32_t c, uint32_t nb) {
-    if (box_gap2(info[c], info[nb]) > d2) return;
-    const uint32_t a0 = grid.begin[c], a1 = grid.begin[c + 1];
-    const uint32_t b0 = grid.begin[nb], b1 = grid.begin[nb + 1];
-    if (info[c].connected && info[nb].connected) {
-      if (uf.find(a0) != uf.find(b0) && any_close(xyz, a0, a1, b0, b1, d2)) uf.unite(a0, b0);
+  UnionFind uf(g.order.size());
+  std::vector<uint8_t> connected;
+  const std::vector<CellBox> boxes = link_cells(g, d2, &uf, &connected);
+  const __m128 d2x4 = _mm_set1_ps(d2);
+  for_each_adjacent_pair(g, [&](uint32_t c, uint32_t nb) {
+    if (box_gap2(boxes[c], boxes[nb]) > d2) return;
+    const uint32_t a0 = g.begin[c], a1 = g.begin[c + 1];
+    const uint32_t b0 = g.begin[nb], b1 = g.begin[nb + 1];
+    if (connected[c] && connected[nb]) {
+      if (uf.find(a0) != uf.find(b0) && any_close(g.xyz, a0, a1, b0, b1, d2x4)) uf.unite(a0, b0);
     } else {
-      link_ranges(xyz, a0, a1, b0, b1, d2, false, &uf);
+      link_ranges(g.xyz, a0, a1, b0, b1, d2x4, false, &uf);
     }
   });
-  std::vector<uint32_t> root(grid.order.size());
+  std::vector<uint32_t> root(g.order.size());
   for (uint32_t k = 0; k < root.size(); ++k) root[k] = uf.find(k);
-  return collect_clusters(grid.order, std::move(root), config);
+  return collect_clusters(g.order, std::move(root), config);
 }
 
 }  // namespace detail
