@@ -1,10 +1,9 @@
-#define CELLF 1.0f
 // Pose refinement after geometric verification (beyond the paper: the centroid-based transform
 // of III-E is accurate to decimetres; ICP on the matched segments' points brings it to
 // centimetres). Point-to-plane ICP (Chen & Medioni 1992) with normals estimated lazily from
 // the target points' neighbourhoods, or point-to-point ICP (Besl & McKay 1992, Umeyama step).
 //
-// Neighbour queries run on a hashed grid of cubic cells (half the correspondence distance)
+// Neighbour queries run on a hashed grid of cubic cells (the correspondence distance wide)
 // instead of a k-d tree: every query is bounded (correspondences beyond max_correspondence_m
 // are dropped anyway), so a query looks at its own cell and only those neighbour cells whose
 // box is closer than the best point so far. Results are exact nearest neighbours, as with the
@@ -290,8 +289,9 @@ RefineResult refine_alignment(const PointCloud& query_points, const PointCloud& 
     return std::lexicographical_compare(ka.data(), ka.data() + 3, kb.data(), kb.data() + 3);
   });
 
-  // Cells of half the correspondence distance: a query rarely needs more than its own cell.
-  const TargetGrid grid(target_points, CELLF * config.max_correspondence_m);
+  // Cells as wide as the correspondence distance: a query rarely needs more than its own cell
+  // and the nearest faces of its neighbours.
+  const TargetGrid grid(target_points, config.max_correspondence_m);
   // Normal neighbourhoods are capped at twice the correspondence distance (a k-d tree had no
   // cap; neighbours that far apart do not describe one surface anyway).
   LazyNormals normals(grid, 2.f * config.max_correspondence_m);
