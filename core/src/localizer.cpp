@@ -51,6 +51,32 @@ Ranked rank_by_support(const std::vector<PoseHypothesis>& hypotheses, const Segm
   return r;
 }
 
+// The hypotheses that put the sensor within the prior's radius (all of them without a prior).
+std::vector<PoseHypothesis> within_prior(std::vector<PoseHypothesis> hypotheses, const Eigen::Vector3f& sensor,
+                                         const PosePrior* prior) {
+  if (!prior) return hypotheses;
+  const Eigen::Vector3d s = sensor.cast<double>(), expected = prior->T_map_query * s;
+  std::vector<PoseHypothesis> kept;
+  for (PoseHypothesis& h : hypotheses)
+    if ((h.T_target_query * s - expected).norm() <= prior->radius_m) kept.push_back(std::move(h));
+  return kept;
+}
+
+// The matches whose map segment lies where the prior, within its tolerances, puts the query
+// segment (all of them without a prior).
+Matches gate_matches(Matches matches, const Segments& query, const Segments& targets, const Eigen::Vector3f& sensor,
+                     const PosePrior* prior) {
+  if (!prior) return matches;
+  const double angle = prior->max_rotation_deg * M_PI / 180.0;
+  Matches kept;
+  for (const Match& m : matches) {
+    const Eigen::Vector3d q = query[m.query].centroid.cast<double>();
+    const double slack = prior->radius_m + angle * (q - sensor.cast<double>()).norm();
+    if ((prior->T_map_query * q - targets[m.target].centroid.cast<double>()).norm() <= slack) kept.push_back(m);
+  }
+  return kept;
+}
+
 // Points of the segments on one side of the matches, for the refinement.
 PointCloud gather(const Segments& segments, const Matches& inliers, bool query_side) {
   PointCloud out;
@@ -150,7 +176,10 @@ Localizer::Localizer(const LocalizerConfig& config, Segments targets,
 }
 
 LocalizationResult Localizer::localize(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
-                                       CloudKind kind) const {
+                                       CloudKind kind, const PosePrior* prior) const {
+  if (prior && !(prior->radius_m > 0.0 && std::isfinite(prior->radius_m) && prior->T_map_query.matrix().allFinite() &&
+                 prior->max_rotation_deg >= 0.0 && std::isfinite(prior->max_rotation_deg)))
+    throw std::invalid_argument("PosePrior needs a finite pose, a finite radius_m > 0 and max_rotation_deg >= 0");
   LocalizationResult r;
   Stopwatch total, clock;
   auto finish = [&](LocalizationResult res) {
@@ -172,19 +201,25 @@ LocalizationResult Localizer::localize(const PointCloud& cloud, const Eigen::Vec
   const Matches candidates = retrieve_candidates(r.query, index_, config_.retrieval);
   r.candidates = candidates.size();
   r.timings.retrieve_ms = clock.lap();
-  const Matches matches = filter_matches(r.query, targets_, candidates, config_.matcher, classifier_.get());
+  const Matches matches = gate_matches(filter_matches(r.query, targets_, candidates, config_.matcher, classifier_.get()),
+                                       r.query, targets_, sensor_position, prior);
   r.matches = matches.size();
   r.timings.classify_ms = clock.lap();
   // Paper III-E: geometric verification on the segment centroids.
-  const VerificationResult v = verify_matches(r.query, targets_, matches, config_.verification);
+  VerificationResult v = verify_matches(r.query, targets_, matches, config_.verification);
   r.timings.verify_ms = clock.lap();
   if (!v.found)
     return finish(refuse(std::move(r), "no geometrically consistent set of " + std::to_string(min_inliers) +
                                            " matches among " + std::to_string(matches.size())));
+  const size_t verified = v.hypotheses.size();
+  const std::vector<PoseHypothesis> hypotheses = within_prior(std::move(v.hypotheses), sensor_position, prior);
+  if (hypotheses.empty())
+    return finish(refuse(std::move(r), "none of the " + std::to_string(verified) + " verified poses is within " +
+                                           std::to_string(prior->radius_m) + " m of the prior"));
   // Beyond the paper: the hypothesis that explains most of the query wins, if unambiguous.
-  const Ranked ranked = rank_by_support(v.hypotheses, r.query, centroids_, config_.support_radius_m);
-  const PoseHypothesis& best = v.hypotheses[ranked.best];
-  r.hypotheses = v.hypotheses.size();
+  const Ranked ranked = rank_by_support(hypotheses, r.query, centroids_, config_.support_radius_m);
+  const PoseHypothesis& best = hypotheses[ranked.best];
+  r.hypotheses = hypotheses.size();
   r.support = ranked.support.count();
   r.runner_up_support = ranked.runner_up;
   r.inliers = best.inliers;

@@ -1,6 +1,7 @@
 #include "segmatch/core/loop_closure.h"
 
 #include "loop_map.h"
+#include "segmatch/core/voxel_accumulator.h"
 
 #include <chrono>
 #include <cmath>
@@ -38,14 +39,18 @@ void LoopDetectorConfig::validate() const {
   if (min_inliers < 1) throw std::invalid_argument("min_inliers must be >= 1");
   if (!(min_confidence >= 0.0f && min_confidence <= 1.0f)) throw std::invalid_argument("min_confidence must be in 0..1");
   if (rebuild_every_local_clouds < 1) throw std::invalid_argument("rebuild_every_local_clouds must be >= 1");
+  if (!(max_drift_m >= 0.0) || !std::isfinite(max_drift_m))
+    throw std::invalid_argument("max_drift_m must be finite and >= 0 (0: no bound)");
+  if (!(max_drift_deg >= 0.0) || !std::isfinite(max_drift_deg)) throw std::invalid_argument("max_drift_deg must be finite and >= 0");
 }
 
 struct LoopDetector::Impl {
   LoopDetectorConfig config;
   std::shared_ptr<const RandomForestMatcher> classifier;
   // Two local clouds restarted alternately every local_cloud_history_m, half of it apart; the
-  // query uses the one with the longer history.
-  LocalCloud local[2];
+  // query uses the one with the longer history. Voxelized incrementally (as the map builder):
+  // voxel_filter of a crop of millions of raw points was a third of a step's time.
+  VoxelAccumulator local[2];
   double local_started_at[2];
   LoopSegmentMap map;
   // Localizer over the eligible (old, frozen) segments and, per target, its map index.
@@ -68,14 +73,15 @@ struct LoopDetector::Impl {
   Impl(const LoopDetectorConfig& c, std::shared_ptr<const RandomForestMatcher> rf)
       : config(c),
         classifier(std::move(rf)),
-        local{LocalCloud(c.local_cloud), LocalCloud(c.local_cloud)},
+        local{VoxelAccumulator(c.local_cloud, c.localizer.segmentation.voxel),
+              VoxelAccumulator(c.local_cloud, c.localizer.segmentation.voxel)},
         local_started_at{0.0, -0.5 * c.local_cloud_history_m},
         map(c.segment_map, RecencyWindow{c.exclude_recent_distance_m, c.exclude_recent_time_s}),
         next_cloud_at(c.local_cloud_every_m) {}
 
   void advance_odometer(const Pose3d& T_odom_sensor, size_t frame);
   void accumulate(const PointCloud& scan, const Pose3d& T_odom_sensor);
-  LocalCloud& longest_history() { return local_started_at[0] <= local_started_at[1] ? local[0] : local[1]; }
+  VoxelAccumulator& longest_history() { return local_started_at[0] <= local_started_at[1] ? local[0] : local[1]; }
   bool rebuild_if_due(const Sighting& now);
   void match(const PointCloud& cloud, const Pose3d& T_odom_sensor, const Sighting& now, LoopStep& step,
              Segments& query);
@@ -154,12 +160,15 @@ void LoopDetector::Impl::match(const PointCloud& cloud, const Pose3d& T_odom_sen
                                LoopStep& step, Segments& query) {
   const Eigen::Vector3f sensor = T_odom_sensor.translation().cast<float>();
   if (!localizer) {
-    query = extract_segments(cloud, sensor, config.localizer.segmentation, nullptr, &step.timings);
+    query = extract_segments_from_voxels(cloud, sensor, config.localizer.segmentation, nullptr, &step.timings);
     step.reason = "no target segments older than the recent-past window yet";
     return;
   }
   step.eligible_targets = localizer->targets().size();
-  LocalizationResult r = localizer->localize(cloud, sensor);
+  // The map is in the odometry frame: the odometry's own guess is the identity.
+  const PosePrior odometry{Pose3d::Identity(), config.max_drift_m, config.max_drift_deg};
+  LocalizationResult r =
+      localizer->localize(cloud, sensor, CloudKind::kVoxelized, config.max_drift_m > 0.0 ? &odometry : nullptr);
   step.timings = r.timings;
   query = std::move(r.query);
   if (!r.localized()) {
@@ -202,9 +211,12 @@ LoopStep LoopDetector::process(const PointCloud& scan_points_sensor, const Pose3
   const Sighting now{frame_index, d.odometer, time_s};
   d.cloud_poses[frame_index] = {T_odom_sensor, d.odometer, time_s};
   step.rebuilt_index = d.rebuild_if_due(now);
+  const auto crop_start = std::chrono::steady_clock::now();
   const PointCloud cloud = d.longest_history().crop(T_odom_sensor);
+  const double crop_ms = ms_since(crop_start);
   Segments query;
   d.match(cloud, T_odom_sensor, now, step, query);
+  step.timings.voxel_ms = crop_ms;  // the voxel grid's share: the incremental grid's crop
   step.query_segments = query.size();
   d.map.add(std::move(query), now);
   step.map_segments = d.map.size();

@@ -31,6 +31,7 @@ struct Options {
   long first = 0, last = -1;
   bool l2 = false, no_eval = false, verbose = false;
   double every_m = 0, exclude_m = -1, exclude_s = -1, radius_m = 0, history_m = 0, min_confidence = -1;
+  double max_drift_m = 0, max_drift_deg = -1;
   int min_inliers = 0;
   loop::EvalConfig eval;
 };
@@ -56,6 +57,8 @@ LoopDetectorConfig detector_config(const Options& o) {
   if (o.exclude_s >= 0) c.exclude_recent_time_s = o.exclude_s;
   if (o.min_inliers > 0) c.min_inliers = o.min_inliers;
   if (o.min_confidence >= 0) c.min_confidence = static_cast<float>(o.min_confidence);
+  c.max_drift_m = o.max_drift_m;
+  if (o.max_drift_deg >= 0) c.max_drift_deg = o.max_drift_deg;
   if (o.history_m > 0) c.local_cloud_history_m = o.history_m;
   else c.local_cloud_history_m = std::min(c.local_cloud_history_m, c.exclude_recent_distance_m);
   return c;
@@ -184,6 +187,10 @@ int main(int argc, char** argv) {
   app.add_option("--history-m", o.history_m, "query local cloud holds at most this much driving (default min(120, exclude))");
   app.add_option("--min-confidence", o.min_confidence, "minimum confidence of a loop, 0..1 (default 0.6)");
   app.add_option("--min-inliers", o.min_inliers, "minimum inlier matches of a loop (default 5)");
+  app.add_option("--max-drift-m", o.max_drift_m, "accept loops only within this of the odometry's own position (default 0: anywhere)")
+      ->check(CLI::Range(0.0, 1e6));
+  app.add_option("--max-drift-deg", o.max_drift_deg, "with --max-drift-m: heading drift bound, degrees (default 5)")
+      ->check(CLI::Range(0.0, 180.0));
   app.add_option("--revisit-radius-m", o.eval.revisit_radius_m, "evaluation: a revisit is within this of an earlier pose");
   app.add_option("--revisit-gap-m", o.eval.min_revisit_gap_m,
                  "evaluation: ... driven at least this long before (default: --exclude-m)");

@@ -125,6 +125,32 @@ TEST(Localizer, RefusesAStreetOfIdenticalPolesAsAmbiguous) {
   EXPECT_GE(r.hypotheses, 2u);
 }
 
+// A prior (GNSS, odometry) settles what the support cannot: the poles are 6 m apart, and
+// within 2 m of the true pose only the true shift remains. A prior 20 m off the street leaves
+// no pose at all.
+TEST(Localizer, APriorSettlesTheStreetOfIdenticalPoles) {
+  const LocalizerConfig c = config();
+  const PointCloud map_cloud = pole_street(false);
+  const Localizer localizer(c, extract_segments(map_cloud, Eigen::Vector3f(25, 0, 2), c.segmentation));
+  const Pose3d T = T_query_map();
+  const PointCloud query = transformed(map_cloud, T);
+  const Eigen::Vector3f sensor = T.cast<float>() * Eigen::Vector3f(25, 0, 2);
+  PosePrior prior;
+  prior.T_map_query = T.inverse();
+  prior.T_map_query.translation() += Eigen::Vector3d(0.8, -0.5, 0.0);  // a fair guess
+  prior.radius_m = 2.0;
+  prior.max_rotation_deg = 3.0;
+  const LocalizationResult r = localizer.localize(query, sensor, CloudKind::kRaw, &prior);
+  ASSERT_TRUE(r.localized()) << r.reason;
+  const Pose3d error = r.T_map_query * T;
+  EXPECT_LT(error.translation().norm(), 0.05);
+  EXPECT_EQ(r.hypotheses, 1u);
+  prior.T_map_query.translation() += Eigen::Vector3d(0.0, 20.0, 0.0);  // beside the street
+  EXPECT_FALSE(localizer.localize(query, sensor, CloudKind::kRaw, &prior).localized());
+  prior.radius_m = 0.0;
+  EXPECT_THROW(localizer.localize(query, sensor, CloudKind::kRaw, &prior), std::invalid_argument);
+}
+
 TEST(Localizer, RefusesEmptyAndNonFiniteQueriesWithAReason) {
   const LocalizerConfig c = config();
   const Localizer localizer(c, extract_segments(pole_street(true), Eigen::Vector3f::Zero(), c.segmentation));

@@ -94,6 +94,7 @@ struct SimLoop {
   double prefix_m = 0;  // the route up to here comes back nowhere
   double loop_m = 0;    // odometer at which the route is back at its start
   std::unique_ptr<LoopDetector> exact, drift, prefix;
+  std::unique_ptr<LoopDetector> drift_bounded;  // drifted odometry, loops searched within 6 m of it
   Poses drift_poses;
 };
 
@@ -117,6 +118,9 @@ std::unique_ptr<SimLoop> simulate_loop(uint64_t seed) {
   s->exact = std::make_unique<LoopDetector>(config);
   s->drift = std::make_unique<LoopDetector>(config);
   s->prefix = std::make_unique<LoopDetector>(config);
+  LoopDetectorConfig bounded = config;
+  bounded.max_drift_m = 6.0;  // above the 2-3 m the odometry drifts by the revisit
+  s->drift_bounded = std::make_unique<LoopDetector>(bounded);
 
   const RayCaster caster(world.scene());
   const std::vector<size_t> frames = metre_frames(t);
@@ -135,6 +139,7 @@ std::unique_ptr<SimLoop> simulate_loop(uint64_t seed) {
       const size_t f = frames[b + k];
       s->exact->process(scans[k].points, t.T_world_lidar[f], f, t.times_s[f]);
       s->drift->process(scans[k].points, s->drift_poses[f], f, t.times_s[f]);
+      s->drift_bounded->process(scans[k].points, s->drift_poses[f], f, t.times_s[f]);
       if (t.odometer_m[f] <= s->prefix_m) s->prefix->process(scans[k].points, t.T_world_lidar[f], f, t.times_s[f]);
     }
   }
@@ -185,6 +190,12 @@ TEST(LoopDetectorConfig, RejectsBadValues) {
   c.exclude_recent_time_s = 30;
   EXPECT_NO_THROW(c.validate());
   c = l2_config();
+  c.max_drift_m = -1;
+  EXPECT_THROW(c.validate(), std::invalid_argument);
+  c.max_drift_m = 5;
+  c.max_drift_deg = NAN;
+  EXPECT_THROW(c.validate(), std::invalid_argument);
+  c = l2_config();
   c.localizer.matcher.type = MatcherType::kRandomForest;
   EXPECT_THROW(LoopDetector{c}, std::invalid_argument) << "a random forest needs a classifier";
 }
@@ -217,6 +228,18 @@ TEST_F(SimulatedLoop, DriftedOdometryGivesTheTrueCorrection) {
   EXPECT_GE(accurate, 2u);
   for (const LoopClosure& l : sim_->drift->loops())
     EXPECT_GT(l.T_oldodom_odom.translation().norm(), 1.0) << "the correction undoes metres of drift";
+}
+
+// A drift bound above the real drift keeps every loop (the true place is within it).
+TEST_F(SimulatedLoop, ADriftBoundAboveTheDriftKeepsTheLoops) {
+  const auto& free = sim_->drift->loops();
+  const auto& bounded = sim_->drift_bounded->loops();
+  ASSERT_EQ(bounded.size(), free.size());
+  for (size_t i = 0; i < free.size(); ++i) {
+    EXPECT_EQ(bounded[i].query_frame, free[i].query_frame);
+    EXPECT_EQ(bounded[i].match_frame, free[i].match_frame);
+    EXPECT_LE(bounded[i].T_oldodom_odom.translation().norm(), 6.0);
+  }
 }
 
 TEST_F(SimulatedLoop, RouteWithoutRevisitYieldsNoLoop) {

@@ -96,6 +96,20 @@ Segments extract_segments_from_voxels(const PointCloud& voxels, const Eigen::Vec
 // What a query cloud holds: raw points, or one point per occupied voxel of the map's grid.
 enum class CloudKind { kRaw, kVoxelized };
 
+// Where the query is believed to be (e.g. GNSS, the last fix plus odometry, or odometry itself
+// for loop closure): verified hypotheses that put the sensor farther than radius_m from where
+// T_map_query puts it are discarded before ranking, so the prior also settles a choice between
+// distant look-alike places that the support alone would refuse as ambiguous.
+// Candidate matches are gated too, before verification (so that the few matches of the right
+// place are not outnumbered by a larger cluster elsewhere): a query segment at distance d from
+// the sensor may only match a map segment within radius_m + d * max_rotation_deg (in radians)
+// of where the prior puts it.
+struct PosePrior {
+  Pose3d T_map_query = Pose3d::Identity();
+  double radius_m = 10.0;         // search radius around the prior's sensor position (finite, > 0)
+  double max_rotation_deg = 10.0; // heading error the prior may have (finite, >= 0)
+};
+
 class Localizer {
  public:
   // targets: the map's described segments (map frame). classifier: required for the random
@@ -107,8 +121,9 @@ class Localizer {
   // that frame. Thread-safe: many queries may run at once.
   // With CloudKind::kVoxelized the cloud is already voxel_filter'ed with
   // config().segmentation.voxel (e.g. a vehicle's VoxelAccumulator): the voxel grid is skipped.
+  // With a prior, only poses within prior->radius_m of it are considered (see PosePrior).
   LocalizationResult localize(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
-                              CloudKind kind = CloudKind::kRaw) const;
+                              CloudKind kind = CloudKind::kRaw, const PosePrior* prior = nullptr) const;
 
   const Segments& targets() const { return targets_; }
   const LocalizerConfig& config() const { return config_; }

@@ -24,6 +24,9 @@
 // A consequence is that the set of eligible targets only grows, so the target index can be
 // rebuilt lazily (rebuild_every_local_clouds) without ever matching a recent segment.
 //
+// Scans are accumulated in two VoxelAccumulators (the local cloud, voxelized incrementally),
+// so a step crops voxels rather than millions of raw points.
+//
 // Knows no files: the caller feeds scans and odometry poses.
 #pragma once
 
@@ -72,6 +75,15 @@ struct LoopDetectorConfig {
   // the refinement's fitness) of at least this. On the simulated loop test a false loop had 5
   // inliers, support 12, confidence 0.45; true loops had 0.8 and above.
   float min_confidence = 0.6f;
+  // Beyond the paper: if > 0, a loop is only accepted within this distance of where the
+  // odometry itself puts the vehicle (the correction T_oldodom_odom moves the sensor by at most
+  // this much). Odometry drift over one loop is bounded in practice (LiDAR-inertial odometry:
+  // well under 1 % of the distance; LIO-SAM searches loop candidates within 15 m), and a bound
+  // lets the true place win over distant look-alikes that the support alone calls ambiguous
+  // (small scenes of few segments). 0: anywhere in the map. max_drift_deg bounds the heading
+  // drift the same way (used only with max_drift_m > 0; see PosePrior).
+  double max_drift_m = 0.0;
+  double max_drift_deg = 5.0;
   // The target index (k-d tree, centroid grid) is rebuilt at most once per this many local
   // clouds, and only when segments aged out of the recent-past window since the last build.
   // Segments that aged out since then are not matched until the next build.
@@ -106,7 +118,7 @@ struct LoopStep {
   size_t eligible_targets = 0;     // target segments matched against (older than the window)
   size_t map_segments = 0;         // all map segments after insertion
   bool rebuilt_index = false;
-  ModuleTimings timings;           // of the localization (voxel .. refine)
+  ModuleTimings timings;           // of the localization (voxel = the incremental voxel grid's crop .. refine)
   double total_ms = 0;             // whole call, including local cloud crop, index rebuild, insertion
 };
 
