@@ -35,19 +35,25 @@ void Client::send_raw(const std::vector<uint8_t>& bytes) {
 }
 
 void Client::rethrow_pending_error() {
-  uint8_t header[kHeaderBytes];
-  const Clock::time_point deadline = deadline_after(0.5);
   Frame f;
-  if (read_exact(socket_.fd(), header, kHeaderBytes, deadline) != IoResult::kOk) return;
-  if (decode_header(header, kHeaderBytes, options_.limits, f.header) != DecodeStatus::kOk) return;
-  if (f.header.type != static_cast<uint16_t>(MessageType::kError)) return;
-  f.payload.resize(f.header.payload_bytes);
-  if (read_exact(socket_.fd(), f.payload.data(), f.payload.size(), deadline) != IoResult::kOk) return;
+  const FrameRead r = try_read_frame(deadline_after(0.5), f);
+  if (r.io != IoResult::kOk || r.header != DecodeStatus::kOk || f.header.type != static_cast<uint16_t>(MessageType::kError))
+    return;
   ErrorReply e;
   if (decode(f.payload.data(), f.payload.size(), options_.limits, e) != DecodeStatus::kOk) return;
   broken_ = true;
   socket_.close();
   throw_server_error(e);
+}
+
+Client::FrameRead Client::try_read_frame(Clock::time_point deadline, Frame& f) {
+  FrameRead r;
+  uint8_t header[kHeaderBytes];
+  if ((r.io = read_exact(socket_.fd(), header, kHeaderBytes, deadline)) != IoResult::kOk) return r;
+  if ((r.header = decode_header(header, kHeaderBytes, options_.limits, f.header)) != DecodeStatus::kOk) return r;
+  f.payload.resize(f.header.payload_bytes);
+  r.io = read_exact(socket_.fd(), f.payload.data(), f.payload.size(), deadline);
+  return r;
 }
 
 void Client::throw_server_error(const ErrorReply& e) const {
@@ -57,18 +63,11 @@ void Client::throw_server_error(const ErrorReply& e) const {
 
 Frame Client::read_frame() {
   if (broken_) throw ClientError(ClientError::Kind::kClosed, where_ + ": connection is closed");
-  const Clock::time_point deadline = deadline_after(options_.reply_timeout_s);
-  uint8_t header[kHeaderBytes];
-  auto check = [&](IoResult r) {
-    if (r == IoResult::kTimeout) fail(ClientError::Kind::kTimeout, "no reply within " + std::to_string(options_.reply_timeout_s) + " s");
-    if (r != IoResult::kOk) fail(ClientError::Kind::kClosed, std::string("reading the reply: ") + to_string(r));
-  };
-  check(read_exact(socket_.fd(), header, kHeaderBytes, deadline));
   Frame f;
-  const DecodeStatus s = decode_header(header, kHeaderBytes, options_.limits, f.header);
-  if (s != DecodeStatus::kOk) fail(ClientError::Kind::kProtocol, std::string("bad reply header: ") + to_string(s));
-  f.payload.resize(f.header.payload_bytes);
-  check(read_exact(socket_.fd(), f.payload.data(), f.payload.size(), deadline));
+  const FrameRead r = try_read_frame(deadline_after(options_.reply_timeout_s), f);
+  if (r.io == IoResult::kTimeout) fail(ClientError::Kind::kTimeout, "no reply within " + std::to_string(options_.reply_timeout_s) + " s");
+  if (r.io != IoResult::kOk) fail(ClientError::Kind::kClosed, std::string("reading the reply: ") + to_string(r.io));
+  if (r.header != DecodeStatus::kOk) fail(ClientError::Kind::kProtocol, std::string("bad reply header: ") + to_string(r.header));
   return f;
 }
 

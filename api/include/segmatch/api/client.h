@@ -67,6 +67,13 @@ class Client {
   [[noreturn]] void fail(ClientError::Kind kind, const std::string& message);
   // After a failed send: throws the server's ERROR if one is waiting; returns otherwise.
   void rethrow_pending_error();
+  // One whole frame by `deadline`, without throwing: the I/O outcome, and kOk or why the
+  // header is bad (`frame` is complete only when both are kOk).
+  struct FrameRead {
+    IoResult io = IoResult::kOk;
+    DecodeStatus header = DecodeStatus::kOk;
+  };
+  FrameRead try_read_frame(Clock::time_point deadline, Frame& frame);
   [[noreturn]] void throw_server_error(const ErrorReply& e) const;
 
   ClientOptions options_;
