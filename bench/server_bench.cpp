@@ -1,7 +1,8 @@
 // segmatch-bench-server: throughput and latency of segmatch-server over loopback with 1, 4
 // and 16 concurrent clients, on a simulated tiny city mapped by its first traversal and
-// queried with the revisit's full local clouds (HDL-64E, 60 m cylinder). L2 matcher (no
-// classifier to train). Prints figures, asserts nothing.
+// queried with the revisit's voxelized local clouds (HDL-64E, 60 m cylinder), with the shipped
+// RF model (or --l2). Closed loop (clients back to back) and open loop (a fleet on fixed
+// schedules at an offered rate). Prints figures, asserts nothing.
 #include <segmatch/api/client.h>
 #include <segmatch/core/preprocess.h>
 #include <segmatch/io/pipeline_config.h>
@@ -109,6 +110,48 @@ void run_level(uint16_t port, const std::vector<api::LocalizeRequest>& requests,
               percentile(latencies_ms, 0.99), localized.load(), errors.load());
 }
 
+// A fleet: `clients` vehicles together asking `rate` queries/s, each on its own fixed schedule
+// (a vehicle queries every few metres whether or not the previous answer was quick), for
+// `seconds`. Latency counts from the scheduled send time, so a queue that builds up shows in
+// it (no coordinated omission); a vehicle whose answer is late sends its next query at once.
+void run_fleet(uint16_t port, const std::vector<api::LocalizeRequest>& requests, int clients, double rate,
+               double seconds) {
+  std::mutex mutex;
+  std::vector<double> latencies_ms;
+  std::atomic<int> errors{0}, localized{0};
+  const auto start = Clock::now() + std::chrono::milliseconds(200);
+  const std::chrono::duration<double> period(clients / rate);
+  const int per_client = std::max(1, static_cast<int>(seconds * rate / clients));
+  std::vector<std::thread> threads;
+  for (int c = 0; c < clients; ++c)
+    threads.emplace_back([&, c] {
+      api::ClientOptions options;
+      options.reply_timeout_s = 600;
+      api::Client client("127.0.0.1", port, options);
+      const auto first = start + std::chrono::duration_cast<Clock::duration>(period * (static_cast<double>(c) / clients));
+      for (int i = 0; i < per_client; ++i) {
+        const auto due = first + std::chrono::duration_cast<Clock::duration>(period * static_cast<double>(i));
+        std::this_thread::sleep_until(due);
+        const api::LocalizeRequest& r = requests[(c * 7 + i) % requests.size()];
+        try {
+          localized += client.localize(r).status == api::LocalizeStatus::kLocalized;
+        } catch (const std::exception&) {
+          ++errors;
+          continue;
+        }
+        const double ms = std::chrono::duration<double, std::milli>(Clock::now() - due).count();
+        std::lock_guard<std::mutex> lock(mutex);
+        latencies_ms.push_back(ms);
+      }
+    });
+  for (std::thread& t : threads) t.join();
+  const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
+  std::printf("%2d vehicles at %.1f queries/s offered: %4zu queries in %6.1f s = %6.2f queries/s, latency p50 %7.1f ms "
+              "p99 %7.1f ms, %d localized, %d errors\n",
+              clients, rate, latencies_ms.size(), elapsed, latencies_ms.size() / elapsed, percentile(latencies_ms, 0.5),
+              percentile(latencies_ms, 0.99), localized.load(), errors.load());
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -117,6 +160,8 @@ int main(int argc, char** argv) {
   uint64_t seed = 3;
   double subsample_leaf_m = 0.0;
   bool raw = false, l2 = false;
+  double fleet_rate = 20.0, fleet_seconds = 30.0;
+  int fleet_vehicles = 16;
   std::string model_path = SEGMATCH_SOURCE_DIR "/maps/models/default-rf.yml";
   app.add_option("--workers", workers, "server localization threads (0 = cores)");
   app.add_option("--queries", queries_per_level, "queries per level, spread over its clients (at least one each)");
@@ -125,6 +170,9 @@ int main(int argc, char** argv) {
   app.add_flag("--raw", raw, "send raw points (60-230 MB clouds: use with --subsample-leaf-m 0.1) instead of voxels");
   app.add_flag("--l2", l2, "L2 matcher on eigen features instead of the shipped RF_eigen+shapes");
   app.add_option("--model", model_path, "RF model file");
+  app.add_option("--fleet-rate", fleet_rate, "fleet level: queries/s offered in total (0: skip the level)");
+  app.add_option("--fleet-vehicles", fleet_vehicles, "fleet level: vehicles, each on its own schedule")->check(CLI::Range(1, 256));
+  app.add_option("--fleet-seconds", fleet_seconds, "fleet level: duration")->check(CLI::Range(1.0, 3600.0));
   CLI11_PARSE(app, argc, argv);
   io::PipelineConfig config = io::pipeline_preset("kitti-hdl64");
   std::string model;
@@ -158,7 +206,12 @@ int main(int argc, char** argv) {
   server::Server server(sc, server::load_map(map_path));
   server.start();
   std::printf("server on %s, %u cores\n", server.address().c_str(), std::thread::hardware_concurrency());
+  std::printf("closed loop: each client sends its next query as soon as it has the answer\n");
   for (int clients : {1, 4, 16}) run_level(server.port(), requests, clients, std::max(1, queries_per_level / clients));
+  if (fleet_rate > 0.0) {
+    std::printf("open loop: a fleet querying on fixed schedules, latency from the scheduled send time\n");
+    run_fleet(server.port(), requests, fleet_vehicles, fleet_rate, fleet_seconds);
+  }
   server.stop();
   std::filesystem::remove(map_path);
   return 0;
