@@ -7,7 +7,9 @@
 #include "match_features.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <memory>
 #include <stdexcept>
 #include <string>
 
@@ -44,9 +46,10 @@ std::vector<float> pair_features(const Segment& query, const Segment& target, bo
   check_descriptors(target, use_shapes, "target");
   std::vector<float> out(pair_feature_count(use_shapes));
   if (use_shapes) {
-    const detail::ScaledEsf q = detail::scaled_esf(query.esf);
-    const detail::ScaledEsf t = detail::scaled_esf(target.esf);
-    detail::write_pair_features(query.eigen, target.eigen, &q, &t, out.data());
+    std::array<float, kEsfBins> q, t;
+    detail::scale_esf(query.esf, q.data());
+    detail::scale_esf(target.esf, t.data());
+    detail::write_pair_features(query.eigen, target.eigen, q.data(), t.data(), out.data());
   } else {
     detail::write_pair_features(query.eigen, target.eigen, nullptr, nullptr, out.data());
   }
@@ -79,44 +82,80 @@ Matches filter_rf(const Segments& queries, const Segments& targets, const Matche
                   const MatcherConfig& config, const RandomForestMatcher& rf) {
   const bool shapes = config.use_shapes;
   const int dim = pair_feature_count(shapes);
-  // Histogram scales of every involved ESF, once rather than once per pair.
-  std::vector<int> q_slot, t_slot;
-  std::vector<detail::ScaledEsf> q_esf, t_esf;
-  if (shapes) {
-    q_slot.assign(queries.size(), -1);
-    t_slot.assign(targets.size(), -1);
-  }
-  std::vector<float> rows(candidates.size() * dim);
-  for (size_t i = 0; i < candidates.size(); ++i) {
-    const Match& m = candidates[i];
+  // Checks first, in candidate order (the first bad candidate or descriptor throws), giving
+  // every involved segment a slot for its scaled ESF (scale_esf), computed once per call.
+  std::vector<int> q_slot(shapes ? queries.size() : 0, -1), t_slot(shapes ? targets.size() : 0, -1);
+  std::vector<const Segment*> q_segs, t_segs;
+  for (const Match& m : candidates) {
     check_candidate(m, queries, targets);
     const Segment& q = queries[m.query];
     const Segment& t = targets[m.target];
-    const detail::ScaledEsf* eq = nullptr;
-    const detail::ScaledEsf* et = nullptr;
-    if (shapes) {
-      if (q_slot[m.query] < 0) {
-        check_descriptors(q, true, "query");
-        q_slot[m.query] = static_cast<int>(q_esf.size());
-        q_esf.push_back(detail::scaled_esf(q.esf));
-      }
-      if (t_slot[m.target] < 0) {
-        check_descriptors(t, true, "target");
-        t_slot[m.target] = static_cast<int>(t_esf.size());
-        t_esf.push_back(detail::scaled_esf(t.esf));
-      }
-      eq = &q_esf[q_slot[m.query]];
-      et = &t_esf[t_slot[m.target]];
-    } else {
+    if (!shapes) {
       check_descriptors(q, false, "query");
       check_descriptors(t, false, "target");
+      continue;
     }
-    detail::write_pair_features(q.eigen, t.eigen, eq, et, rows.data() + i * dim);
+    if (q_slot[m.query] < 0) {
+      check_descriptors(q, true, "query");
+      q_slot[m.query] = static_cast<int>(q_segs.size());
+      q_segs.push_back(&q);
+    }
+    if (t_slot[m.target] < 0) {
+      check_descriptors(t, true, "target");
+      t_slot[m.target] = static_cast<int>(t_segs.size());
+      t_segs.push_back(&t);
+    }
   }
-  const std::vector<float> p = rf.probabilities(rows);
+  std::unique_ptr<float[]> q_esf(new float[q_segs.size() * kEsfBins]);
+  std::unique_ptr<float[]> t_esf(new float[t_segs.size() * kEsfBins]);
+  for (size_t i = 0; i < q_segs.size(); ++i) detail::scale_esf(q_segs[i]->esf, &q_esf[i * kEsfBins]);
+  for (size_t i = 0; i < t_segs.size(); ++i) detail::scale_esf(t_segs[i]->esf, &t_esf[i * kEsfBins]);
+  // Candidates go through in blocks: the block's pair rows stay in cache between being written
+  // and the forest's walks, and the forest skips the rows that cannot reach the threshold.
+  // Within a block the intersections are computed target by target (chains of the block's
+  // rows per target slot, through `next`): the block's few query ESFs stay in L1 and each
+  // target ESF (2.5 KB; ~250 of them per map neighbourhood overflow L2) is read once per
+  // block rather than once per pair. The order in which rows are written does not change them.
+  constexpr size_t kBlock = 1024;
+  std::vector<float> rows(kBlock * dim), p(kBlock);
+  std::vector<size_t> t_block(t_segs.size(), candidates.size());  // block a slot was last used in
+  std::vector<int> t_head(t_segs.size(), -1), next(kBlock), touched;
   Matches out;
-  for (size_t i = 0; i < candidates.size(); ++i) {
-    if (p[i] >= config.rf_threshold) out.push_back({candidates[i].query, candidates[i].target, p[i]});
+  for (size_t b0 = 0; b0 < candidates.size(); b0 += kBlock) {
+    const size_t nb = std::min(kBlock, candidates.size() - b0);
+    if (!shapes) {
+      for (size_t j = 0; j < nb; ++j) {
+        const Match& m = candidates[b0 + j];
+        detail::write_pair_features(queries[m.query].eigen, targets[m.target].eigen, nullptr, nullptr,
+                                    rows.data() + j * dim);
+      }
+    } else {
+      touched.clear();
+      for (size_t j = 0; j < nb; ++j) {
+        const int ts = t_slot[candidates[b0 + j].target];
+        if (t_block[ts] != b0) {
+          t_block[ts] = b0;
+          t_head[ts] = -1;
+          touched.push_back(ts);
+        }
+        next[j] = t_head[ts];
+        t_head[ts] = static_cast<int>(j);
+      }
+      for (int ts : touched) {
+        const float* et = &t_esf[static_cast<size_t>(ts) * kEsfBins];
+        for (int j = t_head[ts]; j >= 0; j = next[j]) {
+          const Match& m = candidates[b0 + j];
+          const float* eq = &q_esf[static_cast<size_t>(q_slot[m.query]) * kEsfBins];
+          detail::write_pair_features(queries[m.query].eigen, targets[m.target].eigen, eq, et,
+                                      rows.data() + j * dim);
+        }
+      }
+    }
+    rf.probabilities_at_least(rows.data(), nb, config.rf_threshold, p.data());
+    for (size_t j = 0; j < nb; ++j) {
+      const Match& m = candidates[b0 + j];
+      if (p[j] >= config.rf_threshold) out.push_back({m.query, m.target, p[j]});
+    }
   }
   return out;
 }

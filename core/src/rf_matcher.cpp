@@ -133,6 +133,71 @@ struct RandomForestMatcher::Impl {
       for (int l = 0; l < lanes; ++l) out[i0 + l] = sum[l];
     }
   }
+
+  // Adds the "same" votes of trees [t0, t1) to count[idx[j]] for the rows idx[0..m) of `rows`
+  // (complete trees only): the walk of votes() above over a subset of the rows and trees.
+  void add_votes(const float* rows, int dim, const int* idx, int m, int t0, int t1, int* count) const {
+    const size_t splits = (size_t{1} << depth) - 1;
+    constexpr int kLanes = 8;
+    for (int i0 = 0; i0 < m; i0 += kLanes) {
+      const int lanes = std::min(kLanes, m - i0);
+      const float* x[kLanes];
+      for (int l = 0; l < kLanes; ++l) x[l] = rows + static_cast<size_t>(idx[i0 + std::min(l, lanes - 1)]) * dim;
+      int sum[kLanes] = {};
+      for (int t = t0; t < t1; ++t) {
+        const int* var = split_var.data() + t * splits;
+        const float* c = split_c.data() + t * splits;
+        size_t at[kLanes] = {};
+        for (int d = 0; d < depth; ++d)
+          for (int l = 0; l < kLanes; ++l) at[l] = 2 * at[l] + 1 + !(x[l][var[at[l]]] <= c[at[l]]);
+        const uint8_t* leaf = leaf_same.data() + t * (splits + 1) - splits;
+        for (int l = 0; l < kLanes; ++l) sum[l] += leaf[at[l]];
+      }
+      for (int l = 0; l < lanes; ++l) count[idx[i0 + l]] += sum[l];
+    }
+  }
+
+  // Votes of rows [0, n) into out[0..n) where they reach `needed` (<= trees), -1 elsewhere.
+  // A row is dropped as soon as more than trees - needed trees voted "different": its final
+  // count could no longer reach `needed`. No row can be dropped before trees - needed + 1
+  // trees, so all rows walk those first, then the survivors walk kChunk trees at a time.
+  void votes_at_least(const float* rows, int dim, int n, int needed, int* out) const {
+    const int trees = static_cast<int>(roots.size());
+    const int max_no = trees - needed;
+    if (depth < 0) {
+      for (int i = 0; i < n; ++i) {
+        const float* x = rows + static_cast<size_t>(i) * dim;
+        int same = 0, no = 0;
+        for (int r : roots) {
+          const FlatNode* nd = &nodes[r];
+          while (nd->var >= 0) nd = &nodes[x[nd->var] <= nd->c ? nd->left : nd->right];
+          same += nd->same;
+          no += 1 - nd->same;
+          if (no > max_no) break;
+        }
+        out[i] = no > max_no ? -1 : same;
+      }
+      return;
+    }
+    constexpr int kChunk = 2;  // of 1, 2 and 4 trees per round, 2 measured fastest
+    std::vector<int> idx(n);
+    for (int i = 0; i < n; ++i) {
+      idx[i] = i;
+      out[i] = 0;
+    }
+    int m = n;
+    for (int t = 0; t < trees && m > 0;) {
+      const int t1 = std::min(trees, t == 0 ? max_no + 1 : t + kChunk);
+      add_votes(rows, dim, idx.data(), m, t, t1, out);
+      t = t1;
+      int kept = 0;
+      for (int j = 0; j < m; ++j) {
+        if (t - out[idx[j]] <= max_no) idx[kept++] = idx[j];
+        else out[idx[j]] = -1;
+      }
+      m = kept;
+    }
+  }
 };
 
 RandomForestMatcher::RandomForestMatcher(const MatcherConfig& config)
@@ -223,6 +288,25 @@ std::vector<float> RandomForestMatcher::probabilities(const std::vector<float>& 
   impl_->votes(rows.data(), dim, n, votes.data());
   for (int i = 0; i < n; ++i) out[i] = static_cast<float>(votes[i]) / trees;
   return out;
+}
+
+void RandomForestMatcher::probabilities_at_least(const float* rows, size_t n, float min_probability,
+                                                 float* out) const {
+  if (!trained()) throw std::logic_error("RandomForestMatcher: not trained");
+  if (n > static_cast<size_t>(std::numeric_limits<int>::max()))
+    throw std::invalid_argument("RandomForestMatcher::probabilities_at_least: too many rows");
+  if (n == 0) return;
+  const int dim = pair_feature_count(impl_->config.use_shapes);
+  const int trees = static_cast<int>(impl_->roots.size());
+  const float ftrees = static_cast<float>(trees);
+  // Fewest votes whose probability (computed as in probabilities()) is >= min_probability;
+  // the probability only grows with the votes. trees + 1: no count reaches it.
+  int needed = trees + 1;
+  for (int v = trees; v >= 0 && static_cast<float>(v) / ftrees >= min_probability; --v) needed = v;
+  std::vector<int> votes(n);
+  if (needed > trees) std::fill(votes.begin(), votes.end(), -1);
+  else impl_->votes_at_least(rows, dim, static_cast<int>(n), needed, votes.data());
+  for (size_t i = 0; i < n; ++i) out[i] = votes[i] < 0 ? -1.f : static_cast<float>(votes[i]) / ftrees;
 }
 
 std::vector<float> RandomForestMatcher::opencv_probabilities(const std::vector<float>& rows) const {

@@ -146,6 +146,17 @@ TEST(MatcherTest, RandomForestClassifiesHeldOutPairs) {
         rows.insert(rows.end(), f.begin(), f.end());
       }
     EXPECT_EQ(rf.probabilities(rows), rf.opencv_probabilities(rows));
+    // The early-exit walk is exact wherever the probability reaches its floor, and says
+    // "below" (-1) everywhere else, for any floor.
+    const std::vector<float> all = rf.probabilities(rows);
+    std::vector<float> at_least(all.size());
+    for (float floor : {0.f, 0.3f, 0.5f, 0.72f, 0.81f, 1.f}) {
+      rf.probabilities_at_least(rows.data(), all.size(), floor, at_least.data());
+      for (size_t r = 0; r < all.size(); ++r) {
+        if (all[r] >= floor) EXPECT_EQ(at_least[r], all[r]) << "row " << r << " floor " << floor;
+        else EXPECT_EQ(at_least[r], -1.f) << "row " << r << " floor " << floor;
+      }
+    }
 
     // Through filter_matches: true pairs pass the paper's threshold, few wrong ones do.
     MatcherConfig config = rf.config();

@@ -5,6 +5,7 @@
 
 #include "segmatch/core/segment.h"
 
+#include <cstddef>
 #include <memory>
 #include <string>
 #include <utility>
@@ -64,6 +65,11 @@ class RandomForestMatcher {
   float probability(const Segment& query, const Segment& target) const;
   // Batch version over pair feature rows (rows x pair_feature_count(config().use_shapes)).
   std::vector<float> probabilities(const std::vector<float>& rows) const;
+  // Same over the n rows at `rows` into out[0..n), but exact only where the probability is
+  // >= min_probability; the other rows get -1. The forest stops walking a row once too many
+  // trees voted "different" for it to reach min_probability (filter_matches() keeps only
+  // probabilities >= rf_threshold, and most candidates are far below it).
+  void probabilities_at_least(const float* rows, size_t n, float min_probability, float* out) const;
   // Same through OpenCV's own RTrees::getVotes (slow; reference for tests).
   std::vector<float> opencv_probabilities(const std::vector<float>& rows) const;
 
