@@ -24,6 +24,11 @@
 #include <limits>
 #include <stdexcept>
 
+#if defined(__SSE2__) || defined(_M_X64)
+#include <emmintrin.h>
+#define SEGMATCH_REFINE_SSE2 1
+#endif
+
 namespace segmatch {
 
 void RefineConfig::validate() const {
@@ -40,33 +45,50 @@ constexpr size_t kNormalNeighbours = 10;
 constexpr size_t kMinCorrespondences = 6;
 
 // Target points bucketed in cubic cells, stored in cell order as separate coordinate arrays
-// (the scans over a cell's points are the inner loops of the refinement).
+// (the scans over a cell's points are the inner loops of the refinement). The cells are those
+// of detail::CellGrid::build (sorted by key, points in input order), built here without its
+// per-point cell index, which nothing here reads.
 class TargetGrid {
  public:
-  TargetGrid(const PointCloud& target, float cell_m)
-      : grid_(detail::CellGrid::build(target, cell_m, false, "RefineConfig.max_correspondence_m")),
-        cell_(cell_m) {
+  TargetGrid(const PointCloud& target, float cell_m) : cell_(cell_m) {
+    frame_ = detail::GridFrame::fit(target, cell_m, false, "RefineConfig.max_correspondence_m");
+    std::vector<uint64_t> keys, cell_key;
+    std::vector<uint32_t> order;
+    keys.reserve(target.size()), order.reserve(target.size());
+    for (size_t i = 0; i < target.size(); ++i) {
+      if (!detail::is_finite(target[i])) continue;
+      keys.push_back(key_of(target[i]));
+      order.push_back(static_cast<uint32_t>(i));
+    }
+    detail::radix_sort(keys, order, frame_.total_bits);
+    for (size_t i = 0; i < keys.size(); ++i) {
+      if (i > 0 && keys[i] == keys[i - 1]) continue;
+      cell_key.push_back(keys[i]);
+      begin_.push_back(static_cast<uint32_t>(i));
+    }
+    begin_.push_back(static_cast<uint32_t>(keys.size()));
     // Occupancy filter: one bit per hashed cell key, ~8 bits per occupied cell (12 % false
     // positives). Early ICP iterations probe many empty cells around points that are still
     // decimetres off the surface; the bit spares most of them a hash-map probe.
-    while ((size_t{1} << filter_bits_) < 8 * grid_.cell_count()) ++filter_bits_;
+    while ((size_t{1} << filter_bits_) < 8 * cell_key.size()) ++filter_bits_;
     filter_.assign((size_t{1} << filter_bits_) / 64 + 1, 0);
-    for (uint64_t key : grid_.cell_key) {
-      const uint64_t b = filter_bit(key);
+    lookup_.reserve(cell_key.size());
+    for (size_t c = 0; c < cell_key.size(); ++c) {
+      lookup_.insert(cell_key[c], uint32_t(c));
+      const uint64_t b = filter_bit(cell_key[c]);
       filter_[b >> 6] |= uint64_t{1} << (b & 63);
     }
-    for (std::vector<float>* v : {&x_, &y_, &z_}) v->reserve(grid_.order.size());
-    for (uint32_t i : grid_.order) {
-      x_.push_back(target[i].x);
-      y_.push_back(target[i].y);
-      z_.push_back(target[i].z);
+    for (std::vector<float>* v : {&x_, &y_, &z_}) v->resize(order.size());
+    for (size_t k = 0; k < order.size(); ++k) {
+      x_[k] = target[order[k]].x, y_[k] = target[order[k]].y, z_[k] = target[order[k]].z;
     }
   }
   size_t size() const { return x_.size(); }
   Eigen::Vector3f point(uint32_t k) const { return {x_[k], y_[k], z_[k]}; }
 
   // Nearest point within sqrt(max2) of p (a point at exactly that distance counts): its index
-  // (cell order) and squared distance, or false.
+  // (cell order) and squared distance, or false. Ties go to the smaller index, so the result
+  // does not depend on the order in which distances are compared.
   // `hint` (a point index or kMissing) seeds the bound: the previous iteration's neighbour
   // is usually still within a hair of the nearest, so few cells remain to be looked at.
   bool nearest(const Eigen::Vector3f& p, float max2, uint32_t hint, uint32_t* index,
@@ -77,11 +99,29 @@ class TargetGrid {
       best = sq_dist(hint, p);
       best_k = hint;
     }
-    search(p, max2, [&] { return best; }, [&](uint32_t b, uint32_t e) {
-      for (uint32_t k = b; k < e; ++k) {
-        const float d = sq_dist(k, p);
-        if (d < best || (d == best && k < best_k)) best = d, best_k = k;
+    const auto consider = [&](float d, uint32_t k) {
+      if (d < best || (d == best && k < best_k)) best = d, best_k = k;
+    };
+    search(p, max2, [&] { return best; }, [&](uint32_t k, uint32_t e) {
+#ifdef SEGMATCH_REFINE_SSE2
+      if (e - k >= 4) {  // four lanes, each keeping its first minimum (indices ascend in a lane)
+        __m128 lane_d = sq_dist4(k, p);
+        __m128i lane_k = _mm_setr_epi32(int(k), int(k + 1), int(k + 2), int(k + 3)), idx = lane_k;
+        for (k += 4; k + 4 <= e; k += 4) {
+          idx = _mm_add_epi32(idx, _mm_set1_epi32(4));
+          const __m128 d = sq_dist4(k, p);
+          const __m128i less = _mm_castps_si128(_mm_cmplt_ps(d, lane_d));
+          lane_d = _mm_min_ps(d, lane_d);
+          lane_k = _mm_or_si128(_mm_and_si128(less, idx), _mm_andnot_si128(less, lane_k));
+        }
+        alignas(16) float ld[4];
+        alignas(16) uint32_t lk[4];
+        _mm_store_ps(ld, lane_d);
+        _mm_store_si128(reinterpret_cast<__m128i*>(lk), lane_k);
+        for (int l = 0; l < 4; ++l) consider(ld[l], lk[l]);
       }
+#endif
+      for (; k < e; ++k) consider(sq_dist(k, p), k);
     });
     *index = best_k;
     *d2 = best;
@@ -111,6 +151,16 @@ class TargetGrid {
     const float dx = x_[k] - p.x(), dy = y_[k] - p.y(), dz = z_[k] - p.z();
     return dx * dx + dy * dy + dz * dz;
   }
+#ifdef SEGMATCH_REFINE_SSE2
+  // sq_dist of points k..k+3: the same operations in the same order, so the same bits
+  // (no FMA contraction without -march).
+  __m128 sq_dist4(uint32_t k, const Eigen::Vector3f& p) const {
+    const __m128 dx = _mm_sub_ps(_mm_loadu_ps(&x_[k]), _mm_set1_ps(p.x()));
+    const __m128 dy = _mm_sub_ps(_mm_loadu_ps(&y_[k]), _mm_set1_ps(p.y()));
+    const __m128 dz = _mm_sub_ps(_mm_loadu_ps(&z_[k]), _mm_set1_ps(p.z()));
+    return _mm_add_ps(_mm_add_ps(_mm_mul_ps(dx, dx), _mm_mul_ps(dy, dy)), _mm_mul_ps(dz, dz));
+  }
+#endif
 
   // Calls scan(begin, end) with the point range of every cell whose box is within
   // sqrt(bound2()) of p (bound2() may shrink meanwhile; it starts at most at max2). The own
@@ -118,7 +168,7 @@ class TargetGrid {
   // distance lies in (previous reach, reach], the reach doubling until it covers the bound.
   template <typename Bound, typename Scan>
   void search(const Eigen::Vector3f& p, float max2, Bound&& bound2, Scan&& scan) const {
-    const detail::GridFrame& f = grid_.frame;
+    const detail::GridFrame& f = frame_;
     int64_t c[3];
     float lo_gap[3], hi_gap[3];  // distance from p to the low / high face of its cell
     for (int a = 0; a < 3; ++a) {
@@ -130,6 +180,11 @@ class TargetGrid {
       hi_gap[a] = cell_ - lo_gap[a];
     }
     scan_cell(c[0], c[1], c[2], scan);
+    // Every other cell lies at least one face gap away (float sums of non-negative terms are
+    // no smaller than any term), so the loop below would skip them all.
+    float face2 = cell_ * cell_;
+    for (int a = 0; a < 3; ++a) face2 = std::min({face2, lo_gap[a] * lo_gap[a], hi_gap[a] * hi_gap[a]});
+    if (bound2() < face2) return;
     float prev2 = -1.f;
     for (float reach = cell_;; reach *= 2.f) {
       const float r2 = std::min(reach * reach, max2);
@@ -155,15 +210,26 @@ class TargetGrid {
     }
   }
 
+  // frame_.key_of(p) with an inline floor (std::floor is a libm call without SSE4.1; the
+  // quotient is the same, so the key is too).
+  uint64_t key_of(const Point& p) const {
+    const auto coord = [&](float v, int axis) {
+      const double q = double(v) / frame_.cell_m;
+      const int64_t t = static_cast<int64_t>(q);
+      return t - (double(t) > q) - frame_.base[axis];
+    };
+    return frame_.pack(coord(p.x, 0), coord(p.y, 1), coord(p.z, 2));
+  }
+
   uint64_t filter_bit(uint64_t key) const { return (key * 0x9E3779B97F4A7C15ull) >> (64 - filter_bits_); }
 
   template <typename Scan>
   void scan_cell(int64_t x, int64_t y, int64_t z, Scan& scan) const {
-    if (!grid_.frame.inside(x, y, z)) return;
-    const uint64_t key = grid_.frame.pack(x, y, z), b = filter_bit(key);
+    if (!frame_.inside(x, y, z)) return;
+    const uint64_t key = frame_.pack(x, y, z), b = filter_bit(key);
     if (!((filter_[b >> 6] >> (b & 63)) & 1)) return;
-    const uint32_t cell = grid_.lookup.find(key);
-    if (cell != detail::FlatHashMap::kMissing) scan(grid_.begin[cell], grid_.begin[cell + 1]);
+    const uint32_t cell = lookup_.find(key);
+    if (cell != detail::FlatHashMap::kMissing) scan(begin_[cell], begin_[cell + 1]);
   }
 
   // Squared distance along one axis from p to the cell `d` cells away.
@@ -172,7 +238,9 @@ class TargetGrid {
     return g * g;
   }
 
-  detail::CellGrid grid_;
+  detail::GridFrame frame_;
+  detail::FlatHashMap lookup_;   // cell key -> cell index
+  std::vector<uint32_t> begin_;  // cell c holds points begin_[c] .. begin_[c + 1] - 1
   float cell_;
   int filter_bits_ = 6;
   std::vector<uint64_t> filter_;
@@ -184,19 +252,20 @@ class TargetGrid {
 class LazyNormals {
  public:
   LazyNormals(const TargetGrid& grid, float radius)
-      : grid_(grid), radius2_(radius * radius), state_(grid.size(), 0), normals_(grid.size()) {}
+      : grid_(grid), radius2_(radius * radius), slot_(grid.size(), kUnknown) {}
   // Returns false if the neighbourhood is degenerate (fewer than 3 points).
   bool get(uint32_t i, Eigen::Vector3f& n) {
-    if (state_[i] == 0) compute(i);
-    n = normals_[i];
-    return state_[i] == 1;
+    if (slot_[i] == kUnknown) compute(i);
+    if (slot_[i] == kDegenerate) return false;
+    n = normals_[slot_[i]];
+    return true;
   }
 
  private:
   void compute(uint32_t i) {
     idx_.clear();
     grid_.knn(grid_.point(i), kNormalNeighbours, radius2_, &idx_);
-    state_[i] = 2;
+    slot_[i] = kDegenerate;
     if (idx_.size() < 3) return;
     std::sort(idx_.begin(), idx_.end());  // summation order independent of the search
     Eigen::Vector3f mean = Eigen::Vector3f::Zero();
@@ -209,13 +278,18 @@ class LazyNormals {
     }
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3f> solver;
     solver.computeDirect(cov);
-    normals_[i] = solver.eigenvectors().col(0).normalized();  // smallest eigenvalue
-    if (normals_[i].allFinite()) state_[i] = 1;
+    const Eigen::Vector3f n = solver.eigenvectors().col(0).normalized();  // smallest eigenvalue
+    if (!n.allFinite()) return;
+    slot_[i] = static_cast<uint32_t>(normals_.size());
+    normals_.push_back(n);
   }
 
   const TargetGrid& grid_;
   float radius2_;
-  std::vector<uint8_t> state_;  // 0 unknown, 1 valid, 2 degenerate
+  // Per target point: index into normals_, or one of the two markers. Only a few thousand
+  // points ever need a normal; a dense array of them would be mostly untouched pages.
+  static constexpr uint32_t kUnknown = 0xFFFFFFFF, kDegenerate = 0xFFFFFFFE;
+  std::vector<uint32_t> slot_;
   std::vector<Eigen::Vector3f> normals_;
   std::vector<uint32_t> idx_;
 };
