@@ -59,15 +59,20 @@ DecodeStatus first_error(std::initializer_list<DecodeStatus> statuses) {
   return DecodeStatus::kOk;
 }
 
+// Points are 4 packed floats, the wire layout of stride 4: read in one go.
+static_assert(sizeof(Point) == 4 * sizeof(float), "Point must stay x y z intensity");
+
 DecodeStatus get_points(wire::Reader& r, uint32_t count, uint32_t stride, PointCloud& points) {
   points.resize(count);
-  for (uint32_t i = 0; i < count; ++i) {
-    Point& p = points[i];
-    p.x = r.f32(), p.y = r.f32(), p.z = r.f32();
-    p.intensity = stride == 4 ? r.f32() : 0.f;
+  if (stride == 4) {
+    if (count > 0 && !r.f32s(&points[0].x, 4 * static_cast<size_t>(count))) return DecodeStatus::kTruncated;
+  } else {
+    for (Point& p : points)
+      if (!r.f32s(&p.x, 3)) return DecodeStatus::kTruncated;
+  }
+  for (const Point& p : points)
     if (!(std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z) && std::isfinite(p.intensity)))
       return DecodeStatus::kNonFinite;
-  }
   return DecodeStatus::kOk;
 }
 
@@ -90,9 +95,10 @@ std::vector<uint8_t> encode(const LocalizeRequest& m) {
   w.f64(m.prior_radius_m);
   w.u32(static_cast<uint32_t>(m.points.size()));
   w.u32(stride);
-  for (const Point& p : m.points) {
-    w.f32(p.x), w.f32(p.y), w.f32(p.z);
-    if (stride == 4) w.f32(p.intensity);
+  if (stride == 4 && !m.points.empty()) {
+    w.f32s(&m.points[0].x, 4 * m.points.size());
+  } else {
+    for (const Point& p : m.points) w.f32s(&p.x, 3);
   }
   return detail::frame(type_of(m), w);
 }

@@ -34,12 +34,33 @@ class Writer {
   void raw(const uint8_t* data, size_t n) {
     if (n > 0) bytes_.insert(bytes_.end(), data, data + n);
   }
+  // n floats at once (point clouds: millions of them, one resize instead of 4 push_backs each).
+  void f32s(const float* v, size_t n) {
+    const size_t at = bytes_.size();
+    bytes_.resize(at + 4 * n);
+    write_f32s(bytes_.data() + at, v, n);
+  }
   void reserve(size_t n) { bytes_.reserve(n); }
   std::vector<uint8_t>& bytes() { return bytes_; }
 
+  // Little-endian floats: the wire layout is the memory layout on little-endian hosts.
+  static void write_f32s(uint8_t* out, const float* v, size_t n) {
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+    std::memcpy(out, v, 4 * n);
+#else
+    for (size_t k = 0; k < n; ++k) {
+      uint32_t b;
+      std::memcpy(&b, &v[k], 4);
+      for (int i = 0; i < 4; ++i) out[4 * k + i] = static_cast<uint8_t>(b >> (8 * i));
+    }
+#endif
+  }
+
  private:
   void put(uint64_t v, int n) {
-    for (int i = 0; i < n; ++i) bytes_.push_back(static_cast<uint8_t>(v >> (8 * i)));
+    const size_t at = bytes_.size();
+    bytes_.resize(at + static_cast<size_t>(n));
+    for (int i = 0; i < n; ++i) bytes_[at + static_cast<size_t>(i)] = static_cast<uint8_t>(v >> (8 * i));
   }
   std::vector<uint8_t> bytes_;
 };
@@ -82,6 +103,21 @@ class Reader {
   size_t remaining() const { return size_ - pos_; }
   bool failed() const { return failed_; }
   bool too_long() const { return too_long_; }
+
+  // n little-endian floats at once; false (and failed) if fewer bytes remain.
+  bool f32s(float* out, size_t n) {
+    if (failed_ || n > remaining() / 4) {
+      failed_ = true;
+      return false;
+    }
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+    std::memcpy(out, data_ + pos_, 4 * n);
+    pos_ += 4 * n;
+#else
+    for (size_t k = 0; k < n; ++k) out[k] = f32();
+#endif
+    return true;
+  }
 
  private:
   uint64_t get(size_t n) {
