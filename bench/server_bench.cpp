@@ -77,37 +77,50 @@ double percentile(std::vector<double> v, double p) {
   return v[std::min(v.size() - 1, static_cast<size_t>(p * (v.size() - 1) + 0.5))];
 }
 
-// `clients` connections, each sending `per_client` queries back to back.
-void run_level(uint16_t port, const std::vector<api::LocalizeRequest>& requests, int clients, int per_client) {
+// What the clients of one level saw: latencies of answered queries, errors, localizations.
+struct Tally {
   std::mutex mutex;
   std::vector<double> latencies_ms;
   std::atomic<int> errors{0}, localized{0};
+
+  // One query; its latency counts from `since` (the send, or the scheduled send time).
+  void query(api::Client& client, const api::LocalizeRequest& r, Clock::time_point since) {
+    try {
+      localized += client.localize(r).status == api::LocalizeStatus::kLocalized;
+    } catch (const std::exception&) {
+      ++errors;
+      return;
+    }
+    const double ms = std::chrono::duration<double, std::milli>(Clock::now() - since).count();
+    std::lock_guard<std::mutex> lock(mutex);
+    latencies_ms.push_back(ms);
+  }
+  void print(double seconds) const {
+    std::printf("%4zu queries in %6.1f s = %6.2f queries/s, latency p50 %7.1f ms p99 %7.1f ms, %d localized, %d errors\n",
+                latencies_ms.size(), seconds, latencies_ms.size() / seconds, percentile(latencies_ms, 0.5),
+                percentile(latencies_ms, 0.99), localized.load(), errors.load());
+  }
+};
+
+api::Client connect(uint16_t port) {
+  api::ClientOptions options;
+  options.reply_timeout_s = 600;
+  return api::Client("127.0.0.1", port, options);
+}
+
+// `clients` connections, each sending `per_client` queries back to back.
+void run_level(uint16_t port, const std::vector<api::LocalizeRequest>& requests, int clients, int per_client) {
+  Tally tally;
   const auto start = Clock::now();
   std::vector<std::thread> threads;
   for (int c = 0; c < clients; ++c)
     threads.emplace_back([&, c] {
-      api::ClientOptions options;
-      options.reply_timeout_s = 600;
-      api::Client client("127.0.0.1", port, options);
-      for (int i = 0; i < per_client; ++i) {
-        const api::LocalizeRequest& r = requests[(c * 7 + i) % requests.size()];
-        const auto t0 = Clock::now();
-        try {
-          localized += client.localize(r).status == api::LocalizeStatus::kLocalized;
-        } catch (const std::exception&) {
-          ++errors;
-          continue;
-        }
-        const double ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-        std::lock_guard<std::mutex> lock(mutex);
-        latencies_ms.push_back(ms);
-      }
+      api::Client client = connect(port);
+      for (int i = 0; i < per_client; ++i) tally.query(client, requests[(c * 7 + i) % requests.size()], Clock::now());
     });
   for (std::thread& t : threads) t.join();
-  const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
-  std::printf("%2d clients: %4zu queries in %6.1f s = %6.2f queries/s, latency p50 %7.1f ms p99 %7.1f ms, %d localized, %d errors\n",
-              clients, latencies_ms.size(), seconds, latencies_ms.size() / seconds, percentile(latencies_ms, 0.5),
-              percentile(latencies_ms, 0.99), localized.load(), errors.load());
+  std::printf("%2d clients: ", clients);
+  tally.print(std::chrono::duration<double>(Clock::now() - start).count());
 }
 
 // A fleet: `clients` vehicles together asking `rate` queries/s, each on its own fixed schedule
@@ -116,40 +129,24 @@ void run_level(uint16_t port, const std::vector<api::LocalizeRequest>& requests,
 // it (no coordinated omission); a vehicle whose answer is late sends its next query at once.
 void run_fleet(uint16_t port, const std::vector<api::LocalizeRequest>& requests, int clients, double rate,
                double seconds) {
-  std::mutex mutex;
-  std::vector<double> latencies_ms;
-  std::atomic<int> errors{0}, localized{0};
+  Tally tally;
   const auto start = Clock::now() + std::chrono::milliseconds(200);
   const std::chrono::duration<double> period(clients / rate);
   const int per_client = std::max(1, static_cast<int>(seconds * rate / clients));
   std::vector<std::thread> threads;
   for (int c = 0; c < clients; ++c)
     threads.emplace_back([&, c] {
-      api::ClientOptions options;
-      options.reply_timeout_s = 600;
-      api::Client client("127.0.0.1", port, options);
+      api::Client client = connect(port);
       const auto first = start + std::chrono::duration_cast<Clock::duration>(period * (static_cast<double>(c) / clients));
       for (int i = 0; i < per_client; ++i) {
         const auto due = first + std::chrono::duration_cast<Clock::duration>(period * static_cast<double>(i));
         std::this_thread::sleep_until(due);
-        const api::LocalizeRequest& r = requests[(c * 7 + i) % requests.size()];
-        try {
-          localized += client.localize(r).status == api::LocalizeStatus::kLocalized;
-        } catch (const std::exception&) {
-          ++errors;
-          continue;
-        }
-        const double ms = std::chrono::duration<double, std::milli>(Clock::now() - due).count();
-        std::lock_guard<std::mutex> lock(mutex);
-        latencies_ms.push_back(ms);
+        tally.query(client, requests[(c * 7 + i) % requests.size()], due);
       }
     });
   for (std::thread& t : threads) t.join();
-  const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
-  std::printf("%2d vehicles at %.1f queries/s offered: %4zu queries in %6.1f s = %6.2f queries/s, latency p50 %7.1f ms "
-              "p99 %7.1f ms, %d localized, %d errors\n",
-              clients, rate, latencies_ms.size(), elapsed, latencies_ms.size() / elapsed, percentile(latencies_ms, 0.5),
-              percentile(latencies_ms, 0.99), localized.load(), errors.load());
+  std::printf("%2d vehicles at %.1f queries/s offered: ", clients, rate);
+  tally.print(std::chrono::duration<double>(Clock::now() - start).count());
 }
 
 }  // namespace

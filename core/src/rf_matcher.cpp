@@ -7,6 +7,7 @@
 #include <opencv2/ml.hpp>
 
 #include <algorithm>
+#include <numeric>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -114,31 +115,17 @@ struct RandomForestMatcher::Impl {
       for (int i = 0; i < n; ++i) out[i] = votes(rows + static_cast<size_t>(i) * dim);
       return;
     }
-    const size_t splits = (size_t{1} << depth) - 1;
-    constexpr int kLanes = 8;  // independent walks in flight
-    for (int i0 = 0; i0 < n; i0 += kLanes) {
-      const int lanes = std::min(kLanes, n - i0);
-      const float* x[kLanes];
-      for (int l = 0; l < kLanes; ++l) x[l] = rows + static_cast<size_t>(i0 + std::min(l, lanes - 1)) * dim;
-      int sum[kLanes] = {};
-      for (size_t t = 0; t < roots.size(); ++t) {
-        const int* var = split_var.data() + t * splits;
-        const float* c = split_c.data() + t * splits;
-        size_t at[kLanes] = {};
-        for (int d = 0; d < depth; ++d)
-          for (int l = 0; l < kLanes; ++l) at[l] = 2 * at[l] + 1 + !(x[l][var[at[l]]] <= c[at[l]]);
-        const uint8_t* leaf = leaf_same.data() + t * (splits + 1) - splits;
-        for (int l = 0; l < kLanes; ++l) sum[l] += leaf[at[l]];
-      }
-      for (int l = 0; l < lanes; ++l) out[i0 + l] = sum[l];
-    }
+    std::vector<int> all(static_cast<size_t>(n));
+    std::iota(all.begin(), all.end(), 0);
+    std::fill(out, out + n, 0);
+    add_votes(rows, dim, all.data(), n, 0, static_cast<int>(roots.size()), out);
   }
 
   // Adds the "same" votes of trees [t0, t1) to count[idx[j]] for the rows idx[0..m) of `rows`
-  // (complete trees only): the walk of votes() above over a subset of the rows and trees.
+  // (complete trees only), walking 8 rows at a time.
   void add_votes(const float* rows, int dim, const int* idx, int m, int t0, int t1, int* count) const {
     const size_t splits = (size_t{1} << depth) - 1;
-    constexpr int kLanes = 8;
+    constexpr int kLanes = 8;  // independent walks in flight
     for (int i0 = 0; i0 < m; i0 += kLanes) {
       const int lanes = std::min(kLanes, m - i0);
       const float* x[kLanes];
