@@ -35,30 +35,35 @@ std::vector<SimulatedScan> simulate_batch(const RayCaster& caster, const LidarMo
 
 }  // namespace
 
-void for_each_local_cloud(const RayCaster& caster, const LidarModel& model, const Traversal& traversal,
-                          const LocalCloudConfig& local_config, const LocalCloudSchedule& schedule,
-                          const std::function<void(const SimulatedLocalCloud&)>& visit) {
+void for_each_kept_scan(const RayCaster& caster, const LidarModel& model, const Traversal& traversal,
+                        const LocalCloudConfig& local_config, const LocalCloudSchedule& schedule,
+                        const std::function<void(size_t, const SimulatedScan&)>& visit) {
   const int threads = schedule.threads > 0 ? schedule.threads : std::max(1u, std::thread::hardware_concurrency());
   const size_t last = std::min(schedule.last_frame, traversal.size() - 1);
   const auto frames = kept_frames(traversal, schedule.first_frame, last, local_config.min_travel_between_scans_m);
-  LocalCloud local(local_config);
-  double next_cloud_at = traversal.odometer_m[schedule.first_frame] + schedule.warmup_m;
   constexpr size_t kBatch = 16;
   for (size_t b = 0; b < frames.size(); b += kBatch) {
     const std::vector<size_t> batch(frames.begin() + b, frames.begin() + std::min(frames.size(), b + kBatch));
     const auto scans = simulate_batch(caster, model, traversal, batch, schedule.seed, threads);
-    for (size_t k = 0; k < batch.size(); ++k) {
-      const size_t f = batch[k];
-      local.add_scan(scans[k].points, traversal.T_world_lidar[f], &scans[k].labels);
-      if (traversal.odometer_m[f] < next_cloud_at) continue;
-      next_cloud_at = traversal.odometer_m[f] + schedule.every_m;
-      SimulatedLocalCloud out;
-      out.frame = f;
-      out.T_world_sensor = traversal.T_world_lidar[f];
-      out.cloud = local.crop(out.T_world_sensor, &out.labels);
-      visit(out);
-    }
+    for (size_t k = 0; k < batch.size(); ++k) visit(batch[k], scans[k]);
   }
+}
+
+void for_each_local_cloud(const RayCaster& caster, const LidarModel& model, const Traversal& traversal,
+                          const LocalCloudConfig& local_config, const LocalCloudSchedule& schedule,
+                          const std::function<void(const SimulatedLocalCloud&)>& visit) {
+  LocalCloud local(local_config);
+  double next_cloud_at = traversal.odometer_m[schedule.first_frame] + schedule.warmup_m;
+  for_each_kept_scan(caster, model, traversal, local_config, schedule, [&](size_t f, const SimulatedScan& scan) {
+    local.add_scan(scan.points, traversal.T_world_lidar[f], &scan.labels);
+    if (traversal.odometer_m[f] < next_cloud_at) return;
+    next_cloud_at = traversal.odometer_m[f] + schedule.every_m;
+    SimulatedLocalCloud out;
+    out.frame = f;
+    out.T_world_sensor = traversal.T_world_lidar[f];
+    out.cloud = local.crop(out.T_world_sensor, &out.labels);
+    visit(out);
+  });
 }
 
 }  // namespace segmatch::sim

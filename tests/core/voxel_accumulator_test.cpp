@@ -89,9 +89,10 @@ void expect_same(const PointCloud& expected, const std::vector<uint32_t>& expect
 
 // Drives along x (turning back after `turn` scans), feeding both the reference (LocalCloud +
 // voxel_filter) and the accumulator, cropping every `crop_every` scans; returns the number of
-// crops after which scans had been dropped.
+// crops after which scans had been dropped. With evict_every_scan the accumulator evicts after
+// every scan and the reference crops (output unused) after every scan.
 size_t drive_and_compare(const Scene& scene, LocalCloudConfig lc, double step_m, int scans, int crop_every,
-                         bool some_without_labels, bool with_nan, int turn = 1 << 30) {
+                         bool some_without_labels, bool with_nan, int turn = 1 << 30, bool evict_every_scan = false) {
   const VoxelGridConfig vc;
   LocalCloud reference(lc);
   VoxelAccumulator acc(lc, vc);
@@ -108,6 +109,11 @@ size_t drive_and_compare(const Scene& scene, LocalCloudConfig lc, double step_m,
     const bool b = acc.add_scan(points, T, labelled ? &labels : nullptr);
     EXPECT_EQ(a, b) << "scan " << k;
     added += a;
+    if (evict_every_scan) {
+      acc.evict(T);
+      reference.crop(T);
+      EXPECT_EQ(acc.scan_count(), reference.scan_count()) << "scan " << k;
+    }
     if (k % crop_every != crop_every - 1 && k != scans - 1) continue;
     std::vector<uint32_t> cropped_labels, expected_labels, got_labels;
     const PointCloud cropped = reference.crop(T, &cropped_labels);
@@ -135,6 +141,16 @@ TEST(VoxelAccumulator, EqualsVoxelFilterOfTheCroppedLocalCloudIncludingDroppedSc
   // subtracted) before the vehicle returned to where their points lie.
   const size_t crops_after_drops = drive_and_compare(scene, lc, 1.0, 121, 3, false, false, 70);
   EXPECT_GE(crops_after_drops, 20u) << "scans left the cylinder and were subtracted";
+}
+
+// A vehicle evicts after every scan (moving the subtraction of old scans off its queries):
+// the same as cropping at every scan, and crops far apart still equal the reference.
+TEST(VoxelAccumulator, EvictingAfterEveryScanEqualsCroppingAtEveryScan) {
+  const Scene scene;
+  LocalCloudConfig lc;
+  lc.radius_m = 20.0;
+  const size_t crops_after_drops = drive_and_compare(scene, lc, 1.0, 121, 10, false, false, 70, true);
+  EXPECT_GE(crops_after_drops, 6u);
 }
 
 TEST(VoxelAccumulator, EqualsWithSubsamplingSkippedScansMissingLabelsAndNaNs) {

@@ -22,10 +22,13 @@
 // that pass LocalCloud's point test (horizontal distance <= radius_m). So a voxel cut by the
 // boundary gets the centroid and count of its points inside, exactly as cropping raw points
 // first; a crop by voxel centroid would keep or drop such a voxel whole, with all its points
-// (see voxel_accumulator_test.cpp). Cost per crop: the tiles near the cylinder plus the raw
-// points of the boundary ring, not the millions of points held.
-// Memory: the held scans' points (as LocalCloud) plus ~48 bytes per held voxel (at most 70 %
-// of each table used).
+// (see voxel_accumulator_test.cpp). The output comes in voxel_filter's order without a
+// global sort: tiles in (x, y) order, each tile's voxels sorted by column and z, then each
+// strip of tiles sharing x emitted column by column. Cost per crop: the tiles near the
+// cylinder plus the raw points of the boundary ring, not the millions of points held
+// (HDL-64E, 60 m, ~20 M points held: ~15 ms for 260 k voxels, segmatch-bench).
+// Memory: the held scans' points (as LocalCloud) plus ~44 bytes per slot of the voxel tables
+// (25-70 % used; tables mostly emptied by dropped scans are compacted).
 //
 // Limits: points more than 20 km (any axis) from their sensor are refused (invalid_argument);
 // voxel keys wrap every 2^21 voxels (210 km at 0.1 m) and are unwrapped around the crop
@@ -58,6 +61,12 @@ class VoxelAccumulator {
   // above); drops (and subtracts) the scans wholly outside it first, as LocalCloud::crop.
   // labels_out (if given) gets each voxel's majority label (0 where none).
   PointCloud crop(const Pose3d& T_world_sensor, std::vector<uint32_t>* labels_out = nullptr);
+
+  // Only the first step of crop: drops (and subtracts) the scans wholly outside the cylinder
+  // around T_world_sensor. A vehicle that crops at its current pose may call it after every
+  // add_scan: the same as cropping at every scan, and the cost of dropping old scans (a
+  // subtraction per point) leaves the query.
+  void evict(const Pose3d& T_world_sensor);
 
   size_t scan_count() const;
   size_t point_count() const;

@@ -25,6 +25,13 @@ struct LocalCloudSchedule {
   uint64_t seed = 1;                // noise seed of the scans
 };
 
+// Simulates the scans a local cloud keeps (the first, then one per min_travel_between_scans_m,
+// within the schedule's frames) and calls `visit(frame, scan)` for each, in order. Scans are
+// simulated in parallel batches; visits are sequential.
+void for_each_kept_scan(const RayCaster& caster, const LidarModel& model, const Traversal& traversal,
+                        const LocalCloudConfig& local_config, const LocalCloudSchedule& schedule,
+                        const std::function<void(size_t, const SimulatedScan&)>& visit);
+
 // Simulates the scans the local cloud keeps and calls `visit` for each scheduled local
 // cloud, in order. Scans are simulated in parallel; accumulation is sequential.
 void for_each_local_cloud(const RayCaster& caster, const LidarModel& model, const Traversal& traversal,
