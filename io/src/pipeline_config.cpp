@@ -203,7 +203,7 @@ void PipelineConfig::validate() const {
 // was not chosen on (seed 2, README "What we measured").
 PipelineConfig::PipelineConfig() { localizer.min_confidence = 0.8f; }
 
-std::vector<std::string> pipeline_preset_names() { return {"kitti-hdl64", "sparse-keyframes"}; }
+std::vector<std::string> pipeline_preset_names() { return {"kitti-hdl64", "sparse-keyframes", "livox-keyframes"}; }
 
 PipelineConfig pipeline_preset(const std::string& name) {
   PipelineConfig c;
@@ -221,6 +221,26 @@ PipelineConfig pipeline_preset(const std::string& name) {
     // No confidence floor: the 0.8 of kitti-hdl64 was chosen on simulated HDL-64E clouds;
     // sparse keyframes give fewer segments, hence lower support, for true poses too.
     c.localizer.min_confidence = 0.0f;
+    return c;
+  }
+  if (name == "livox-keyframes") {
+    // sparse-keyframes for a small-FOV short-range sensor (Livox Avia: 70 deg, ~15 m) in a
+    // small scene: few segments per local cloud, and their centroids move by up to ~1 m
+    // between passes. Matching is loose (all eigen-feature neighbours within L2 3.0, 0.7 m
+    // consistency, support 4) and a 30 m cylinder gives each query more segments; what keeps
+    // look-alikes out is the odometry prior of loop closure (segmatch-loop --max-drift-m).
+    // Chosen by a sweep on hku-loop1 itself (README "What we measured"); no second Livox
+    // recording was available to validate it. L2 matcher: no classifier was trained on
+    // Livox segments.
+    c = pipeline_preset("sparse-keyframes");
+    c.preset = name;
+    c.local_cloud.radius_m = 30.0;
+    c.localizer.segmentation.segmenter.min_points = 20;
+    c.localizer.matcher.type = MatcherType::kL2;
+    c.localizer.matcher.use_shapes = false;
+    c.localizer.matcher.l2_threshold = 3.0f;
+    c.localizer.verification.resolution_m = 0.7f;
+    c.localizer.min_support = 4;
     return c;
   }
   std::string known;

@@ -64,12 +64,14 @@ LoopDetectorConfig detector_config(const Options& o) {
   return c;
 }
 
-// The random forest from --classifier or the default model, else the L2 matcher.
+// The random forest from --classifier or the default model, else the L2 matcher (also when
+// the preset or config asks for it and no --classifier is given).
 std::shared_ptr<const RandomForestMatcher> pick_matcher(const Options& o, LoopDetectorConfig& c) {
   std::string path = o.classifier;
-  if (path.empty() && !o.l2 && fs::exists(SEGMATCH_DEFAULT_MODEL)) path = SEGMATCH_DEFAULT_MODEL;
-  if (o.l2 || path.empty()) {
-    if (!o.l2) std::fprintf(stderr, "segmatch-loop: no classifier (%s missing): using the L2 matcher\n", SEGMATCH_DEFAULT_MODEL);
+  const bool l2 = o.l2 || (path.empty() && c.localizer.matcher.type == MatcherType::kL2);
+  if (path.empty() && !l2 && fs::exists(SEGMATCH_DEFAULT_MODEL)) path = SEGMATCH_DEFAULT_MODEL;
+  if (l2 || path.empty()) {
+    if (!l2) std::fprintf(stderr, "segmatch-loop: no classifier (%s missing): using the L2 matcher\n", SEGMATCH_DEFAULT_MODEL);
     c.localizer.matcher.type = MatcherType::kL2;
     c.localizer.matcher.use_shapes = false;
     return nullptr;
@@ -171,7 +173,7 @@ int main(int argc, char** argv) {
   Options o;
   app.add_option("--input", o.input, "sequence folder (KITTI velodyne/ or PCD keyframes scans/)")->required();
   auto* config_opt = app.add_option("--config", o.config_path, "pipeline config JSON");
-  app.add_option("--preset", o.preset, "pipeline preset: kitti-hdl64 (default), sparse-keyframes")->excludes(config_opt);
+  app.add_option("--preset", o.preset, "pipeline preset: kitti-hdl64 (default), sparse-keyframes, livox-keyframes")->excludes(config_opt);
   app.add_option("--classifier", o.classifier, "random forest model (default: maps/models/default-rf.yml if present)");
   app.add_flag("--l2", o.l2, "use the L2 feature-distance matcher instead of a random forest");
   app.add_option("--odometry", o.odometry, "odometry poses (KITTI 12 numbers) instead of the sequence's poses.txt");

@@ -42,7 +42,7 @@ int main(int argc, char** argv) {
       ->required();
   app.add_option("-o,--output", o.output, "map file to write (e.g. map.sqlite)")->required();
   auto* config = app.add_option("--config", o.config_path, "pipeline config JSON (see io/pipeline_config.h)");
-  app.add_option("--preset", o.preset, "pipeline preset: kitti-hdl64 (default) or sparse-keyframes")
+  app.add_option("--preset", o.preset, "pipeline preset: kitti-hdl64 (default), sparse-keyframes or livox-keyframes")
       ->excludes(config);
   auto* first_opt = app.add_option("--first", first, "first scan index (default 0)");
   auto* last_opt = app.add_option("--last", last, "last scan index, inclusive (default: the last scan)");

@@ -47,7 +47,11 @@ struct PipelineConfig {
 //                      sensor whose raw scans are accumulated (the default);
 //   "sparse-keyframes" keyframes already voxel-downsampled by a SLAM front end (~0.2 m point
 //                      spacing, e.g. ../shared/data/real): 0.2 m voxels with >= 1 point, 0.4 m
-//                      cluster distance, >= 30 points per segment.
+//                      cluster distance, >= 30 points per segment;
+//   "livox-keyframes"  sparse-keyframes for a small-FOV short-range sensor (Livox): 30 m
+//                      cylinder, >= 20 points, L2 matcher at 3.0 without shapes, 0.7 m
+//                      verification resolution, support 4 (meant for loop closure with an
+//                      odometry drift bound; tuned on hku-loop1).
 // Throws std::invalid_argument listing the known names.
 PipelineConfig pipeline_preset(const std::string& name);
 std::vector<std::string> pipeline_preset_names();
