@@ -79,39 +79,41 @@ void sum_points(const PointCloud& points, const std::vector<uint32_t>& labels, s
 // Tiles against the cylinder: 0 wholly outside, 1 wholly inside (every point passes the point
 // test), 2 crossed by the boundary. The margin covers the rounding of floor(v / leaf). Worked
 // out once per crop for the tiles of the cylinder's bounding box, then looked up (a crop
-// classifies every tile of every held scan).
+// classifies every tile of every held scan); computed on the fly for a cylinder of more than
+// 4 M tiles.
 class TileClasses {
  public:
-  TileClasses(double cx, double cy, double radius, double leaf) {
-    const double tile_m = leaf * double(int64_t{1} << kTileShift);
-    x0_ = static_cast<int64_t>(std::floor((cx - radius) / tile_m)) - 1;
-    y0_ = static_cast<int64_t>(std::floor((cy - radius) / tile_m)) - 1;
-    nx_ = static_cast<int64_t>(std::floor((cx + radius) / tile_m)) + 2 - x0_;
-    ny_ = static_cast<int64_t>(std::floor((cy + radius) / tile_m)) + 2 - y0_;
+  TileClasses(double cx, double cy, double radius, double leaf)
+      : cx_(cx), cy_(cy), tile_m_(leaf * double(int64_t{1} << kTileShift)), inner_(radius - kTileMarginM),
+        outer_(radius + kTileMarginM) {
+    x0_ = static_cast<int64_t>(std::floor((cx - radius) / tile_m_)) - 1;
+    y0_ = static_cast<int64_t>(std::floor((cy - radius) / tile_m_)) - 1;
+    nx_ = static_cast<int64_t>(std::floor((cx + radius) / tile_m_)) + 2 - x0_;
+    ny_ = static_cast<int64_t>(std::floor((cy + radius) / tile_m_)) + 2 - y0_;
+    if (double(nx_) * double(ny_) > double(1 << 22)) return;
     cls_.resize(static_cast<size_t>(nx_ * ny_));
-    const double inner = radius - kTileMarginM, outer = radius + kTileMarginM;
-    for (int64_t i = 0; i < nx_; ++i) {
-      for (int64_t j = 0; j < ny_; ++j) {
-        const double xa = double(x0_ + i) * tile_m, xb = double(x0_ + i + 1) * tile_m;
-        const double ya = double(y0_ + j) * tile_m, yb = double(y0_ + j + 1) * tile_m;
-        const double nx = std::clamp(cx, xa, xb) - cx, ny = std::clamp(cy, ya, yb) - cy;
-        const double fx = std::max(std::abs(xa - cx), std::abs(xb - cx));
-        const double fy = std::max(std::abs(ya - cy), std::abs(yb - cy));
-        uint8_t c = 2;
-        if (nx * nx + ny * ny > outer * outer) c = 0;
-        else if (inner > 0 && fx * fx + fy * fy <= inner * inner) c = 1;
-        cls_[static_cast<size_t>(i * ny_ + j)] = c;
-      }
-    }
+    for (int64_t i = 0; i < nx_; ++i)
+      for (int64_t j = 0; j < ny_; ++j) cls_[static_cast<size_t>(i * ny_ + j)] = compute(x0_ + i, y0_ + j);
   }
   int at(int64_t x, int64_t y) const {
     const int64_t i = x - x0_, j = y - y0_;
     if (i < 0 || j < 0 || i >= nx_ || j >= ny_) return 0;
-    return cls_[static_cast<size_t>(i * ny_ + j)];
+    return cls_.empty() ? compute(x, y) : cls_[static_cast<size_t>(i * ny_ + j)];
   }
 
  private:
-  int64_t x0_, y0_, nx_, ny_;
+  uint8_t compute(int64_t x, int64_t y) const {
+    const double xa = double(x) * tile_m_, xb = double(x + 1) * tile_m_;
+    const double ya = double(y) * tile_m_, yb = double(y + 1) * tile_m_;
+    const double nx = std::clamp(cx_, xa, xb) - cx_, ny = std::clamp(cy_, ya, yb) - cy_;
+    if (nx * nx + ny * ny > outer_ * outer_) return 0;
+    const double fx = std::max(std::abs(xa - cx_), std::abs(xb - cx_));
+    const double fy = std::max(std::abs(ya - cy_), std::abs(yb - cy_));
+    return (inner_ > 0 && fx * fx + fy * fy <= inner_ * inner_) ? 1 : 2;
+  }
+
+  double cx_, cy_, tile_m_, inner_, outer_;
+  int64_t x0_ = 0, y0_ = 0, nx_ = 0, ny_ = 0;
   std::vector<uint8_t> cls_;
 };
 
