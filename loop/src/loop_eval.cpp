@@ -53,6 +53,29 @@ void summarise_errors(Evaluation& e) {
   e.max_rotation_error_deg = r.empty() ? 0.0 : *std::max_element(r.begin(), r.end());
 }
 
+// Precision and recall at each translation threshold: loops within it (and the rotation
+// threshold), revisit local clouds with such a loop.
+std::vector<ThresholdPoint> threshold_curve(const std::vector<LoopClosure>& loops, const std::vector<LoopScore>& scores,
+                                            const std::vector<size_t>& revisit_frames, const EvalConfig& c) {
+  std::vector<ThresholdPoint> curve;
+  for (double t : c.curve_translation_m) {
+    ThresholdPoint p;
+    p.translation_m = t;
+    std::vector<size_t> good_frames;
+    for (size_t i = 0; i < loops.size(); ++i) {
+      if (scores[i].translation_error_m > t || scores[i].rotation_error_deg > c.max_rotation_error_deg) continue;
+      ++p.true_loops;
+      good_frames.push_back(loops[i].query_frame);
+    }
+    for (size_t f : revisit_frames)
+      p.detected_revisit_clouds += std::find(good_frames.begin(), good_frames.end(), f) != good_frames.end();
+    p.precision = loops.empty() ? 1.0 : static_cast<double>(p.true_loops) / loops.size();
+    p.recall = revisit_frames.empty() ? 0.0 : static_cast<double>(p.detected_revisit_clouds) / revisit_frames.size();
+    curve.push_back(p);
+  }
+  return curve;
+}
+
 }  // namespace
 
 Evaluation evaluate(const std::vector<LoopClosure>& loops, const std::vector<size_t>& processed,
@@ -74,6 +97,7 @@ Evaluation evaluate(const std::vector<LoopClosure>& loops, const std::vector<siz
   const std::vector<double> odo = path_length(truth, first_frame, last);
   e.processed_clouds = processed.size();
   bool in_stretch = false;
+  std::vector<size_t> revisit_frames;
   for (size_t f : processed) {
     const bool revisit = is_revisit(f, truth, odo, first_frame, c);
     if (!revisit) {
@@ -81,6 +105,7 @@ Evaluation evaluate(const std::vector<LoopClosure>& loops, const std::vector<siz
       continue;
     }
     ++e.revisit_clouds;
+    revisit_frames.push_back(f);
     if (!in_stretch) e.stretches.push_back(RevisitStretch{f, f});
     in_stretch = true;
     RevisitStretch& s = e.stretches.back();
@@ -96,6 +121,7 @@ Evaluation evaluate(const std::vector<LoopClosure>& loops, const std::vector<siz
   e.precision = loops.empty() ? 1.0 : static_cast<double>(e.true_loops) / loops.size();
   e.recall = e.revisit_clouds ? static_cast<double>(e.detected_revisit_clouds) / e.revisit_clouds : 0.0;
   summarise_errors(e);
+  e.curve = threshold_curve(loops, e.scores, revisit_frames, c);
   return e;
 }
 
@@ -115,6 +141,11 @@ std::string to_json(const Evaluation& e, const EvalConfig& c) {
   j["recall"] = e.recall;
   j["true_loop_translation_error_m"] = {{"median", e.median_translation_error_m}, {"max", e.max_translation_error_m}};
   j["true_loop_rotation_error_deg"] = {{"median", e.median_rotation_error_deg}, {"max", e.max_rotation_error_deg}};
+  j["curve"] = nlohmann::json::array();
+  for (const ThresholdPoint& p : e.curve)
+    j["curve"].push_back({{"max_translation_error_m", p.translation_m}, {"true_loops", p.true_loops},
+                          {"precision", p.precision}, {"detected_revisit_local_clouds", p.detected_revisit_clouds},
+                          {"recall", p.recall}});
   j["per_loop"] = nlohmann::json::array();
   for (const LoopScore& s : e.scores)
     j["per_loop"].push_back({{"translation_error_m", s.translation_error_m},
@@ -139,6 +170,12 @@ void print_summary(const Evaluation& e, const EvalConfig& c) {
   if (e.true_loops)
     std::printf("true loop error: median %.3f m / %.2f deg, max %.3f m / %.2f deg\n", e.median_translation_error_m,
                 e.median_rotation_error_deg, e.max_translation_error_m, e.max_rotation_error_deg);
+  if (!e.curve.empty()) {
+    std::printf("precision / recall by translation threshold (rotation <= %.1f deg):", c.max_rotation_error_deg);
+    for (const ThresholdPoint& p : e.curve)
+      std::printf(" %.2g m %.2f/%.2f", p.translation_m, p.precision, p.recall);
+    std::printf("\n");
+  }
   for (const RevisitStretch& s : e.stretches) {
     if (s.detected)
       std::printf("revisit frames %zu..%zu (%.0f m, %zu clouds): first detected after %.1f m, %zu clouds detected\n",

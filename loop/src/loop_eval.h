@@ -17,6 +17,9 @@ struct EvalConfig {
   // frame driven more than min_revisit_gap_m before (along the true path).
   double revisit_radius_m = 5.0;
   double min_revisit_gap_m = 150.0;
+  // Precision and recall are also given for these translation-error thresholds (rotation
+  // within max_rotation_error_deg): how good the true loops are, and how far off the others.
+  std::vector<double> curve_translation_m = {0.05, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0};
 };
 
 struct LoopScore {
@@ -33,6 +36,14 @@ struct RevisitStretch {
   double driven_before_detection_m = 0;     // from first_frame to the first true loop
 };
 
+// Precision and recall when a loop counts as true within translation_m (and the rotation
+// threshold of the config).
+struct ThresholdPoint {
+  double translation_m = 0;
+  size_t true_loops = 0, detected_revisit_clouds = 0;
+  double precision = 0, recall = 0;
+};
+
 struct Evaluation {
   std::vector<LoopScore> scores;  // one per loop, same order
   size_t true_loops = 0, false_loops = 0;
@@ -41,6 +52,7 @@ struct Evaluation {
   std::vector<RevisitStretch> stretches;
   double median_translation_error_m = 0, max_translation_error_m = 0;  // of true loops
   double median_rotation_error_deg = 0, max_rotation_error_deg = 0;
+  std::vector<ThresholdPoint> curve;  // one per EvalConfig::curve_translation_m
 };
 
 // truth: T_world_sensor per frame of the sequence (indexed by frame). processed: frames where

@@ -160,9 +160,10 @@ int run_main(const Options& o) {
     for (const loop::LoopScore& s : e.scores) correct.push_back(s.correct);
     loop::print_summary(e, o.eval);
     write_text((fs::path(o.out) / "eval.json").string(), loop::to_json(e, o.eval));
+    loop::write_curve_png((fs::path(o.out) / "precision_recall.png").string(), e.curve, o.eval.max_rotation_error_deg);
   }
   loop::write_png((fs::path(o.out) / "loops.png").string(), r.frames, r.T_odom_sensor, r.processed, r.loops, correct);
-  std::printf("wrote %s/{loops.txt,loops.g2o,loops.png%s}\n", o.out.c_str(), o.no_eval ? "" : ",eval.json");
+  std::printf("wrote %s/{loops.txt,loops.g2o,loops.png%s}\n", o.out.c_str(), o.no_eval ? "" : ",eval.json,precision_recall.png");
   return 0;
 }
 

@@ -3,6 +3,8 @@
 
 #include <segmatch/core/loop_closure.h>
 
+#include "loop_eval.h"
+
 #include <string>
 #include <vector>
 
@@ -34,5 +36,9 @@ void write_g2o(const std::string& path, const std::vector<size_t>& frames, const
 void write_png(const std::string& path, const std::vector<size_t>& frames, const Poses& T_odom_sensor,
                const std::vector<size_t>& processed, const std::vector<LoopClosure>& loops,
                const std::vector<bool>& correct);
+
+// Precision and recall (0..1) against the translation threshold (log scale), one point per
+// threshold of the curve. Throws std::runtime_error when it cannot write.
+void write_curve_png(const std::string& path, const std::vector<ThresholdPoint>& curve, double rotation_deg);
 
 }  // namespace segmatch::loop

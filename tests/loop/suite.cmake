@@ -1,2 +1,5 @@
-# Online loop-closure detection (core LoopDetector) on simulated loops and on hku-loop1.
-segmatch_test_suite(test_loop loop segmatch_core segmatch_sim segmatch_io)
+# Online loop-closure detection (core LoopDetector) on simulated loops and on hku-loop1, and
+# segmatch-loop's scoring.
+segmatch_test_suite(test_loop loop segmatch_core segmatch_sim segmatch_io nlohmann_json::nlohmann_json)
+target_sources(test_loop PRIVATE ${PROJECT_SOURCE_DIR}/loop/src/loop_eval.cpp)
+target_include_directories(test_loop PRIVATE ${PROJECT_SOURCE_DIR}/loop/src)
