@@ -228,7 +228,8 @@ PipelineConfig pipeline_preset(const std::string& name) {
     // small scene: few segments per local cloud, and their centroids move by up to ~1 m
     // between passes. Matching is loose (all eigen-feature neighbours within L2 3.0, 0.7 m
     // consistency, support 4) and a 30 m cylinder gives each query more segments; what keeps
-    // look-alikes out is the odometry prior of loop closure (segmatch-loop --max-drift-m).
+    // look-alikes out is the odometry prior of loop closure (segmatch-loop --max-drift-m;
+    // segmatch-loop brings this preset's loop settings, loop_main.cpp).
     // Chosen by a sweep on hku-loop1 itself (README "What we measured"); no second Livox
     // recording was available to validate it. L2 matcher: no classifier was trained on
     // Livox segments.
