@@ -264,7 +264,6 @@ PointCloud VoxelAccumulator::crop(const Pose3d& T_world_sensor, std::vector<uint
   evict(T_world_sensor);
   if (m.scans.empty()) return {};
   const TileClasses classes(cx, cy, radius, leaf);
-  const auto classify = [&](int64_t x, int64_t y) { return classes.at(x, y); };
 
   // The boundary tiles' voxels, from the raw points inside the cylinder, one table per tile.
   std::unordered_map<uint64_t, VoxelTable> boundary;
@@ -272,7 +271,7 @@ PointCloud VoxelAccumulator::crop(const Pose3d& T_world_sensor, std::vector<uint
   std::vector<uint32_t>& ring_labels = m.ring_labels;
   for (const Scan& s : m.scans) {
     for (size_t t = 0; t + 1 < s.tiles.size(); ++t) {
-      if (classify(s.tiles[t].x, s.tiles[t].y) != 2) continue;
+      if (classes.at(s.tiles[t].x, s.tiles[t].y) != 2) continue;
       ring.clear();
       ring_labels.clear();
       for (uint32_t i = s.tiles[t].begin; i < s.tiles[t + 1].begin; ++i) {
@@ -292,7 +291,7 @@ PointCloud VoxelAccumulator::crop(const Pose3d& T_world_sensor, std::vector<uint
   for (const auto& [key, table] : m.tiles) {
     const int64_t x = static_cast<int64_t>(key) >> 32;  // arithmetic shift undoes tile_key's
     const int64_t y = static_cast<int32_t>(static_cast<uint32_t>(key));
-    if (classify(x, y) == 1) kept.push_back({x, y, &table});
+    if (classes.at(x, y) == 1) kept.push_back({x, y, &table});
   }
   for (const auto& [key, table] : boundary)
     kept.push_back({static_cast<int64_t>(key) >> 32, static_cast<int32_t>(static_cast<uint32_t>(key)), &table});

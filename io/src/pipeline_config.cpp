@@ -228,8 +228,7 @@ PipelineConfig pipeline_preset(const std::string& name) {
     // small scene: few segments per local cloud, and their centroids move by up to ~1 m
     // between passes. Matching is loose (all eigen-feature neighbours within L2 3.0, 0.7 m
     // consistency, support 4) and a 30 m cylinder gives each query more segments; what keeps
-    // look-alikes out is the odometry prior of loop closure (segmatch-loop --max-drift-m;
-    // segmatch-loop brings this preset's loop settings, loop_main.cpp).
+    // look-alikes out is the odometry prior of loop closure (loop_detector_config below).
     // Chosen by a sweep on hku-loop1 itself (README "What we measured"); no second Livox
     // recording was available to validate it. L2 matcher: no classifier was trained on
     // Livox segments.
@@ -247,6 +246,23 @@ PipelineConfig pipeline_preset(const std::string& name) {
   std::string known;
   for (const std::string& n : pipeline_preset_names()) known += (known.empty() ? "" : ", ") + n;
   throw std::invalid_argument("unknown preset \"" + name + "\" (known: " + known + ")");
+}
+
+LoopDetectorConfig loop_detector_config(const PipelineConfig& p) {
+  LoopDetectorConfig c;
+  c.local_cloud = p.local_cloud;
+  c.localizer = p.localizer;
+  c.segment_map = p.segment_map;
+  if (p.preset == "livox-keyframes") {
+    c.local_cloud_every_m = 1.0;
+    c.exclude_recent_distance_m = 25.0;
+    c.local_cloud_history_m = 25.0;
+    c.min_inliers = 4;
+    c.min_confidence = 0.3f;
+    c.max_drift_m = 1.0;
+    c.max_drift_deg = 2.0;
+  }
+  return c;
 }
 
 PipelineConfig parse_pipeline_config(const std::string& json_text, const std::string& origin) {

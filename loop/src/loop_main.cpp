@@ -31,9 +31,10 @@ struct Options {
   long first = 0, last = -1;
   bool l2 = false, no_eval = false, verbose = false;
   double every_m = 0, exclude_m = -1, exclude_s = -1, radius_m = 0, history_m = 0, min_confidence = -1;
-  double max_drift_m = 0, max_drift_deg = -1;
+  double max_drift_m = -1, max_drift_deg = -1;  // < 0: not given
   int min_inliers = 0;
   loop::EvalConfig eval;
+  bool revisit_gap_given = false;  // else the gap is the recent past excluded
 };
 
 std::string read_file(const std::string& path) {
@@ -44,41 +45,25 @@ std::string read_file(const std::string& path) {
   return s.str();
 }
 
-// Loop-closure settings that go with a preset (a pipeline config holds none): the options the
-// user did not give. livox-keyframes was tuned with these on hku-loop1 (README "What we
-// measured"): a local cloud every metre, 25 m of recent past, >= 4 inliers, confidence >= 0.3,
-// and the odometry trusted to 1 m / 2 deg.
-void apply_preset_loop_defaults(const CLI::App& app, Options& o) {
-  if (o.preset != "livox-keyframes") return;
-  if (app.count("--every-m") == 0) o.every_m = 1.0;
-  if (app.count("--exclude-m") == 0) o.exclude_m = 25.0;
-  if (app.count("--history-m") == 0) o.history_m = 25.0;
-  if (app.count("--min-inliers") == 0) o.min_inliers = 4;
-  if (app.count("--min-confidence") == 0) o.min_confidence = 0.3;
-  if (app.count("--max-drift-m") == 0) o.max_drift_m = 1.0;
-  if (app.count("--max-drift-deg") == 0) o.max_drift_deg = 2.0;
-  std::printf("livox-keyframes loop settings: a local cloud every %.1f m, recent past %.0f m, history %.0f m, "
-              ">= %d inliers, confidence >= %.2f, drift bound %.1f m / %.1f deg\n",
-              o.every_m, o.exclude_m, o.history_m, o.min_inliers, o.min_confidence, o.max_drift_m, o.max_drift_deg);
-}
-
+// The preset's (or config's) stages and loop settings, then the options given.
 LoopDetectorConfig detector_config(const Options& o) {
   const io::PipelineConfig p = o.config_path.empty() ? io::pipeline_preset(o.preset.empty() ? "kitti-hdl64" : o.preset)
                                                      : io::read_pipeline_config(o.config_path);
-  LoopDetectorConfig c;
-  c.local_cloud = p.local_cloud;
-  c.localizer = p.localizer;
-  c.segment_map = p.segment_map;
+  LoopDetectorConfig c = io::loop_detector_config(p);
   if (o.radius_m > 0) c.local_cloud.radius_m = o.radius_m;
   if (o.every_m > 0) c.local_cloud_every_m = o.every_m;
   if (o.exclude_m >= 0) c.exclude_recent_distance_m = o.exclude_m;
   if (o.exclude_s >= 0) c.exclude_recent_time_s = o.exclude_s;
   if (o.min_inliers > 0) c.min_inliers = o.min_inliers;
   if (o.min_confidence >= 0) c.min_confidence = static_cast<float>(o.min_confidence);
-  c.max_drift_m = o.max_drift_m;
+  if (o.max_drift_m >= 0) c.max_drift_m = o.max_drift_m;
   if (o.max_drift_deg >= 0) c.max_drift_deg = o.max_drift_deg;
   if (o.history_m > 0) c.local_cloud_history_m = o.history_m;
   else c.local_cloud_history_m = std::min(c.local_cloud_history_m, c.exclude_recent_distance_m);
+  std::printf("%s loop settings: a local cloud every %.1f m, recent past %.0f m, history %.0f m, >= %d inliers, "
+              "confidence >= %.2f, drift bound %.1f m / %.1f deg%s\n",
+              p.preset.c_str(), c.local_cloud_every_m, c.exclude_recent_distance_m, c.local_cloud_history_m,
+              c.min_inliers, c.min_confidence, c.max_drift_m, c.max_drift_deg, c.max_drift_m > 0 ? "" : " (off)");
   return c;
 }
 
@@ -149,8 +134,9 @@ void write_text(const std::string& path, const std::string& text) {
   if (!out) throw std::runtime_error("cannot write " + path);
 }
 
-int run_main(const Options& o) {
+int run_main(Options o) {
   LoopDetectorConfig config = detector_config(o);
+  if (!o.revisit_gap_given) o.eval.min_revisit_gap_m = config.exclude_recent_distance_m;
   const auto classifier = pick_matcher(o, config);
   io::SequenceOptions so;
   so.poses_path = o.odometry;
@@ -218,9 +204,7 @@ int main(int argc, char** argv) {
   app.add_option("--out", o.out, "output folder")->required();
   CLI11_PARSE(app, argc, argv);
   try {
-    apply_preset_loop_defaults(app, o);
-    if (app.count("--revisit-gap-m") == 0)
-      o.eval.min_revisit_gap_m = o.exclude_m >= 0 ? o.exclude_m : LoopDetectorConfig{}.exclude_recent_distance_m;
+    o.revisit_gap_given = app.count("--revisit-gap-m") > 0;
     return run_main(o);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "segmatch-loop: %s\n", e.what());

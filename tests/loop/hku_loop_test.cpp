@@ -25,26 +25,15 @@ struct HkuRun {
   std::vector<double> odometer_m;  // per frame
 };
 
-// The livox-keyframes preset, a local cloud every metre, the last 25 m of driving excluded
-// (and at most 25 m of scans in the query), loops with >= 4 inliers, confidence >= 0.3 and an
-// odometry drift bound of 1 m / 2 deg (the odometry drifts 0.3 m / 0.4 deg over this loop),
-// as the README's hku-loop1 command.
+// The livox-keyframes preset with its loop settings (io::loop_detector_config: a local cloud
+// every metre, the last 25 m of driving excluded and at most 25 m of scans in the query, loops
+// with >= 4 inliers, confidence >= 0.3 and an odometry drift bound of 1 m / 2 deg; the
+// odometry drifts 0.3 m / 0.4 deg over this loop), as the README's hku-loop1 command.
 HkuRun run_hku() {
   io::SequenceOptions options;
   options.poses_path = kDir + "/odom_poses.txt";
   const io::Sequence seq = io::Sequence::open(kDir, options);
-  const io::PipelineConfig p = io::pipeline_preset("livox-keyframes");
-  LoopDetectorConfig c;
-  c.local_cloud = p.local_cloud;
-  c.localizer = p.localizer;
-  c.segment_map = p.segment_map;
-  c.local_cloud_every_m = 1.0;
-  c.exclude_recent_distance_m = 25.0;
-  c.local_cloud_history_m = 25.0;
-  c.min_inliers = 4;
-  c.min_confidence = 0.3f;
-  c.max_drift_m = 1.0;
-  c.max_drift_deg = 2.0;
+  const LoopDetectorConfig c = io::loop_detector_config(io::pipeline_preset("livox-keyframes"));
   LoopDetector detector(c);
   HkuRun r;
   for (size_t i = 0; i < seq.size(); ++i) {

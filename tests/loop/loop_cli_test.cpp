@@ -4,12 +4,12 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
-#include <sys/wait.h>
+#include "support/run_command.h"
 
-#include <cstdio>
+#include <unistd.h>
+
 #include <filesystem>
 #include <fstream>
-#include <sstream>
 #include <string>
 
 namespace fs = std::filesystem;
@@ -19,20 +19,8 @@ namespace {
 const std::string kBin = std::string(SEGMATCH_BIN_DIR) + "/segmatch-loop";
 const std::string kHku = std::string(SEGMATCH_SHARED_DATA_DIR) + "/real/hku-loop1";
 
-struct Result {
-  int code = -1;
-  std::string output;
-};
-
-Result run(const std::string& args) {
-  Result r;
-  FILE* pipe = popen((kBin + " " + args + " 2>&1").c_str(), "r");
-  if (!pipe) return r;
-  char buffer[4096];
-  for (size_t n; (n = fread(buffer, 1, sizeof buffer, pipe)) > 0;) r.output.append(buffer, n);
-  const int status = pclose(pipe);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
+segmatch::test::CommandResult run(const std::string& args) {
+  return segmatch::test::run_command(kBin + " " + args);
 }
 
 fs::path fresh_dir(const std::string& name) {
@@ -46,7 +34,7 @@ fs::path fresh_dir(const std::string& name) {
 TEST(LoopCli, LivoxPresetDetectsTheHkuRevisitWithItsOwnLoopSettings) {
   if (!fs::exists(kHku)) GTEST_SKIP() << kHku << " is absent (real data is not in the repository)";
   const fs::path out = fresh_dir("hku");
-  const Result r = run("--input " + kHku + " --preset livox-keyframes --odometry " + kHku + "/odom_poses.txt --out " +
+  const auto r = run("--input " + kHku + " --preset livox-keyframes --odometry " + kHku + "/odom_poses.txt --out " +
                        out.string());
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_NE(r.output.find("livox-keyframes loop settings: a local cloud every 1.0 m"), std::string::npos) << r.output;
@@ -62,7 +50,7 @@ TEST(LoopCli, LivoxPresetDetectsTheHkuRevisitWithItsOwnLoopSettings) {
 
 TEST(LoopCli, MissingInputFolderIsRefusedByName) {
   const fs::path out = fresh_dir("missing");
-  const Result r = run("--input /nonexistent/sequence --preset livox-keyframes --out " + out.string());
+  const auto r = run("--input /nonexistent/sequence --preset livox-keyframes --out " + out.string());
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.output.find("/nonexistent/sequence"), std::string::npos) << r.output;
   fs::remove_all(out);

@@ -8,6 +8,8 @@
 
 #include <gtest/gtest.h>
 
+#include "support/run_command.h"
+
 #include <fcntl.h>
 #include <sys/file.h>
 #include <sys/wait.h>
@@ -31,21 +33,8 @@ namespace {
 const std::string kBin = SEGMATCH_BIN_DIR;
 constexpr int kLast = 40;  // scans 0..40 of sequence 00: a few local clouds, a few seconds
 
-struct Result {
-  int code = -1;
-  std::string output;  // stdout and stderr
-};
-
-Result run(const std::string& args) {
-  Result r;
-  FILE* pipe = popen((args + " 2>&1").c_str(), "r");
-  if (!pipe) return r;
-  char buffer[4096];
-  for (size_t n; (n = fread(buffer, 1, sizeof buffer, pipe)) > 0;) r.output.append(buffer, n);
-  const int status = pclose(pipe);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+using Result = segmatch::test::CommandResult;
+Result run(const std::string& args) { return segmatch::test::run_command(args); }
 
 std::string read_all(const fs::path& p) {
   std::ifstream f(p, std::ios::binary);

@@ -23,6 +23,7 @@
 #pragma once
 
 #include <segmatch/core/local_cloud.h>
+#include <segmatch/core/loop_closure.h>
 #include <segmatch/core/localizer.h>
 #include <segmatch/core/segment_map.h>
 
@@ -55,6 +56,13 @@ struct PipelineConfig {
 // Throws std::invalid_argument listing the known names.
 PipelineConfig pipeline_preset(const std::string& name);
 std::vector<std::string> pipeline_preset_names();
+
+// Online loop closure from a pipeline config: its stages, plus the loop-closure settings that
+// go with its preset (a JSON config holds none). "livox-keyframes" brings those it was tuned
+// with on hku-loop1: a local cloud every metre, 25 m of recent past and of history, >= 4
+// inliers, confidence >= 0.3, odometry drift bound 1 m / 2 deg. The other presets keep
+// LoopDetectorConfig's defaults.
+LoopDetectorConfig loop_detector_config(const PipelineConfig& p);
 
 // Parses the JSON form above (starting from its "preset", default "kitti-hdl64") and
 // validates the result. `origin` names the text in error messages (a file path). Throws IoError
