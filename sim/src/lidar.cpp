@@ -1,18 +1,23 @@
-// Spinning LiDAR sensor models and scan simulation.
+// LiDAR sensor models and scan simulation.
 //
-// Conventions: sensor frame x forward, y left, z up. Column j has azimuth 2*pi*j/columns,
-// counter-clockwise from +x (column 0 looks along +x, columns/4 along +y). Beams are listed
-// top-down (highest elevation first) for every model. A scan is emitted column by column,
-// beam by beam within a column (like a real sensor stream); rays that are dropped or hit
-// nothing produce no point.
+// Conventions: sensor frame x forward, y left, z up. Rays that are dropped or hit nothing
+// produce no point; the others come out in the order the sensor emits them.
 //
-// Randomness: column j uses its own stream Rng(mix_seed(seed, j)) and every ray draws the
-// same two 64-bit words in the same order whether or not it hits (the first gives the
-// dropout and intensity-noise uniforms, 32 bits each; the second the range-noise uniform,
-// 53 bits, turned into a Gaussian by the inverse normal CDF). So the output is a pure
-// function of (scene, model, pose, seed), and stays so if columns are ever simulated in
-// parallel. Only IEEE arithmetic, sqrt and log are involved: bitwise reproducible on
-// machines of the same kind (same libm).
+// Spinning models: column j has azimuth 2*pi*j/columns, counter-clockwise from +x (column 0
+// looks along +x, columns/4 along +y). Beams are listed top-down (highest elevation first)
+// for every model. A scan is emitted column by column, beam by beam within a column.
+//
+// Rosette models: ray k of a scan leaves at time t0 + k / point_rate_hz, where t0 is the
+// pattern time the scan starts at (given, or derived from the seed). Its direction depends
+// on that time only, so consecutive frames continue one pattern and never repeat it.
+//
+// Randomness: column j (rosette: block j of kRosetteBlock consecutive rays) uses its own
+// stream Rng(mix_seed(seed, j)) and every ray draws the same two 64-bit words in the same
+// order whether or not it hits (the first gives the dropout and intensity-noise uniforms,
+// 32 bits each; the second the range-noise uniform, 53 bits, turned into a Gaussian by the
+// inverse normal CDF). So the output is a pure function of (scene, model, pose, seed[, time]),
+// and stays so if columns are ever simulated in parallel. Only IEEE arithmetic, sqrt, log,
+// sin and cos are involved: bitwise reproducible on machines of the same kind (same libm).
 #include "segmatch/sim/lidar.h"
 
 #include "segmatch/core/random.h"
@@ -28,6 +33,12 @@ namespace segmatch::sim {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
+constexpr double kDegToRad = kPi / 180.0;
+// Rays of a rosette scan that share one random stream (the unit of parallel work, were the
+// rays ever cast in parallel).
+constexpr size_t kRosetteBlock = 256;
+// A rosette scan seeded without a time starts somewhere in this much of its pattern.
+constexpr double kRosettePatternSpanS = 3600.0;
 
 // Inverse of the standard normal CDF for p in (0, 1): Wichura's algorithm AS241 (PPND16),
 // relative accuracy ~1e-16. Deterministic (no trig) and needs one uniform per Gaussian;
@@ -81,7 +92,139 @@ std::vector<float> linspace_deg(double from, double to, int n) {
   return out;
 }
 
+// The two words every ray draws, whether or not it hits (see the top of the file).
+struct RayDraws {
+  double u_drop;   // [0, 1)
+  double u_int;    // [0, 1)
+  uint64_t w2;     // range noise, used only on a hit
+};
+
+RayDraws draw_ray(Rng& rng) {
+  const uint64_t w1 = rng.next_u64();
+  const uint64_t w2 = rng.next_u64();
+  return {static_cast<double>(w1 >> 32) * 0x1.0p-32, static_cast<double>(w1 & 0xFFFFFFFFu) * 0x1.0p-32, w2};
+}
+
+// Noisy range of a hit: Gaussian noise from a uniform in (0, 1), never 0 or 1.
+double noisy_range(const RayHit& hit, double sigma, uint64_t w2) {
+  const double u_noise = (static_cast<double>(w2 >> 11) + 0.5) * 0x1.0p-53;
+  const double noise = sigma > 0.0 ? sigma * inverse_normal_cdf(u_noise) : 0.0;
+  return std::max(0.0, static_cast<double>(hit.range_m) + noise);
+}
+
+// Reflectivity dimmed at grazing incidence, with +-10 % multiplicative noise, in [0, 1].
+float return_intensity(const RayHit& hit, const Eigen::Vector3f& dir_w, double u_int) {
+  const float cos_inc = std::fabs(hit.normal.dot(dir_w));
+  const float intensity = hit.reflectivity * (0.3f + 0.7f * cos_inc) * static_cast<float>(0.9 + 0.2 * u_int);
+  return std::min(1.0f, std::max(0.0f, intensity));
+}
+
+SimulatedScan simulate_spinning(const RayCaster& caster, const LidarModel& model, const Pose3d& T_world_sensor,
+                                uint64_t seed) {
+  SimulatedScan scan;
+  const size_t beams = model.elevations_deg.size();
+  const int columns = model.columns;
+  if (beams == 0 || columns <= 0) return scan;
+  scan.points.reserve(model.rays_per_scan());
+  scan.labels.reserve(model.rays_per_scan());
+
+  // Trig once per beam and once per column, never per ray.
+  std::vector<double> cos_el(beams), sin_el(beams);
+  for (size_t i = 0; i < beams; ++i) {
+    const double el = static_cast<double>(model.elevations_deg[i]) * kPi / 180.0;
+    cos_el[i] = std::cos(el);
+    sin_el[i] = std::sin(el);
+  }
+  const Eigen::Matrix3d R = T_world_sensor.linear();
+  const Eigen::Vector3d up_w = R.col(2);
+  const Eigen::Vector3f origin = T_world_sensor.translation().cast<float>();
+
+  RayHit hit;
+  for (int col = 0; col < columns; ++col) {
+    const double az = 2.0 * kPi * static_cast<double>(col) / static_cast<double>(columns);
+    const double ca = std::cos(az), sa = std::sin(az);
+    const Eigen::Vector3d horiz_w = R.col(0) * ca + R.col(1) * sa;  // R * (ca, sa, 0)
+    Rng rng(mix_seed(seed, static_cast<uint64_t>(col)));
+    for (size_t i = 0; i < beams; ++i) {
+      const RayDraws d = draw_ray(rng);  // fixed draws per ray, independent of the outcome
+      if (d.u_drop < model.dropout_probability) continue;
+
+      const Eigen::Vector3f dir_w = (horiz_w * cos_el[i] + up_w * sin_el[i]).cast<float>();
+      if (!caster.cast(origin, dir_w, model.min_range_m, model.max_range_m, &hit)) continue;
+      const double range = noisy_range(hit, model.range_noise_sigma_m, d.w2);
+      const double h = cos_el[i] * range;
+      Point p;
+      p.x = static_cast<float>(h * ca);
+      p.y = static_cast<float>(h * sa);
+      p.z = static_cast<float>(sin_el[i] * range);
+      p.intensity = return_intensity(hit, dir_w, d.u_int);
+      scan.points.push_back(p);
+      scan.labels.push_back(hit.label);
+    }
+  }
+  return scan;
+}
+
+// Unit direction (sensor frame) of a rosette ray at pattern time t_s. Each prism deflects
+// the beam by a quarter of the field of view; the deflections add, so the beam reaches the
+// rim when the prisms line up and the axis when they oppose.
+Eigen::Vector3d rosette_direction(const RosetteConfig& r, double t_s) {
+  auto phase = [](double hz, double t) {  // 2 pi frac(hz t): exact reduction before the trig
+    const double turns = hz * t;
+    return 2.0 * kPi * (turns - std::floor(turns));
+  };
+  const double p1 = phase(r.prism1_hz, t_s), p2 = phase(r.prism2_hz, t_s);
+  const double a_h = 0.25 * r.fov_horizontal_deg * kDegToRad, a_v = 0.25 * r.fov_vertical_deg * kDegToRad;
+  const double dh = a_h * (std::cos(p1) + std::cos(p2));  // towards +y
+  const double dv = a_v * (std::sin(p1) + std::sin(p2));  // towards +z
+  const double off_axis = std::sqrt(dh * dh + dv * dv);
+  if (off_axis < 1e-12) return Eigen::Vector3d::UnitX();
+  const double s = std::sin(off_axis) / off_axis;
+  return {std::cos(off_axis), dh * s, dv * s};
+}
+
+SimulatedScan simulate_rosette(const RayCaster& caster, const LidarModel& model, const Pose3d& T_world_sensor,
+                               uint64_t seed, double pattern_time_s) {
+  SimulatedScan scan;
+  const size_t rays = model.rays_per_scan();
+  if (rays == 0) return scan;
+  scan.points.reserve(rays);
+  scan.labels.reserve(rays);
+  const Eigen::Matrix3d R = T_world_sensor.linear();
+  const Eigen::Vector3f origin = T_world_sensor.translation().cast<float>();
+  const double ray_period_s = 1.0 / model.rosette.point_rate_hz;
+
+  RayHit hit;
+  Rng rng(0);
+  for (size_t k = 0; k < rays; ++k) {
+    if (k % kRosetteBlock == 0) rng = Rng(mix_seed(seed, static_cast<uint64_t>(k / kRosetteBlock)));
+    const RayDraws d = draw_ray(rng);  // fixed draws per ray, independent of the outcome
+    if (d.u_drop < model.dropout_probability) continue;
+
+    const Eigen::Vector3d dir_s = rosette_direction(model.rosette, pattern_time_s + static_cast<double>(k) * ray_period_s);
+    const Eigen::Vector3f dir_w = (R * dir_s).cast<float>();
+    if (!caster.cast(origin, dir_w, model.min_range_m, model.max_range_m, &hit)) continue;
+    const double range = noisy_range(hit, model.range_noise_sigma_m, d.w2);
+    Point p;
+    p.x = static_cast<float>(dir_s.x() * range);
+    p.y = static_cast<float>(dir_s.y() * range);
+    p.z = static_cast<float>(dir_s.z() * range);
+    p.intensity = return_intensity(hit, dir_w, d.u_int);
+    scan.points.push_back(p);
+    scan.labels.push_back(hit.label);
+  }
+  return scan;
+}
+
 }  // namespace
+
+size_t LidarModel::rays_per_scan() const {
+  if (pattern == ScanPattern::kRosette) {
+    if (!(rosette.point_rate_hz > 0.0) || !(rate_hz > 0.0f)) return 0;
+    return static_cast<size_t>(std::llround(rosette.point_rate_hz / static_cast<double>(rate_hz)));
+  }
+  return elevations_deg.size() * static_cast<size_t>(std::max(0, columns));
+}
 
 LidarModel hdl64e() {
   LidarModel m;
@@ -128,6 +271,27 @@ LidarModel os1_64() {
   return m;
 }
 
+LidarModel livox_avia() {
+  LidarModel m;
+  m.name = "livox-avia";
+  m.pattern = ScanPattern::kRosette;
+  m.rosette.fov_horizontal_deg = 70.4f;
+  m.rosette.fov_vertical_deg = 77.2f;
+  m.rosette.point_rate_hz = 240000.0;
+  // 6 lasers x ~120 rev/s stand-in; the ratio is the golden section (the "most irrational"
+  // number), so each new petal falls between earlier ones and frames interleave evenly.
+  // About 116 petals per 0.1 s frame, ~200 rays each.
+  m.rosette.prism1_hz = 720.0;
+  m.rosette.prism2_hz = -720.0 * 0.6180339887498949;
+  m.min_range_m = 1.0f;   // blind zone in front of the window
+  m.max_range_m = 100.0f;
+  m.range_noise_sigma_m = 0.02f;  // data sheet: 2 cm (1 sigma at 20 m)
+  m.dropout_probability = 0.02f;
+  m.rate_hz = 10.0f;
+  m.mount_height_m = 1.0f;  // handheld or on a small platform
+  return m;
+}
+
 LidarModel lidar_model_by_name(const std::string& name) {
   std::string key = name;
   std::transform(key.begin(), key.end(), key.begin(),
@@ -135,72 +299,23 @@ LidarModel lidar_model_by_name(const std::string& name) {
   if (key == "hdl64e") return hdl64e();
   if (key == "vlp16") return vlp16();
   if (key == "os1-64" || key == "os1_64") return os1_64();
+  if (key == "livox-avia" || key == "livox_avia" || key == "avia") return livox_avia();
   throw std::invalid_argument("unknown LiDAR model '" + name +
-                              "'; valid names: hdl64e, vlp16, os1-64");
+                              "'; valid names: hdl64e, vlp16, os1-64, livox-avia");
+}
+
+SimulatedScan simulate_scan(const RayCaster& caster, const LidarModel& model,
+                            const Pose3d& T_world_sensor, uint64_t seed, double pattern_time_s) {
+  if (model.pattern == ScanPattern::kRosette)
+    return simulate_rosette(caster, model, T_world_sensor, seed, pattern_time_s);
+  return simulate_spinning(caster, model, T_world_sensor, seed);
 }
 
 SimulatedScan simulate_scan(const RayCaster& caster, const LidarModel& model,
                             const Pose3d& T_world_sensor, uint64_t seed) {
-  SimulatedScan scan;
-  const size_t beams = model.elevations_deg.size();
-  const int columns = model.columns;
-  if (beams == 0 || columns <= 0) return scan;
-  scan.points.reserve(model.rays_per_scan());
-  scan.labels.reserve(model.rays_per_scan());
-
-  // Trig once per beam and once per column, never per ray.
-  std::vector<double> cos_el(beams), sin_el(beams);
-  for (size_t i = 0; i < beams; ++i) {
-    const double el = static_cast<double>(model.elevations_deg[i]) * kPi / 180.0;
-    cos_el[i] = std::cos(el);
-    sin_el[i] = std::sin(el);
-  }
-  const Eigen::Matrix3d R = T_world_sensor.linear();
-  const Eigen::Vector3d up_w = R.col(2);
-  const Eigen::Vector3f origin = T_world_sensor.translation().cast<float>();
-  const float min_range = model.min_range_m;
-  const float max_range = model.max_range_m;
-  const double sigma = model.range_noise_sigma_m;
-  const double dropout = model.dropout_probability;
-
-  RayHit hit;
-  for (int col = 0; col < columns; ++col) {
-    const double az = 2.0 * kPi * static_cast<double>(col) / static_cast<double>(columns);
-    const double ca = std::cos(az), sa = std::sin(az);
-    const Eigen::Vector3d horiz_w = R.col(0) * ca + R.col(1) * sa;  // R * (ca, sa, 0)
-    Rng rng(mix_seed(seed, static_cast<uint64_t>(col)));
-    for (size_t i = 0; i < beams; ++i) {
-      // Fixed draws per ray, independent of the outcome.
-      const uint64_t w1 = rng.next_u64();
-      const uint64_t w2 = rng.next_u64();
-      const double u_drop = static_cast<double>(w1 >> 32) * 0x1.0p-32;         // [0, 1)
-      const double u_int = static_cast<double>(w1 & 0xFFFFFFFFu) * 0x1.0p-32;  // [0, 1)
-      if (u_drop < dropout) continue;
-
-      const Eigen::Vector3f dir_w = (horiz_w * cos_el[i] + up_w * sin_el[i]).cast<float>();
-      if (!caster.cast(origin, dir_w, min_range, max_range, &hit)) continue;
-
-      // Gaussian range noise; the uniform is in (0, 1), never 0 or 1.
-      const double u_noise = (static_cast<double>(w2 >> 11) + 0.5) * 0x1.0p-53;
-      const double noise = sigma > 0.0 ? sigma * inverse_normal_cdf(u_noise) : 0.0;
-      const double range = std::max(0.0, static_cast<double>(hit.range_m) + noise);
-      const double h = cos_el[i] * range;
-
-      const float cos_inc = std::fabs(hit.normal.dot(dir_w));
-      float intensity = hit.reflectivity * (0.3f + 0.7f * cos_inc) *
-                        static_cast<float>(0.9 + 0.2 * u_int);
-      intensity = std::min(1.0f, std::max(0.0f, intensity));
-
-      Point p;
-      p.x = static_cast<float>(h * ca);
-      p.y = static_cast<float>(h * sa);
-      p.z = static_cast<float>(sin_el[i] * range);
-      p.intensity = intensity;
-      scan.points.push_back(p);
-      scan.labels.push_back(hit.label);
-    }
-  }
-  return scan;
+  // A start anywhere in the first hour of the pattern, from a stream no ray uses.
+  const double start_s = static_cast<double>(mix_seed(seed, 0x705e77e, 1) >> 11) * 0x1.0p-53 * kRosettePatternSpanS;
+  return simulate_scan(caster, model, T_world_sensor, seed, start_s);
 }
 
 std::vector<SimulatedScan> simulate_scans(const RayCaster& caster, const LidarModel& model, const Poses& T_world_sensor,

@@ -177,13 +177,13 @@ void write_world_png(const std::string& path, const World& world, const World* c
   write_png(path, c.img);
 }
 
-void write_scan_png(const std::string& path, const SimulatedScan& scan, const LidarModel& model,
-                    const std::string& title) {
+namespace {
+
+// Range image of a spinning scan: one row per beam, the highest on top; column j looks at
+// azimuth 2*pi*j/columns, drawn with forward (azimuth 0) in the middle and the left side
+// (+y) to the left of it. Pixels: 255 near .. 1 at 80 m, 0 for no return.
+cv::Mat spinning_range_image(const SimulatedScan& scan, const LidarModel& model) {
   const int beams = static_cast<int>(model.elevations_deg.size());
-  const int width = 1600, row_h = std::max(2, 256 / beams), range_h = beams * row_h;
-  const int bev = 800, title_h = 30;
-  cv::Mat img(title_h + range_h + bev, width, CV_8UC3, cv::Scalar(25, 25, 25));
-  // Range image: one row per beam, azimuth across, coloured by range.
   cv::Mat range(beams, model.columns, CV_8UC1, cv::Scalar(0));
   // Row 0 is the highest beam, whatever order the model lists them in.
   std::vector<int> row_of_beam(beams);
@@ -193,8 +193,6 @@ void write_scan_png(const std::string& path, const SimulatedScan& scan, const Li
   for (const auto& p : scan.points) {
     const double r = std::sqrt(p.x * p.x + p.y * p.y + p.z * p.z);
     const double az = std::atan2(p.y, p.x), el = std::asin(p.z / std::max(r, 1e-6)) * 180.0 / M_PI;
-    // Column j looks at azimuth 2*pi*j/columns; the image puts forward (azimuth 0) in the
-    // middle and the left side (+y) to the left of it.
     const long j = std::lround(az / (2 * M_PI) * model.columns);
     const int col = static_cast<int>(((model.columns / 2 - j) % model.columns + model.columns) % model.columns);
     int beam = 0;
@@ -202,11 +200,46 @@ void write_scan_png(const std::string& path, const SimulatedScan& scan, const Li
       if (std::abs(model.elevations_deg[b] - el) < std::abs(model.elevations_deg[beam] - el)) beam = b;
     range.at<uint8_t>(row_of_beam[beam], col) = static_cast<uint8_t>(std::clamp(255.0 - r * 255.0 / 80.0, 1.0, 255.0));
   }
+  return range;
+}
+
+// Front view of a rosette scan: 0.25 deg cells of azimuth and elevation over its field of
+// view, as seen from behind the sensor (left, +y, to the left). 255 near .. 1 at 40 m (a
+// short-range sensor), 0 for no return.
+cv::Mat rosette_range_image(const SimulatedScan& scan, const LidarModel& model) {
+  constexpr double kCellDeg = 0.25;
+  const double half_h = 0.5 * model.rosette.fov_horizontal_deg, half_v = 0.5 * model.rosette.fov_vertical_deg;
+  const int cols = static_cast<int>(std::ceil(2 * half_h / kCellDeg)), rows = static_cast<int>(std::ceil(2 * half_v / kCellDeg));
+  cv::Mat range(rows, cols, CV_8UC1, cv::Scalar(0));
+  for (const auto& p : scan.points) {
+    const double r = std::sqrt(p.x * p.x + p.y * p.y + p.z * p.z);
+    const double az = std::atan2(p.y, p.x) * 180.0 / M_PI;
+    const double el = std::atan2(p.z, std::hypot(p.x, p.y)) * 180.0 / M_PI;
+    const int col = static_cast<int>(std::floor((half_h - az) / kCellDeg));
+    const int row = static_cast<int>(std::floor((half_v - el) / kCellDeg));
+    if (col < 0 || row < 0 || col >= cols || row >= rows) continue;
+    range.at<uint8_t>(row, col) = static_cast<uint8_t>(std::clamp(255.0 - r * 255.0 / 40.0, 1.0, 255.0));
+  }
+  return range;
+}
+
+}  // namespace
+
+void write_scan_png(const std::string& path, const SimulatedScan& scan, const LidarModel& model,
+                    const std::string& title) {
+  const bool rosette = model.pattern == ScanPattern::kRosette;
+  const cv::Mat range = rosette ? rosette_range_image(scan, model) : spinning_range_image(scan, model);
+  const int beams = range.rows;
+  const int width = 1600, row_h = std::max(2, 256 / beams), range_h = rosette ? 400 : beams * row_h;
+  // A rosette's front view keeps its aspect ratio, centred in the strip.
+  const int range_w = rosette ? static_cast<int>(std::lround(double(range_h) * range.cols / range.rows)) : width;
+  const int bev = 800, title_h = 30;
+  cv::Mat img(title_h + range_h + bev, width, CV_8UC3, cv::Scalar(25, 25, 25));
   cv::Mat range_big, range_colour;
-  cv::resize(range, range_big, cv::Size(width, range_h), 0, 0, cv::INTER_NEAREST);
+  cv::resize(range, range_big, cv::Size(range_w, range_h), 0, 0, cv::INTER_NEAREST);
   cv::applyColorMap(range_big, range_colour, cv::COLORMAP_TURBO);
   range_colour.setTo(cv::Scalar(25, 25, 25), range_big == 0);
-  range_colour.copyTo(img(cv::Rect(0, title_h, width, range_h)));
+  range_colour.copyTo(img(cv::Rect((width - range_w) / 2, title_h, range_w, range_h)));
   // Bird's-eye view, 100 m x 100 m around the sensor, by semantic class.
   cv::Mat top = img(cv::Rect(0, title_h + range_h, bev, bev));
   const double scale = bev / 100.0;
@@ -230,7 +263,8 @@ void write_scan_png(const std::string& path, const SimulatedScan& scan, const Li
     cv::putText(img, name, {bev + 60, y}, cv::FONT_HERSHEY_SIMPLEX, 0.6, cv::Scalar(230, 230, 230), 1, cv::LINE_AA);
     y += 28;
   }
-  cv::putText(img, "top: range image (near = red, far = blue); left: bird's-eye view 100 m x 100 m, forward = up",
+  cv::putText(img, rosette ? "top: front view (near = red, far = blue); left: bird's-eye view 100 m x 100 m, forward = up"
+                          : "top: range image (near = red, far = blue); left: bird's-eye view 100 m x 100 m, forward = up",
               {bev + 30, y + 20}, cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(200, 200, 200), 1, cv::LINE_AA);
   cv::putText(img, title, {10, 21}, cv::FONT_HERSHEY_SIMPLEX, 0.65, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
   write_png(path, img);
