@@ -1,5 +1,6 @@
 // segmatch-sim: generates an urban world, drives it twice and writes KITTI-layout data with
-// exact ground truth (poses, per-point labels, revisits) and pictures.
+// exact ground truth (poses, per-point labels, revisits) and pictures; optionally also the
+// keyframes a SLAM front end would write (PCD scans, poses, drifting odometry).
 #include "segmatch/cli/progress.h"
 #include "segmatch/sim/dataset.h"
 
@@ -41,8 +42,52 @@ void clear_previous_output(const fs::path& out, bool force) {
   if (fs::is_empty(out)) return;
   if (!force)
     throw std::runtime_error(out.string() + " is not empty: pass --force to replace the dataset in it");
-  for (const char* sub : {"sequences", "ground_truth", "world.png", "scan.png", "dataset.json"})
+  for (const char* sub : {"sequences", "keyframes", "ground_truth", "world.png", "scan.png", "dataset.json"})
     fs::remove_all(out / sub);
+}
+
+// The keyframe export's options; the drift is given in percent, the library takes a fraction.
+struct KeyframeOptions {
+  sim::KeyframeConfig config;
+  double odom_drift_pct = config.odom_scale_error * 100.0;
+  sim::KeyframeConfig resolved() const {
+    sim::KeyframeConfig c = config;
+    c.odom_scale_error = odom_drift_pct / 100.0;
+    return c;
+  }
+};
+
+void add_keyframe_options(CLI::App& app, KeyframeOptions* k) {
+  app.add_option("--keyframes-every-m", k->config.every_m,
+                 "also write SLAM-style keyframes to OUT/keyframes/{00,01}: one each time the sensor moved this far "
+                 "(0: none, the default)");
+  app.add_option("--keyframe-leaf-m", k->config.leaf_m, "voxel size of the keyframe downsampling (default 0.2)");
+  app.add_option("--keyframe-frames", k->config.frames,
+                 "scans integrated per keyframe (default: 5 for livox-avia, 1 for spinning sensors)");
+  app.add_option("--odom-drift-pct", k->odom_drift_pct,
+                 "keyframe odom_poses.txt reads every step this % too long (default 0.5; 0 with "
+                 "--odom-yaw-drift-deg-per-m 0: equal to poses.txt)");
+  app.add_option("--odom-yaw-drift-deg-per-m", k->config.odom_yaw_drift_deg_per_m,
+                 "and turns this much left per metre (default 0.01)");
+}
+
+void print_summary(const sim::DatasetConfig& config, const sim::DatasetSummary& s, const std::string& out) {
+  std::printf("world:      %zu objects, %zu primitives, %.1f km of streets\n", s.objects, s.primitives,
+              s.street_length_m / 1000.0);
+  std::printf("sequence 00: %zu scans, %.0f m driven (map run)\n", s.scans[0], s.length_m[0]);
+  std::printf("sequence 01: %zu scans, %.0f m driven; %zu scans within 5 m of sequence 00, %zu more than 30 m away\n",
+              s.scans[1], s.length_m[1], s.revisit_frames, s.unmapped_frames);
+  std::printf("points:     %zu (%.1f per scan)\n", s.points,
+              static_cast<double>(s.points) / std::max<size_t>(1, s.scans[0] + s.scans[1]));
+  std::printf("time:       %s\n", cli::Progress::format_duration(s.seconds).c_str());
+  const bool keyframes = config.keyframes.every_m > 0;
+  if (keyframes)
+    std::printf("keyframes:  %zu + %zu (%.1f points each), every %.1f m\n", s.keyframes[0], s.keyframes[1],
+                static_cast<double>(s.keyframe_points) / std::max<size_t>(1, s.keyframes[0] + s.keyframes[1]),
+                config.keyframes.every_m);
+  std::printf("output:     %s/sequences/{00,01}, %s/ground_truth\n", out.c_str(), out.c_str());
+  if (keyframes) std::printf("            %s/keyframes/{00,01}\n", out.c_str());
+  if (config.write_images) std::printf("pictures:   %s/world.png, %s/scan.png\n", out.c_str(), out.c_str());
 }
 
 }  // namespace
@@ -51,14 +96,20 @@ int main(int argc, char** argv) {
   CLI::App app{"Generate a simulated urban LiDAR dataset (two traversals, KITTI layout, exact ground truth)"};
   std::string preset = "demo", out, sensor;
   uint64_t seed = 1;
-  double first_m = 0, second_m = 0;
+  double first_m = 0, second_m = 0, speed_mps = 0;
+  KeyframeOptions keyframes;
   int threads = 0;
   bool force = false, no_labels = false, no_images = false;
   app.add_option("--preset", preset, "tiny (seconds, tests), demo (~2 km), city (10+ km of streets)")
       ->check(CLI::IsMember(sim::dataset_preset_names()));
   app.add_option("--seed", seed, "world seed: same seed, same bytes");
   app.add_option("-o,--out", out, "output folder (default: out/sim-<preset>-<seed>)");
-  app.add_option("--sensor", sensor, "hdl64e (default), vlp16 or os1-64");
+  app.add_option("--sensor", sensor,
+                 "hdl64e (default), vlp16, os1-64 or livox-avia (rosette scan in a 70.4 x 77.2 deg forward cone, "
+                 "24000 points per 0.1 s frame, never repeating; carried at 1.0 m)");
+  app.add_option("--speed-mps", speed_mps, "cruise speed of both traversals (default 10; e.g. 1.5 for walking)")
+      ->check(CLI::Range(0.3, 40.0));
+  add_keyframe_options(app, &keyframes);
   app.add_option("--length-00-m", first_m, "route length of the first traversal (default from preset)");
   app.add_option("--length-01-m", second_m, "route length of the second traversal (default from preset)");
   app.add_option("--threads", threads, "worker threads (0: one per core)");
@@ -69,7 +120,9 @@ int main(int argc, char** argv) {
 
   try {
     sim::DatasetConfig config = sim::dataset_preset(preset, seed);
-    if (!sensor.empty()) config.sensor = sensor;
+    if (!sensor.empty()) config.use_sensor(sensor);
+    if (speed_mps > 0) config.drive_first.cruise_speed_mps = config.drive_second.cruise_speed_mps = speed_mps;
+    config.keyframes = keyframes.resolved();
     if (first_m > 0) config.first_length_m = first_m;
     if (second_m > 0) config.second_length_m = second_m;
     config.threads = threads;
@@ -83,16 +136,7 @@ int main(int argc, char** argv) {
                  static_cast<unsigned long long>(seed), config.sensor.c_str(), out.c_str());
     StageProgress progress;
     const sim::DatasetSummary s = sim::generate_dataset(config, out, std::ref(progress));
-    std::printf("world:      %zu objects, %zu primitives, %.1f km of streets\n", s.objects, s.primitives,
-                s.street_length_m / 1000.0);
-    std::printf("sequence 00: %zu scans, %.0f m driven (map run)\n", s.scans[0], s.length_m[0]);
-    std::printf("sequence 01: %zu scans, %.0f m driven; %zu scans within 5 m of sequence 00, %zu more than 30 m away\n",
-                s.scans[1], s.length_m[1], s.revisit_frames, s.unmapped_frames);
-    std::printf("points:     %zu (%.1f per scan)\n", s.points,
-                static_cast<double>(s.points) / std::max<size_t>(1, s.scans[0] + s.scans[1]));
-    std::printf("time:       %s\n", cli::Progress::format_duration(s.seconds).c_str());
-    std::printf("output:     %s/sequences/{00,01}, %s/ground_truth\n", out.c_str(), out.c_str());
-    if (config.write_images) std::printf("pictures:   %s/world.png, %s/scan.png\n", out.c_str(), out.c_str());
+    print_summary(config, s, out);
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "segmatch-sim: error: %s\n", e.what());

@@ -9,6 +9,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <exception>
 #include <filesystem>
@@ -100,6 +101,10 @@ size_t simulate_sequence(const DatasetConfig& c, const SequenceJob& job, const f
   const RayCaster caster(job.world->scene());
   if (c.write_labels) fs::create_directories(dir / "labels");
   const size_t total = job.traversal->size();
+  // A rosette's frames continue one pattern along the sequence, from a seeded start within
+  // its first hour.
+  const double pattern_start_s =
+      static_cast<double>(mix_seed(c.world.seed, 0x5ca9 + job.index, 0x7153) >> 11) * 0x1.0p-53 * 3600.0;
   std::atomic<size_t> next{0}, done{0}, points{0};
   std::exception_ptr error;
   std::mutex error_mutex;
@@ -107,7 +112,8 @@ size_t simulate_sequence(const DatasetConfig& c, const SequenceJob& job, const f
     try {
       for (size_t i; (i = next++) < total && !error;) {
         const uint64_t seed = mix_seed(c.world.seed, 0x5ca9 + job.index, i);
-        SimulatedScan scan = simulate_scan(caster, model, job.traversal->T_world_lidar[i], seed);
+        SimulatedScan scan = simulate_scan(caster, model, job.traversal->T_world_lidar[i], seed,
+                                           pattern_start_s + job.traversal->times_s[i]);
         io::write_kitti_bin((dir / "velodyne" / frame_name(i, ".bin")).string(), scan.points);
         if (c.write_labels) io::write_kitti_labels((dir / "labels" / frame_name(i, ".label")).string(), scan.labels);
         points += scan.points.size();
@@ -137,6 +143,36 @@ size_t simulate_sequence(const DatasetConfig& c, const SequenceJob& job, const f
   return points;
 }
 
+// Scans per keyframe, with 0 resolved to the sensor's default.
+int keyframe_scan_count(const DatasetConfig& c) {
+  return c.keyframes.frames > 0 ? c.keyframes.frames : default_keyframe_frames(lidar_model_by_name(c.sensor));
+}
+
+// Keyframes of sequence NN, made from its scans as written in sequences/NN (so they hold
+// exactly the points of the KITTI layout), and their ground truth in the shared world frame.
+KeyframeSummary write_sequence_keyframes(const DatasetConfig& c, int index, const Traversal& t, const fs::path& out,
+                                         const ProgressFn& progress) {
+  const std::string nn = index == 0 ? "00" : "01";
+  const fs::path seq = out / "sequences" / nn;
+  if (progress) progress("keyframes " + nn, 0, 1);
+  KeyframeConfig kc = c.keyframes;
+  kc.frames = keyframe_scan_count(c);
+  kc.write_labels = c.write_labels;
+  const ScanSource read_back = [&](size_t f) {
+    SimulatedScan s;
+    s.points = io::read_kitti_bin((seq / "velodyne" / frame_name(f, ".bin")).string()).points;
+    if (kc.write_labels) s.labels = io::read_kitti_labels((seq / "labels" / frame_name(f, ".label")).string());
+    return s;
+  };
+  KeyframeSummary k = write_keyframes(t, read_back, kc, (out / "keyframes" / nn).string());
+  io::write_kitti_poses((out / "ground_truth" / ("keyframe_poses_" + nn + ".txt")).string(), k.T_world_keyframe);
+  std::string frames;
+  for (size_t f : k.frames) frames += std::to_string(f) + "\n";
+  write_text(out / "ground_truth" / ("keyframe_frames_" + nn + ".txt"), frames);
+  if (progress) progress("keyframes " + nn, 1, 1);
+  return k;
+}
+
 nlohmann::json describe(const DatasetConfig& c, const World& w, const DatasetSummary& s,
                         const Traversal* t[2]) {
   nlohmann::json j;
@@ -159,13 +195,27 @@ nlohmann::json describe(const DatasetConfig& c, const World& w, const DatasetSum
   j["revisits"] = {{"frames_01_within_5m_of_00", s.revisit_frames},
                    {"frames_01_beyond_30m_of_00", s.unmapped_frames}};
   j["points"] = s.points;
+  if (c.keyframes.every_m > 0)
+    j["keyframes"] = {{"every_m", c.keyframes.every_m}, {"leaf_m", c.keyframes.leaf_m},
+                      {"frames", keyframe_scan_count(c)},
+                      {"odom_scale_error", c.keyframes.odom_scale_error},
+                      {"odom_yaw_drift_deg_per_m", c.keyframes.odom_yaw_drift_deg_per_m},
+                      {"count", {s.keyframes[0], s.keyframes[1]}}, {"points", s.keyframe_points}};
   return j;
 }
 
 }  // namespace
 
+void DatasetConfig::use_sensor(const std::string& name) {
+  const LidarModel model = lidar_model_by_name(name);
+  sensor = name;
+  // To the mm: 1.73f becomes exactly the 1.73 the traversals default to.
+  drive_first.sensor_height_m = drive_second.sensor_height_m = std::round(model.mount_height_m * 1000.0) / 1000.0;
+}
+
 void DatasetConfig::validate() const {
   world.validate();
+  keyframes.validate();
   lidar_model_by_name(sensor);  // throws on an unknown name
   if (!(first_length_m >= 50.0 && first_length_m <= 200000.0))
     throw std::invalid_argument("first traversal length must be in 50..200000 m");
@@ -245,6 +295,11 @@ DatasetSummary generate_dataset(const DatasetConfig& c, const std::string& out_d
   for (int k = 0; k < 2; ++k) {
     const fs::path dir = out / "sequences" / (k == 0 ? "00" : "01");
     s.points += simulate_sequence(c, {worlds[k], trav[k], k}, dir, progress, k == 1 ? &shown : nullptr, shown_frame);
+    if (c.keyframes.every_m > 0) {
+      const KeyframeSummary kf = write_sequence_keyframes(c, k, *trav[k], out, progress);
+      s.keyframes[k] = kf.frames.size();
+      s.keyframe_points += kf.points;
+    }
   }
   if (c.write_images) {
     write_world_png((out / "world.png").string(), world, &changed, first, &second);

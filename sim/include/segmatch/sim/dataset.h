@@ -11,8 +11,15 @@
 //   OUT/ground_truth/revisits_01_00.txt    per scan of 01: nearest scan of 00, distance, heading diff
 //   OUT/ground_truth/objects_NN.csv        every object: instance, kind, position, size
 //   OUT/world.png, OUT/scan.png, OUT/dataset.json
+//
+// With keyframes (KeyframeConfig::every_m > 0), also as a SLAM front end writes them (see
+// keyframes.h), made from the scans above:
+//   OUT/keyframes/NN/scans/NNNNNN.pcd, poses.txt, odom_poses.txt, times.txt
+//   OUT/ground_truth/keyframe_poses_NN.txt   T_world_lidar per keyframe (shared world frame)
+//   OUT/ground_truth/keyframe_frames_NN.txt  the scan of sequences/NN each keyframe ends at
 #pragma once
 
+#include "segmatch/sim/keyframes.h"
 #include "segmatch/sim/lidar.h"
 #include "segmatch/sim/traversal.h"
 #include "segmatch/sim/world.h"
@@ -35,7 +42,11 @@ struct DatasetConfig {
   int threads = 0;                  // 0: one per core
   bool write_labels = true;
   bool write_images = true;
+  KeyframeConfig keyframes;         // every_m 0 (default): no keyframes
 
+  // Sets the sensor and drives both traversals with it at its mount height (to the mm), e.g.
+  // 1.0 m for the handheld livox-avia. Throws std::invalid_argument on an unknown name.
+  void use_sensor(const std::string& name);
   void validate() const;  // throws std::invalid_argument naming the bad field
 };
 
@@ -53,6 +64,8 @@ struct DatasetSummary {
   double street_length_m = 0;
   size_t revisit_frames = 0;        // frames of 01 within 5 m of a frame of 00
   size_t unmapped_frames = 0;       // frames of 01 more than 30 m from every frame of 00
+  size_t keyframes[2] = {0, 0};     // with keyframes
+  size_t keyframe_points = 0;
   double seconds = 0;
 };
 
