@@ -10,6 +10,7 @@
 #include "segmatch/core/training.h"
 #include "segmatch/eval/real_pairs.h"
 #include "segmatch/io/error.h"
+#include "segmatch/io/auto_profile.h"
 #include "segmatch/io/pipeline_config.h"
 #include "segmatch/sim/city.h"
 
@@ -110,12 +111,16 @@ int main(int argc, char** argv) {
   app.add_option("--real", real_dir,
                  "train on a real keyframe folder instead (e.g. ../shared/data/real/riverside02): map side from the even "
                  "keyframes, queries from the odd ones, labels by centroid distance; every 3rd 300 m stretch of the drive "
-                 "is held out (default config: the sparse-keyframes preset)");
+                 "is held out (default config: the auto profile measured from that folder)");
   app.add_option("--baseline", baselines, "also report these existing model files on the same held-out pairs");
   CLI11_PARSE(app, argc, argv);
   try {
+    // Default: the auto profile. Simulated HDL-64E scans measure as dense-spinning, i.e. the
+    // kitti-hdl64 values, so only a real folder is measured.
     io::PipelineConfig config = !config_path.empty() ? io::read_pipeline_config(config_path)
-                                : io::pipeline_preset(real_dir.empty() ? "kitti-hdl64" : "sparse-keyframes");
+                                : real_dir.empty()   ? io::pipeline_preset("kitti-hdl64")
+                                                     : io::auto_pipeline_config(io::measure_sequence(io::Sequence::open(real_dir)));
+    if (config.measured) std::printf("%s\n", io::describe_profile(config).c_str());
     config.localizer.matcher.use_shapes = !eigen_only;
     if (eigen_only) config.localizer.matcher.rf_threshold = 0.81f;  // paper Table I
     config.validate();

@@ -41,6 +41,8 @@ void LoopDetectorConfig::validate() const {
   if (rebuild_every_local_clouds < 1) throw std::invalid_argument("rebuild_every_local_clouds must be >= 1");
   if (!(max_drift_m >= 0.0) || !std::isfinite(max_drift_m))
     throw std::invalid_argument("max_drift_m must be finite and >= 0 (0: no bound)");
+  if (!(max_drift_fraction >= 0.0 && max_drift_fraction < 1.0))
+    throw std::invalid_argument("max_drift_fraction must be in [0, 1) (0: a fixed bound)");
   if (!(max_drift_deg >= 0.0) || !std::isfinite(max_drift_deg)) throw std::invalid_argument("max_drift_deg must be finite and >= 0");
 }
 
@@ -166,9 +168,10 @@ void LoopDetector::Impl::match(const PointCloud& cloud, const Pose3d& T_odom_sen
   }
   step.eligible_targets = localizer->targets().size();
   // The map is in the odometry frame: the odometry's own guess is the identity.
-  const PosePrior odometry{Pose3d::Identity(), config.max_drift_m, config.max_drift_deg};
+  const double bound_m = config.drift_bound_m(now.odometer_m);
+  const PosePrior odometry{Pose3d::Identity(), bound_m, config.max_drift_deg};
   LocalizationResult r =
-      localizer->localize(cloud, sensor, CloudKind::kVoxelized, config.max_drift_m > 0.0 ? &odometry : nullptr);
+      localizer->localize(cloud, sensor, CloudKind::kVoxelized, bound_m > 0.0 ? &odometry : nullptr);
   step.timings = r.timings;
   query = std::move(r.query);
   if (!r.localized()) {

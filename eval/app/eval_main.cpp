@@ -3,6 +3,7 @@
 //   segmatch-eval classifier ROC of L2, RF_eigen, RF_eigen+shapes on a held-out simulated city
 //                            (or, with --real, on the held-out stretches of a real recording)
 #include "segmatch/api/client.h"
+#include "segmatch/eval/funnel.h"
 #include "segmatch/eval/localization_run.h"
 #include "segmatch/eval/real_pairs.h"
 #include "segmatch/eval/roc.h"
@@ -145,12 +146,22 @@ int main(int argc, char** argv) {
   loc->add_option("--server", server, "HOST:PORT of segmatch-server (default: localize in-process)");
   loc->add_option("--token-file", token_file, "file holding the server's shared secret");
   loc->add_option("--every-m", lc.replay.every_m, "one query every this many metres");
+  loc->add_option("--warmup-m", lc.replay.warmup_m, "no query before this much driving (default 30)");
   loc->add_option("--first", lc.replay.first, "first scan");
   loc->add_option("--last", lc.replay.last, "last scan");
   loc->add_option("--stride", lc.replay.stride, "use every n-th scan");
   loc->add_option("--mapped-radius-m", lc.thresholds.mapped_radius_m, "a street is mapped within this of the map trajectory");
   loc->add_flag("!--quiet", lc.print_each, "no line per query");
   loc->add_option("--out", out_dir, "report folder (JSON + PNG)");
+  eval::LocalizationRunConfig fc;
+  auto* fun = app.add_subcommand("funnel", "where true matches are lost: segments, counterparts, retrieved, classified");
+  fun->add_option("--map", fc.map_path, "map database")->required();
+  fun->add_option("--query", fc.query_folder, "sequence to replay; its poses are the ground truth in the map frame")->required();
+  fun->add_option("--every-m", fc.replay.every_m, "one query every this many metres");
+  fun->add_option("--warmup-m", fc.replay.warmup_m, "no query before this much driving (default 30)");
+  fun->add_option("--first", fc.replay.first, "first scan");
+  fun->add_option("--last", fc.replay.last, "last scan");
+  fun->add_option("--stride", fc.replay.stride, "use every n-th scan");
   ClassifierOptions co;
   auto* cls = app.add_subcommand("classifier", "ROC curves of the match classifiers on a held-out simulated city or real stretches");
   cls->add_option("--model", co.model_shapes, "RF_eigen+shapes model file");
@@ -167,6 +178,13 @@ int main(int argc, char** argv) {
     if (*loc) {
       if (lc.query_folder.empty() == lc.sim_dataset.empty()) throw std::runtime_error("give exactly one of --query and --sim");
       return run_localize(lc, server, token_file, out_dir);
+    }
+    if (*fun) {
+      const auto loaded = server::load_map(fc.map_path);
+      fc.replay.local_cloud = loaded->config.local_cloud;
+      fc.replay.voxel = loaded->config.localizer.segmentation.voxel;
+      eval::print_funnel(eval::run_funnel(fc, *loaded->localizer), loaded->config.localizer.verification.min_inliers);
+      return 0;
     }
     return run_classifier(co);
   } catch (const std::exception& e) {

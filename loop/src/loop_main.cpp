@@ -7,6 +7,7 @@
 
 #include <segmatch/cli/progress.h>
 #include <segmatch/core/loop_closure.h>
+#include <segmatch/io/auto_profile.h>
 #include <segmatch/io/pipeline_config.h>
 #include <segmatch/io/pose_io.h>
 #include <segmatch/io/sequence.h>
@@ -45,10 +46,18 @@ std::string read_file(const std::string& path) {
   return s.str();
 }
 
-// The preset's (or config's) stages and loop settings, then the options given.
-LoopDetectorConfig detector_config(const Options& o) {
-  const io::PipelineConfig p = o.config_path.empty() ? io::pipeline_preset(o.preset.empty() ? "kitti-hdl64" : o.preset)
-                                                     : io::read_pipeline_config(o.config_path);
+// The config file or preset given, else (and with --preset auto) the parameters derived from
+// measuring the scans used (io/auto_profile.h).
+io::PipelineConfig pipeline_config(const Options& o, const io::Sequence& seq, size_t first, size_t last) {
+  if (!o.config_path.empty()) return io::read_pipeline_config(o.config_path);
+  if (!o.preset.empty() && o.preset != "auto") return io::pipeline_preset(o.preset);
+  io::PipelineConfig p = io::auto_pipeline_config(io::measure_sequence(seq, first, last));
+  std::printf("%s\n", io::describe_profile(p).c_str());
+  return p;
+}
+
+// The pipeline's stages and loop settings, then the options given.
+LoopDetectorConfig detector_config(const Options& o, const io::PipelineConfig& p) {
   LoopDetectorConfig c = io::loop_detector_config(p);
   if (o.radius_m > 0) c.local_cloud.radius_m = o.radius_m;
   if (o.every_m > 0) c.local_cloud_every_m = o.every_m;
@@ -56,14 +65,16 @@ LoopDetectorConfig detector_config(const Options& o) {
   if (o.exclude_s >= 0) c.exclude_recent_time_s = o.exclude_s;
   if (o.min_inliers > 0) c.min_inliers = o.min_inliers;
   if (o.min_confidence >= 0) c.min_confidence = static_cast<float>(o.min_confidence);
-  if (o.max_drift_m >= 0) c.max_drift_m = o.max_drift_m;
+  if (o.max_drift_m >= 0) c.max_drift_m = o.max_drift_m, c.max_drift_fraction = 0.0;
   if (o.max_drift_deg >= 0) c.max_drift_deg = o.max_drift_deg;
   if (o.history_m > 0) c.local_cloud_history_m = o.history_m;
   else c.local_cloud_history_m = std::min(c.local_cloud_history_m, c.exclude_recent_distance_m);
   std::printf("%s loop settings: a local cloud every %.1f m, recent past %.0f m, history %.0f m, >= %d inliers, "
-              "confidence >= %.2f, drift bound %.1f m / %.1f deg%s\n",
+              "confidence >= %.2f, drift bound %.1f m%s / %.1f deg%s\n",
               p.preset.c_str(), c.local_cloud_every_m, c.exclude_recent_distance_m, c.local_cloud_history_m,
-              c.min_inliers, c.min_confidence, c.max_drift_m, c.max_drift_deg, c.max_drift_m > 0 ? "" : " (off)");
+              c.min_inliers, c.min_confidence, c.max_drift_m,
+              c.max_drift_fraction > 0 ? (" or " + std::to_string(c.max_drift_fraction * 100).substr(0, 4) + " % of the distance driven").c_str() : "",
+              c.max_drift_deg, c.max_drift_m > 0 ? "" : " (off)");
   return c;
 }
 
@@ -135,9 +146,6 @@ void write_text(const std::string& path, const std::string& text) {
 }
 
 int run_main(Options o) {
-  LoopDetectorConfig config = detector_config(o);
-  if (!o.revisit_gap_given) o.eval.min_revisit_gap_m = config.exclude_recent_distance_m;
-  const auto classifier = pick_matcher(o, config);
   io::SequenceOptions so;
   so.poses_path = o.odometry;
   const io::Sequence seq = io::Sequence::open(o.input, so);
@@ -146,6 +154,9 @@ int run_main(Options o) {
   if (o.first < 0 || o.first > last || last >= n)
     throw std::invalid_argument("--first " + std::to_string(o.first) + " --last " + std::to_string(last) +
                                 " outside the sequence's frames 0.." + std::to_string(n - 1));
+  LoopDetectorConfig config = detector_config(o, pipeline_config(o, seq, static_cast<size_t>(o.first), static_cast<size_t>(last)));
+  if (!o.revisit_gap_given) o.eval.min_revisit_gap_m = config.exclude_recent_distance_m;
+  const auto classifier = pick_matcher(o, config);
   fs::create_directories(o.out);
   LoopDetector detector(config, classifier);
   std::printf("%s: %ld scans, local cloud every %.1f m (radius %.0f m), recent past %.0f m / %.0f s excluded\n",
@@ -178,7 +189,7 @@ int main(int argc, char** argv) {
   Options o;
   app.add_option("--input", o.input, "sequence folder (KITTI velodyne/ or PCD keyframes scans/)")->required();
   auto* config_opt = app.add_option("--config", o.config_path, "pipeline config JSON");
-  app.add_option("--preset", o.preset, "pipeline preset: kitti-hdl64 (default), sparse-keyframes, livox-keyframes")->excludes(config_opt);
+  app.add_option("--preset", o.preset, "pipeline preset: auto (default: measured from the input), kitti-hdl64, sparse-keyframes, livox-keyframes")->excludes(config_opt);
   app.add_option("--classifier", o.classifier, "random forest model (default: maps/models/default-rf.yml if present)");
   app.add_flag("--l2", o.l2, "use the L2 feature-distance matcher instead of a random forest");
   app.add_option("--odometry", o.odometry, "odometry poses (KITTI 12 numbers) instead of the sequence's poses.txt");

@@ -3,6 +3,7 @@
 #include <segmatch/cli/progress.h>
 #include <segmatch/core/map_builder.h>
 #include <segmatch/core/matcher.h>
+#include <segmatch/io/auto_profile.h>
 #include <segmatch/io/pipeline_config.h>
 #include <segmatch/io/sequence.h>
 #include <segmatch/storage/map_writer.h>
@@ -31,13 +32,20 @@ void check_output(const BuildOptions& o) {
   if (!fs::is_directory(folder)) throw UsageError("output folder " + folder.string() + " does not exist");
 }
 
-io::PipelineConfig load_config(const BuildOptions& o) {
+// A config file or a named preset as given; otherwise (or with --preset auto) the scans to be
+// used are measured and the parameters derived from them (io/auto_profile.h).
+io::PipelineConfig load_config(const BuildOptions& o, const io::Sequence& seq, size_t first, size_t last, size_t stride) {
   if (!o.config_path.empty()) return io::read_pipeline_config(o.config_path);
-  try {
-    return o.preset.empty() ? io::PipelineConfig{} : io::pipeline_preset(o.preset);
-  } catch (const std::invalid_argument& e) {
-    throw UsageError(std::string("--preset: ") + e.what());
+  if (!o.preset.empty() && o.preset != "auto") {
+    try {
+      return io::pipeline_preset(o.preset);
+    } catch (const std::invalid_argument& e) {
+      throw UsageError(std::string("--preset: ") + e.what());
+    }
   }
+  io::PipelineConfig c = io::auto_pipeline_config(io::measure_sequence(seq, first, last, stride));
+  std::fprintf(o.print_config ? stderr : stdout, "%s\n", io::describe_profile(c).c_str());
+  return c;
 }
 
 MapBuilderConfig builder_config(const io::PipelineConfig& pipeline, double map_every_m) {
@@ -122,13 +130,17 @@ void print_summary(const MapBuilder& b, size_t scans, double seconds, const std:
 
 int build_map(const BuildOptions& o, const volatile std::sig_atomic_t* stop_signal) {
   const auto start = std::chrono::steady_clock::now();
-  check_output(o);
-  const io::PipelineConfig config = load_config(o);
-  MapBuilder builder(builder_config(config, o.map_every_m));
-  const std::optional<storage::ClassifierBlob> classifier = load_classifier(o);
+  if (!o.print_config) check_output(o);
   if (!fs::is_directory(o.input)) throw UsageError("input folder " + o.input + " does not exist");
   const io::Sequence seq = io::Sequence::open(o.input);
   const ScanRange range = scan_range(o, seq);
+  const io::PipelineConfig config = load_config(o, seq, range.first, range.last, range.stride);
+  MapBuilder builder(builder_config(config, o.map_every_m));
+  if (o.print_config) {
+    std::printf("%s\n", io::to_json(config).c_str());
+    return 0;
+  }
+  const std::optional<storage::ClassifierBlob> classifier = load_classifier(o);
 
   // Created before the loop: an unwritable target fails now, and an interrupted build leaves
   // nothing behind (the writer's destructor deletes its temporary file).

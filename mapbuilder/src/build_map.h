@@ -21,7 +21,8 @@ struct BuildOptions {
   std::string input;            // sequence folder (KITTI or PCD keyframes)
   std::string output;           // map file
   std::string config_path;      // pipeline config JSON (empty: preset)
-  std::string preset;           // pipeline preset (empty: the default, kitti-hdl64)
+  std::string preset;           // pipeline preset (empty or "auto": measured from the input)
+  bool print_config = false;    // print the chosen config as JSON and build nothing
   std::string classifier_path;  // empty: the default model if present
   bool no_classifier = false;
   std::string name;             // map name (empty: the output file's stem)

@@ -40,10 +40,14 @@ int main(int argc, char** argv) {
   size_t first = 0, last = 0;
   app.add_option("-i,--input", o.input, "sequence folder: KITTI (velodyne/, poses.txt, calib.txt) or PCD keyframes")
       ->required();
-  app.add_option("-o,--output", o.output, "map file to write (e.g. map.sqlite)")->required();
+  auto* output = app.add_option("-o,--output", o.output, "map file to write (e.g. map.sqlite)");
   auto* config = app.add_option("--config", o.config_path, "pipeline config JSON (see io/pipeline_config.h)");
-  app.add_option("--preset", o.preset, "pipeline preset: kitti-hdl64 (default), sparse-keyframes or livox-keyframes")
+  app.add_option("--preset", o.preset,
+                 "pipeline preset: auto (default: measured from the input), kitti-hdl64, sparse-keyframes or livox-keyframes")
       ->excludes(config);
+  auto* print = app.add_flag("--print-config", o.print_config,
+                             "print the chosen pipeline config as JSON (to reuse with --config) and build nothing");
+  output->excludes(print);
   auto* first_opt = app.add_option("--first", first, "first scan index (default 0)");
   auto* last_opt = app.add_option("--last", last, "last scan index, inclusive (default: the last scan)");
   app.add_option("--stride", o.stride, "use every N-th scan of the range (default 1)");
@@ -59,6 +63,10 @@ int main(int argc, char** argv) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
     app.exit(e);
+    return 2;
+  }
+  if (!o.print_config && o.output.empty()) {
+    std::fprintf(stderr, "segmatch-mapbuilder: error: --output is required\n");
     return 2;
   }
   if (first_opt->count()) o.first = first;

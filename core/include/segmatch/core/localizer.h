@@ -127,6 +127,8 @@ class Localizer {
 
   const Segments& targets() const { return targets_; }
   const LocalizerConfig& config() const { return config_; }
+  const FeatureIndex& feature_index() const { return index_; }
+  const RandomForestMatcher* classifier() const { return classifier_.get(); }
 
  private:
   LocalizerConfig config_;

@@ -30,6 +30,8 @@
 // Knows no files: the caller feeds scans and odometry poses.
 #pragma once
 
+#include <algorithm>
+
 #include "segmatch/core/local_cloud.h"
 #include "segmatch/core/localizer.h"
 #include "segmatch/core/segment_map.h"
@@ -84,6 +86,15 @@ struct LoopDetectorConfig {
   // drift the same way (used only with max_drift_m > 0; see PosePrior).
   double max_drift_m = 0.0;
   double max_drift_deg = 5.0;
+  // The same bound stated for odometry in general rather than for one recording: if > 0, the
+  // bound is max(max_drift_m, max_drift_fraction * distance driven so far). Without pose-graph
+  // corrections fed back, the drift against any past view is at most the drift accumulated
+  // since the start, which grows with the distance driven (LIO: ~1 % of it).
+  double max_drift_fraction = 0.0;
+  // The bound in force after driving odometer_m (0: no bound).
+  double drift_bound_m(double odometer_m) const {
+    return max_drift_fraction > 0.0 ? std::max(max_drift_m, max_drift_fraction * odometer_m) : max_drift_m;
+  }
   // The target index (k-d tree, centroid grid) is rebuilt at most once per this many local
   // clouds, and only when segments aged out of the recent-past window since the last build.
   // Segments that aged out since then are not matched until the next build.

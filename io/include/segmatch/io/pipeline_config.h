@@ -22,11 +22,13 @@
 // units and defaults).
 #pragma once
 
+#include <segmatch/core/input_profile.h>
 #include <segmatch/core/local_cloud.h>
 #include <segmatch/core/loop_closure.h>
 #include <segmatch/core/localizer.h>
 #include <segmatch/core/segment_map.h>
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -39,11 +41,17 @@ struct PipelineConfig {
   LocalCloudConfig local_cloud;
   LocalizerConfig localizer;
   SegmentMapConfig segment_map;
+  // With the "auto" profile: what the input measured like (io/auto_profile.h). Stored in the
+  // map's parameters as "measured" so that a reader sees why these values were chosen.
+  std::optional<InputMeasurements> measured;
   // Throws std::invalid_argument naming the offending field.
   void validate() const;
 };
 
 // Presets:
+//   "auto"             the default of the tools that read an input: measured and derived by
+//                      io::auto_pipeline_config (auto_profile.h); without measurements (a
+//                      config file saying "auto") it starts from kitti-hdl64's values;
 //   "kitti-hdl64"      the paper's parameters (Table I, section IV-A) for a dense 64-beam
 //                      sensor whose raw scans are accumulated (the default);
 //   "sparse-keyframes" keyframes already voxel-downsampled by a SLAM front end (~0.2 m point
@@ -58,7 +66,10 @@ PipelineConfig pipeline_preset(const std::string& name);
 std::vector<std::string> pipeline_preset_names();
 
 // Online loop closure from a pipeline config: its stages, plus the loop-closure settings that
-// go with its preset (a JSON config holds none). "livox-keyframes" brings those it was tuned
+// go with its preset (a JSON config holds none). "auto" measured as narrow-fov brings the
+// livox-keyframes loop settings stated generically: the recent past and history are 2.5 times
+// the measured median range, and the drift bound grows with the distance driven (1.5 % of
+// it, at least 0.5 m; 2 deg). "livox-keyframes" brings those it was tuned
 // with on hku-loop1: a local cloud every metre, 25 m of recent past and of history, >= 4
 // inliers, confidence >= 0.3, odometry drift bound 1 m / 2 deg. The other presets keep
 // LoopDetectorConfig's defaults.

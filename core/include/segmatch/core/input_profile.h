@@ -1,0 +1,55 @@
+// What an input looks like, measured from its scans and poses (issue 14: the `auto` profile).
+// A sensor class is told by its geometry, not by a name the user has to know: how much of the
+// horizon a scan covers (a spinning LiDAR 360 deg, a Livox Avia ~70 deg), how far it sees, how
+// far apart its points are, and whether a SLAM front end already voxel-downsampled it (then
+// the nearest neighbour of almost every point sits about one leaf away, even close to the
+// sensor, where a raw scan's points are centimetres apart).
+#pragma once
+
+#include "segmatch/core/types.h"
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+namespace segmatch {
+
+struct InputMeasurements {
+  size_t scans_measured = 0;
+  double points_per_scan = 0;        // median
+  double azimuth_coverage = 0;       // fraction of 1-degree azimuth bins holding points (median)
+  double elevation_min_deg = 0;      // 1st / 99th percentile of point elevations (median over scans)
+  double elevation_max_deg = 0;
+  double range_p50_m = 0;            // median and 95th percentile of point ranges (median over scans)
+  double range_p95_m = 0;
+  double spacing_p10_m = 0;          // nearest-neighbour distance within a scan: 10th percentile
+  double spacing_p50_m = 0;          // and median (over sampled points of every measured scan)
+  double spacing_per_range = 0;      // median of nearest-neighbour distance / range (angular step)
+  double scan_distance_m = 0;        // median distance between consecutive scans' positions
+  bool downsampled = false;          // spacing_p10_m >= kDownsampledSpacingM
+  bool wide_fov = false;             // azimuth_coverage >= kWideFovCoverage
+  // A raw scan has its 10th-percentile neighbour a few centimetres away (hku-loop1 / hku-mb:
+  // 0.023 / 0.029 m); keyframes voxelized at 0.2 m have it near half the leaf (riverside02:
+  // 0.096 m), centroids of neighbouring voxels being closer than the leaf.
+  static constexpr double kDownsampledSpacingM = 0.06;
+  static constexpr double kWideFovCoverage = 0.6;
+  // "dense-spinning", "sparse-spinning" (keyframes of a 360-degree sensor), "narrow-fov".
+  std::string sensor_class() const;
+};
+
+struct InputProfileConfig {
+  size_t max_scans = 24;            // scans measured, spread evenly over the input
+  size_t sample_points = 3000;      // points per scan whose nearest neighbour is measured
+  void validate() const;
+};
+
+// Measures a sample of scans (sensor frame; scans_to_measure() picks them) and the poses of
+// every scan of the input in order (T_world_sensor; may be empty: then scan_distance_m stays 0).
+// Throws std::invalid_argument when no scan holds 10 finite points.
+InputMeasurements measure_input(const std::vector<PointCloud>& scans, const Poses& T_world_sensor,
+                                const InputProfileConfig& config = {});
+
+// Which scans measure_input() looks at when given `count` of them (indices, increasing).
+std::vector<size_t> scans_to_measure(size_t count, const InputProfileConfig& config = {});
+
+}  // namespace segmatch

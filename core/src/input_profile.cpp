@@ -1,0 +1,125 @@
+#include "segmatch/core/input_profile.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <unordered_map>
+
+namespace segmatch {
+namespace {
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0.0;
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(p * static_cast<double>(v.size() - 1) + 0.5));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return v[k];
+}
+
+// Nearest-neighbour distances of up to n evenly strided points of a scan, by a hash grid of
+// cell `cell_m` (neighbours farther than one cell are reported as cell_m: only the small
+// spacings matter for telling raw from downsampled).
+std::vector<double> nearest_neighbour_distances(const PointCloud& scan, size_t n, double cell_m,
+                                                std::vector<double>* ranges_of_sampled) {
+  auto key = [cell_m](double x, double y, double z) {
+    const auto c = [cell_m](double v) { return static_cast<int64_t>(std::floor(v / cell_m)) & 0x1FFFFF; };
+    return (c(x) << 42) | (c(y) << 21) | c(z);
+  };
+  std::unordered_multimap<int64_t, uint32_t> grid;
+  grid.reserve(scan.size());
+  for (uint32_t i = 0; i < scan.size(); ++i) grid.emplace(key(scan[i].x, scan[i].y, scan[i].z), i);
+  std::vector<double> out;
+  const size_t step = std::max<size_t>(1, scan.size() / std::max<size_t>(1, n));
+  for (size_t i = 0; i < scan.size(); i += step) {
+    const Point& p = scan[i];
+    double best = cell_m;
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dz = -1; dz <= 1; ++dz) {
+          const auto range = grid.equal_range(key(p.x + dx * cell_m, p.y + dy * cell_m, p.z + dz * cell_m));
+          for (auto it = range.first; it != range.second; ++it) {
+            if (it->second == i) continue;
+            const Point& q = scan[it->second];
+            best = std::min(best, static_cast<double>((q.xyz() - p.xyz()).norm()));
+          }
+        }
+    out.push_back(best);
+    if (ranges_of_sampled) ranges_of_sampled->push_back(p.xyz().norm());
+  }
+  return out;
+}
+
+}  // namespace
+
+std::string InputMeasurements::sensor_class() const {
+  if (!wide_fov) return "narrow-fov";
+  return downsampled ? "sparse-spinning" : "dense-spinning";
+}
+
+void InputProfileConfig::validate() const {
+  if (max_scans == 0) throw std::invalid_argument("max_scans must be > 0");
+  if (sample_points == 0) throw std::invalid_argument("sample_points must be > 0");
+}
+
+std::vector<size_t> scans_to_measure(size_t count, const InputProfileConfig& config) {
+  std::vector<size_t> out;
+  if (count == 0) return out;
+  const size_t n = std::min(count, config.max_scans);
+  for (size_t k = 0; k < n; ++k) out.push_back(n == 1 ? 0 : k * (count - 1) / (n - 1));
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+InputMeasurements measure_input(const std::vector<PointCloud>& scans, const Poses& T_world_sensor,
+                                const InputProfileConfig& config) {
+  config.validate();
+  if (scans.empty()) throw std::invalid_argument("measure_input: no scans");
+  constexpr double kRadToDeg = 180.0 / M_PI;
+  std::vector<double> points, coverage, el_lo, el_hi, r50, r95, spacing, per_range, steps;
+  for (size_t s = 0; s < scans.size(); ++s) {
+    const PointCloud& scan = scans[s];
+    if (scan.size() < 10) continue;
+    std::vector<bool> bins(360, false);
+    std::vector<double> elevation, range;
+    elevation.reserve(scan.size()), range.reserve(scan.size());
+    for (const Point& p : scan) {
+      const double r = p.xyz().norm(), rxy = std::hypot(p.x, p.y);
+      if (!(r > 0.1) || !std::isfinite(r)) continue;
+      range.push_back(r);
+      elevation.push_back(std::atan2(p.z, rxy) * kRadToDeg);
+      const int bin = static_cast<int>(std::floor(std::atan2(p.y, p.x) * kRadToDeg + 180.0)) % 360;
+      bins[static_cast<size_t>(std::max(0, bin))] = true;
+    }
+    if (range.size() < 10) continue;
+    points.push_back(static_cast<double>(scan.size()));
+    coverage.push_back(static_cast<double>(std::count(bins.begin(), bins.end(), true)) / 360.0);
+    el_lo.push_back(percentile(elevation, 0.01));
+    el_hi.push_back(percentile(elevation, 0.99));
+    r50.push_back(percentile(range, 0.5));
+    r95.push_back(percentile(range, 0.95));
+    std::vector<double> ranges;
+    const std::vector<double> nn = nearest_neighbour_distances(scan, config.sample_points, 1.0, &ranges);
+    spacing.insert(spacing.end(), nn.begin(), nn.end());
+    for (size_t i = 0; i < nn.size(); ++i)
+      if (ranges[i] > 1.0 && nn[i] < 1.0) per_range.push_back(nn[i] / ranges[i]);
+  }
+  if (points.empty()) throw std::invalid_argument("measure_input: no scan holds 10 finite points");
+  for (size_t s = 1; s < T_world_sensor.size(); ++s)
+    steps.push_back((T_world_sensor[s].translation() - T_world_sensor[s - 1].translation()).norm());
+  InputMeasurements m;
+  m.scans_measured = points.size();
+  m.points_per_scan = percentile(points, 0.5);
+  m.azimuth_coverage = percentile(coverage, 0.5);
+  m.elevation_min_deg = percentile(el_lo, 0.5);
+  m.elevation_max_deg = percentile(el_hi, 0.5);
+  m.range_p50_m = percentile(r50, 0.5);
+  m.range_p95_m = percentile(r95, 0.5);
+  m.spacing_p10_m = percentile(spacing, 0.1);
+  m.spacing_p50_m = percentile(spacing, 0.5);
+  m.spacing_per_range = percentile(per_range, 0.5);
+  m.scan_distance_m = percentile(steps, 0.5);
+  m.downsampled = m.spacing_p10_m >= InputMeasurements::kDownsampledSpacingM;
+  m.wide_fov = m.azimuth_coverage >= InputMeasurements::kWideFovCoverage;
+  return m;
+}
+
+}  // namespace segmatch

@@ -1,0 +1,114 @@
+#include "segmatch/io/auto_profile.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+namespace segmatch {
+namespace io {
+namespace {
+
+double round_to(double v, double step) { return std::round(v / step) * step; }
+
+// Segmentation of sparse inputs (../shared/data/README.md): our grid takes their median point
+// spacing as its leaf (rounded to 5 cm, 0.2..0.5 m: both validated classes work at 0.2 m, and
+// finer voxels than the points only split segments) with one point per voxel; clusters join
+// points two leaves apart; segments need as many voxels as 30 do at 0.2 m over the same area.
+void fit_segmentation_to_spacing(PipelineConfig& c, const InputMeasurements& m) {
+  SegmentationConfig& s = c.localizer.segmentation;
+  const float leaf = static_cast<float>(std::clamp(round_to(m.spacing_p50_m, 0.05), 0.2, 0.5));
+  s.voxel.leaf_m = leaf;
+  s.voxel.min_points_per_voxel = 1;
+  s.segmenter.cluster_distance_m = 2.0f * leaf;
+  s.segmenter.min_points = std::max(10, static_cast<int>(std::lround(30.0 * (0.2 / leaf) * (0.2 / leaf))));
+  // Keyframes metres apart are each worth keeping; the paper's one scan per metre is for raw
+  // 10 Hz scans.
+  if (m.scan_distance_m >= 1.0) c.local_cloud.min_travel_between_scans_m = 0.0;
+  c.localizer.min_confidence = 0.0f;  // kitti-hdl64's 0.8 was chosen on dense simulated clouds
+}
+
+}  // namespace
+
+InputMeasurements measure_sequence(const Sequence& sequence, size_t first, size_t last, size_t stride,
+                                   const InputProfileConfig& config) {
+  if (sequence.size() == 0) throw std::invalid_argument(sequence.folder() + ": no scans to measure");
+  last = std::min(last, sequence.size() - 1);
+  stride = std::max<size_t>(1, stride);
+  std::vector<size_t> used;
+  for (size_t i = first; i <= last; i += stride) used.push_back(i);
+  if (used.empty()) throw std::invalid_argument(sequence.folder() + ": no scans in the range to measure");
+  Poses poses;
+  for (size_t i : used) poses.push_back(sequence.poses()[i]);
+  std::vector<PointCloud> scans;
+  for (size_t k : scans_to_measure(used.size(), config)) scans.push_back(sequence.scan(used[k]).points);
+  return measure_input(scans, poses, config);
+}
+
+PipelineConfig auto_pipeline_config(const InputMeasurements& m) {
+  PipelineConfig c = pipeline_preset("kitti-hdl64");  // dense-spinning: the paper's values
+  const std::string sensor = m.sensor_class();
+  if (sensor == "sparse-spinning") {
+    fit_segmentation_to_spacing(c, m);
+    // riverside02 keyframes 0-140 (README "What we measured"): the simulation-trained forest
+    // at 0.72 passes half the true pairs it sees on sparse real segments; 0.6 over k = 500
+    // passes more, and support 14 keeps the look-alikes that then verify out.
+    c.localizer.retrieval.k = 500;
+    c.localizer.matcher.rf_threshold = 0.6f;
+    c.localizer.min_refine_fitness = 0.3f;
+    c.localizer.min_support = 14;
+  } else if (sensor == "narrow-fov") {
+    fit_segmentation_to_spacing(c, m);
+    // A small field of view sees few segments: a cylinder of three times the median range
+    // (hku-loop1 and hku-mb: 10.3 m -> 30 m, livox-keyframes' swept value), at most the
+    // paper's 60 m, and every keyframe kept (each sees a place only briefly).
+    c.local_cloud.radius_m = std::clamp(round_to(3.0 * m.range_p50_m, 5.0), 20.0, 60.0);
+    c.local_cloud.min_travel_between_scans_m = 0.0;
+    c.localizer.segmentation.segmenter.min_points = std::max(10, c.localizer.segmentation.segmenter.min_points * 2 / 3);
+    // livox-keyframes' matching (chosen on hku-loop1, checked on hku-mb): loose matches whose
+    // centroids may move by ~1 m between passes, settled by support and, in loop closure, by
+    // the odometry drift bound. L2: no classifier was trained on Livox segments.
+    c.localizer.matcher.type = MatcherType::kL2;
+    c.localizer.matcher.use_shapes = false;
+    c.localizer.matcher.l2_threshold = 3.0f;
+    c.localizer.verification.resolution_m = 0.7f;
+    c.localizer.min_support = 4;
+  }
+  c.preset = "auto";
+  c.measured = m;
+  c.validate();
+  return c;
+}
+
+std::string describe_profile(const PipelineConfig& c) {
+  char buf[1024];
+  std::string out;
+  if (c.measured) {
+    const InputMeasurements& m = *c.measured;
+    std::snprintf(buf, sizeof buf,
+                  "measured (%zu scans): %.0f points per scan, %.0f%% of the horizon, elevation %.1f..%.1f deg, "
+                  "range median %.1f m / p95 %.1f m, point spacing p10 %.3f m / median %.3f m (%.4f per m of range), "
+                  "%.2f m between scans\n",
+                  m.scans_measured, m.points_per_scan, 100.0 * m.azimuth_coverage, m.elevation_min_deg, m.elevation_max_deg,
+                  m.range_p50_m, m.range_p95_m, m.spacing_p10_m, m.spacing_p50_m, m.spacing_per_range, m.scan_distance_m);
+    out += buf;
+    out += "sensor class: " + m.sensor_class() + (m.downsampled ? " (already downsampled)" : " (raw scans)") + "\n";
+  }
+  const SegmentationConfig& s = c.localizer.segmentation;
+  const LocalizerConfig& l = c.localizer;
+  std::snprintf(buf, sizeof buf,
+                "chose (%s): %.0f m cylinder, a scan every %.1f m; voxels %.2f m with >= %d points; clusters %.2f m, "
+                "%d..%d points; k %d; %s; verification %.2f m, support >= %d, confidence >= %.2f",
+                c.preset.c_str(), c.local_cloud.radius_m, c.local_cloud.min_travel_between_scans_m, s.voxel.leaf_m,
+                s.voxel.min_points_per_voxel, s.segmenter.cluster_distance_m, s.segmenter.min_points, s.segmenter.max_points,
+                l.retrieval.k,
+                l.matcher.type == MatcherType::kL2
+                    ? ("L2 matcher < " + std::to_string(l.matcher.l2_threshold).substr(0, 4)).c_str()
+                    : ("random forest >= " + std::to_string(l.matcher.rf_threshold).substr(0, 4) +
+                       (l.matcher.use_shapes ? " (eigen+shapes)" : " (eigen)")).c_str(),
+                l.verification.resolution_m, l.min_support, l.min_confidence);
+  out += buf;
+  return out;
+}
+
+}  // namespace io
+}  // namespace segmatch
