@@ -1,6 +1,6 @@
-// segmatch-loop end to end on hku-loop1 with the livox-keyframes preset and nothing else: the
-// preset's loop settings apply, every output file is written, the revisit is detected and no
-// loop is false. And a missing input folder is refused by name.
+// segmatch-loop end to end on hku-loop1 with no preset and no loop option (issue 14): the auto
+// profile measures the recording as narrow-fov and brings that class's loop settings, every
+// output file is written, the revisit is detected and no loop is false. And a missing input folder is refused by name.
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -31,13 +31,13 @@ fs::path fresh_dir(const std::string& name) {
 
 }  // namespace
 
-TEST(LoopCli, LivoxPresetDetectsTheHkuRevisitWithItsOwnLoopSettings) {
+TEST(LoopCli, DefaultProfileDetectsTheHkuRevisit) {
   if (!fs::exists(kHku)) GTEST_SKIP() << kHku << " is absent (real data is not in the repository)";
   const fs::path out = fresh_dir("hku");
-  const auto r = run("--input " + kHku + " --preset livox-keyframes --odometry " + kHku + "/odom_poses.txt --out " +
-                       out.string());
+  const auto r = run("--input " + kHku + " --odometry " + kHku + "/odom_poses.txt --out " + out.string());
   ASSERT_EQ(r.code, 0) << r.output;
-  EXPECT_NE(r.output.find("livox-keyframes loop settings: a local cloud every 1.0 m"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("sensor class: narrow-fov"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("auto loop settings: a local cloud every 1.0 m"), std::string::npos) << r.output;
   for (const char* f : {"loops.txt", "loops.g2o", "loops.png", "eval.json", "precision_recall.png"})
     EXPECT_GT(fs::file_size(out / f), 0u) << f;
   std::ifstream in(out / "eval.json");

@@ -6,6 +6,8 @@
 #include "segmatch/io/sequence.h"
 #include "segmatch/storage/map_reader.h"
 
+#include "segmatch/io/pipeline_config.h"
+
 #include <gtest/gtest.h>
 
 #include "support/run_command.h"
@@ -160,6 +162,23 @@ TEST_F(MapBuilderCli, WritesAReadableMapWithTrajectoryClassifierAndParameters) {
   EXPECT_TRUE(map.check_integrity().empty());
   EXPECT_EQ(folder_entries(map_path().parent_path()).size(), 1u) << "no temporary file left";
   EXPECT_NE(built_.output.find("local clouds:"), std::string::npos) << "summary printed";
+  // No preset given: the auto profile measured the simulated HDL-64E scans, said so, and stored
+  // the measurements with the parameters.
+  EXPECT_NE(built_.output.find("sensor class: dense-spinning"), std::string::npos) << built_.output;
+  EXPECT_NE(map.metadata().parameters_json.find("\"measured\""), std::string::npos);
+}
+
+TEST_F(MapBuilderCli, PrintConfigWritesTheChosenProfileAsAReusableConfig) {
+  const Result r = run(builder() + " --print-config");
+  ASSERT_EQ(r.code, 0) << r.output;
+  // stdout holds the JSON; what was measured goes to stderr (folded in here, before it).
+  ASSERT_NE(r.output.find('{'), std::string::npos) << r.output;
+  const io::PipelineConfig printed = io::parse_pipeline_config(r.output.substr(r.output.find('{')), "printed config");
+  EXPECT_EQ(printed.preset, "auto");
+  ASSERT_TRUE(printed.measured.has_value());
+  EXPECT_EQ(printed.measured->sensor_class(), "dense-spinning");
+  const storage::MapReader map = storage::MapReader::open(map_path().string());
+  EXPECT_EQ(io::to_json(printed), io::to_json(io::parse_pipeline_config(map.metadata().parameters_json, "map")));
 }
 
 TEST_F(MapBuilderCli, MapinfoPrintsTheCountsAndCheckPasses) {

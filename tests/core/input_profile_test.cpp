@@ -1,0 +1,91 @@
+// The auto profile's measurements on generated scans of known geometry: a 360-degree spinning
+// scan (raw and voxel-downsampled) and a 70-degree forward cone.
+#include "segmatch/core/input_profile.h"
+#include "segmatch/core/preprocess.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+using namespace segmatch;
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// Rays from the origin onto a cylinder wall of radius wall_m (and the ground 1.7 m below),
+// over azimuths [-half_fov, half_fov] and elevations -15..15 deg.
+PointCloud scan_of(double half_fov_deg, int beams, int columns, double wall_m) {
+  PointCloud out;
+  for (int b = 0; b < beams; ++b) {
+    const double el = (-15.0 + 30.0 * b / (beams - 1)) * kPi / 180.0;
+    for (int c = 0; c < columns; ++c) {
+      const double az = (-half_fov_deg + 2.0 * half_fov_deg * c / columns) * kPi / 180.0;
+      double r = wall_m / std::cos(el);
+      if (el < 0) r = std::min(r, 1.7 / std::sin(-el));
+      const double rxy = r * std::cos(el);
+      out.push_back({static_cast<float>(rxy * std::cos(az)), static_cast<float>(rxy * std::sin(az)),
+                     static_cast<float>(r * std::sin(el)), 0.f});
+    }
+  }
+  return out;
+}
+
+Poses straight_line(size_t n, double step_m) {
+  Poses p;
+  for (size_t i = 0; i < n; ++i) {
+    Pose3d T = Pose3d::Identity();
+    T.translation().x() = step_m * static_cast<double>(i);
+    p.push_back(T);
+  }
+  return p;
+}
+
+}  // namespace
+
+TEST(InputProfile, RawSpinningScanIsDenseSpinning) {
+  const std::vector<PointCloud> scans(3, scan_of(180.0, 64, 1024, 20.0));
+  const InputMeasurements m = measure_input(scans, straight_line(10, 0.5));
+  EXPECT_GT(m.azimuth_coverage, 0.95);
+  EXPECT_NEAR(m.elevation_max_deg, 15.0, 1.0);
+  EXPECT_LT(m.spacing_p10_m, 0.06);
+  EXPECT_NEAR(m.scan_distance_m, 0.5, 1e-9);
+  EXPECT_EQ(m.points_per_scan, 64.0 * 1024.0);
+  EXPECT_EQ(m.sensor_class(), "dense-spinning");
+}
+
+TEST(InputProfile, VoxelizedKeyframeIsSparseSpinningWithItsLeaf) {
+  VoxelGridConfig grid;
+  grid.leaf_m = 0.25f;
+  grid.min_points_per_voxel = 1;
+  const PointCloud keyframe = voxel_filter(scan_of(180.0, 64, 2048, 20.0), grid);
+  const InputMeasurements m = measure_input({keyframe, keyframe}, straight_line(5, 6.0));
+  EXPECT_TRUE(m.downsampled);
+  EXPECT_GT(m.spacing_p50_m, 0.15);
+  EXPECT_LT(m.spacing_p50_m, 0.35);
+  EXPECT_EQ(m.sensor_class(), "sparse-spinning");
+}
+
+TEST(InputProfile, ForwardConeIsNarrowFov) {
+  const InputMeasurements m = measure_input({scan_of(35.0, 64, 400, 12.0)}, {});
+  EXPECT_NEAR(m.azimuth_coverage, 70.0 / 360.0, 0.02);
+  EXPECT_EQ(m.scan_distance_m, 0.0);
+  EXPECT_EQ(m.sensor_class(), "narrow-fov");
+  EXPECT_LT(m.range_p95_m, 13.0);
+}
+
+TEST(InputProfile, ScansToMeasureAreSpreadOverTheInput) {
+  InputProfileConfig c;
+  c.max_scans = 4;
+  EXPECT_EQ(scans_to_measure(10, c), (std::vector<size_t>{0, 3, 6, 9}));
+  EXPECT_EQ(scans_to_measure(2, c), (std::vector<size_t>{0, 1}));
+  EXPECT_TRUE(scans_to_measure(0, c).empty());
+}
+
+TEST(InputProfile, NothingToMeasureIsRefused) {
+  EXPECT_THROW(measure_input({}, {}), std::invalid_argument);
+  EXPECT_THROW(measure_input({PointCloud(3)}, {}), std::invalid_argument);
+  InputProfileConfig bad;
+  bad.max_scans = 0;
+  EXPECT_THROW(measure_input({scan_of(35.0, 8, 40, 10.0)}, {}, bad), std::invalid_argument);
+}
