@@ -50,6 +50,50 @@ std::vector<double> nearest_neighbour_distances(const PointCloud& scan, size_t n
 
 }  // namespace
 
+double pose_agreement(const PointCloud& a, const Pose3d& T_world_a, const PointCloud& b, const Pose3d& T_world_b,
+                      double radius_m, size_t sample) {
+  if (a.empty() || b.empty()) return 0.0;
+  // b in a's frame, then the nearest-neighbour distances of the sampled points of b against a.
+  const Eigen::Isometry3f T_a_b = (T_world_a.inverse() * T_world_b).cast<float>();
+  const size_t step = std::max<size_t>(1, b.size() / std::max<size_t>(1, sample));
+  std::vector<Eigen::Vector3f> probes;
+  for (size_t i = 0; i < b.size(); i += step) probes.push_back(T_a_b * b[i].xyz());
+  auto key = [radius_m](const Eigen::Vector3f& p) {
+    const auto c = [radius_m](double v) { return static_cast<int64_t>(std::floor(v / radius_m)) & 0x1FFFFF; };
+    return (c(p.x()) << 42) | (c(p.y()) << 21) | c(p.z());
+  };
+  std::unordered_multimap<int64_t, uint32_t> grid;
+  grid.reserve(a.size());
+  for (uint32_t i = 0; i < a.size(); ++i) grid.emplace(key(a[i].xyz()), i);
+  size_t near = 0;
+  const float r2 = static_cast<float>(radius_m * radius_m);
+  for (const Eigen::Vector3f& p : probes) {
+    bool hit = false;
+    for (int dx = -1; dx <= 1 && !hit; ++dx)
+      for (int dy = -1; dy <= 1 && !hit; ++dy)
+        for (int dz = -1; dz <= 1 && !hit; ++dz) {
+          const Eigen::Vector3f c = p + Eigen::Vector3f(dx, dy, dz) * static_cast<float>(radius_m);
+          const auto range = grid.equal_range(key(c));
+          for (auto it = range.first; it != range.second && !hit; ++it) hit = (a[it->second].xyz() - p).squaredNorm() <= r2;
+        }
+    near += hit;
+  }
+  return static_cast<double>(near) / static_cast<double>(probes.size());
+}
+
+void check_pose_agreement(const std::vector<ScanPair>& pairs, InputMeasurements& m) {
+  for (const ScanPair& p : pairs) {
+    if ((p.T_world_a.translation() - p.T_world_b.translation()).norm() >= InputMeasurements::kAgreementMaxDistanceM)
+      continue;
+    ++m.pairs_checked;
+    if (pose_agreement(*p.a, p.T_world_a, *p.b, p.T_world_b, InputMeasurements::kAgreementRadiusM) <
+        InputMeasurements::kMinAgreement) {
+      ++m.pairs_disagreeing;
+      m.disagreeing_pairs.push_back(p.index_a);
+    }
+  }
+}
+
 std::string InputMeasurements::sensor_class() const {
   if (!wide_fov) return "narrow-fov";
   return downsampled ? "sparse-spinning" : "dense-spinning";

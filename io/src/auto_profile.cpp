@@ -41,7 +41,21 @@ InputMeasurements measure_sequence(const Sequence& sequence, size_t first, size_
   for (size_t i : used) poses.push_back(sequence.poses()[i]);
   std::vector<PointCloud> scans;
   for (size_t k : scans_to_measure(used.size(), config)) scans.push_back(sequence.scan(used[k]).points);
-  return measure_input(scans, poses, config);
+  InputMeasurements m = measure_input(scans, poses, config);
+  // Pose agreement is a property of the recording: consecutive scans of the sequence over the
+  // range, up to kMaxPairs of them spread evenly.
+  constexpr size_t kMaxPairs = 100;
+  const size_t span = last > first ? last - first : 0;
+  PointCloud a, b;
+  size_t loaded = SIZE_MAX;  // index held in b (consecutive pairs reuse it as the next a)
+  for (size_t k = 0; k < std::min(span, kMaxPairs); ++k) {
+    const size_t i = first + (span <= kMaxPairs ? k : k * span / kMaxPairs);
+    a = loaded == i ? std::move(b) : sequence.scan(i).points;
+    b = sequence.scan(i + 1).points;
+    loaded = i + 1;
+    check_pose_agreement({{&a, &b, sequence.poses()[i], sequence.poses()[i + 1], i}}, m);
+  }
+  return m;
 }
 
 PipelineConfig auto_pipeline_config(const InputMeasurements& m) {
@@ -92,6 +106,24 @@ std::string describe_profile(const PipelineConfig& c) {
                   m.range_p50_m, m.range_p95_m, m.spacing_p10_m, m.spacing_p50_m, m.spacing_per_range, m.scan_distance_m);
     out += buf;
     out += "sensor class: " + m.sensor_class() + (m.downsampled ? " (already downsampled)" : " (raw scans)") + "\n";
+    if (m.pairs_checked > 0) {
+      std::snprintf(buf, sizeof buf, "poses against scans: %zu of %zu consecutive pairs checked agree\n",
+                    m.pairs_checked - m.pairs_disagreeing, m.pairs_checked);
+      out += buf;
+    }
+    if (m.pairs_disagreeing > 0) {
+      std::string where;
+      for (size_t k = 0; k < m.disagreeing_pairs.size() && k < 12; ++k)
+        where += (k ? ", " : "") + std::to_string(m.disagreeing_pairs[k]);
+      if (m.disagreeing_pairs.size() > 12) where += ", ...";
+      std::snprintf(buf, sizeof buf,
+                    "WARNING: at %zu pairs the poses disagree with the scans (under %.0f%% of a scan within %.2f m of "
+                    "the previous one): scans %s; segments there are smeared and queries there are unlikely to localize; "
+                    "check the trajectory (e.g. re-run its SLAM) before relying on a map of these stretches\n",
+                    m.pairs_disagreeing, 100.0 * InputMeasurements::kMinAgreement, InputMeasurements::kAgreementRadiusM,
+                    where.c_str());
+      out += buf;
+    }
   }
   const SegmentationConfig& s = c.localizer.segmentation;
   const LocalizerConfig& l = c.localizer;

@@ -203,6 +203,8 @@ void visit_measured(InputMeasurements& m, F&& f) {
   f("spacing_p50_m", m.spacing_p50_m);
   f("spacing_per_range", m.spacing_per_range);
   f("scan_distance_m", m.scan_distance_m);
+  f("pairs_checked", m.pairs_checked);
+  f("pairs_disagreeing", m.pairs_disagreeing);
   f("downsampled", m.downsampled);
   f("wide_fov", m.wide_fov);
 }

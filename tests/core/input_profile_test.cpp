@@ -89,3 +89,27 @@ TEST(InputProfile, NothingToMeasureIsRefused) {
   bad.max_scans = 0;
   EXPECT_THROW(measure_input({scan_of(35.0, 8, 40, 10.0)}, {}, bad), std::invalid_argument);
 }
+
+// The same wall seen from two poses 2 m apart: the right poses put both scans on one surface,
+// poses off by 3 m do not (riverside02's second half, README "What we measured").
+TEST(InputProfile, PoseAgreementTellsRightFromWrongPoses) {
+  const PointCloud a = scan_of(180.0, 32, 720, 15.0);
+  Pose3d T_world_b = Pose3d::Identity();
+  T_world_b.translation() << 2.0, 0.0, 0.0;
+  PointCloud b;  // what the sensor at T_world_b sees of a's wall (a's points in b's frame)
+  for (const Point& p : a) {
+    const Eigen::Vector3f q = (T_world_b.inverse().cast<float>() * p.xyz());
+    b.push_back({q.x(), q.y(), q.z(), 0.f});
+  }
+  EXPECT_GT(pose_agreement(a, Pose3d::Identity(), b, T_world_b, 0.75), 0.99);
+  Pose3d wrong = T_world_b;
+  wrong.translation() << 2.0, 3.0, 0.5;
+  const double off = pose_agreement(a, Pose3d::Identity(), b, wrong, 0.75);
+  EXPECT_LT(off, InputMeasurements::kMinAgreement);
+
+  InputMeasurements m;
+  check_pose_agreement({{&a, &b, Pose3d::Identity(), T_world_b, 7}, {&a, &b, Pose3d::Identity(), wrong, 8}}, m);
+  EXPECT_EQ(m.pairs_checked, 2u);
+  EXPECT_EQ(m.pairs_disagreeing, 1u);
+  EXPECT_EQ(m.disagreeing_pairs, (std::vector<size_t>{8}));
+}

@@ -26,6 +26,13 @@ struct InputMeasurements {
   double spacing_p50_m = 0;          // and median (over sampled points of every measured scan)
   double spacing_per_range = 0;      // median of nearest-neighbour distance / range (angular step)
   double scan_distance_m = 0;        // median distance between consecutive scans' positions
+  // Do the poses agree with the scans? Consecutive scans less than kAgreementMaxDistanceM apart
+  // are put in the world by their poses; a pair disagrees when under half of the later scan's
+  // points lie within kAgreementRadiusM of the earlier one (riverside02: 0.88-0.92 where the
+  // SLAM poses hold, 0.23-0.49 from keyframe ~165 on, where ICP moves them by 1-6 m).
+  size_t pairs_checked = 0;
+  size_t pairs_disagreeing = 0;
+  std::vector<size_t> disagreeing_pairs;  // index of the earlier scan of each (input order)
   bool downsampled = false;          // spacing_p10_m >= kDownsampledSpacingM
   bool wide_fov = false;             // azimuth_coverage >= kWideFovCoverage
   // A raw scan has its 10th-percentile neighbour a few centimetres away (hku-loop1 / hku-mb:
@@ -33,6 +40,9 @@ struct InputMeasurements {
   // 0.096 m), centroids of neighbouring voxels being closer than the leaf.
   static constexpr double kDownsampledSpacingM = 0.06;
   static constexpr double kWideFovCoverage = 0.6;
+  static constexpr double kAgreementRadiusM = 0.75;
+  static constexpr double kAgreementMaxDistanceM = 10.0;
+  static constexpr double kMinAgreement = 0.5;
   // "dense-spinning", "sparse-spinning" (keyframes of a 360-degree sensor), "narrow-fov".
   std::string sensor_class() const;
 };
@@ -48,6 +58,22 @@ struct InputProfileConfig {
 // Throws std::invalid_argument when no scan holds 10 finite points.
 InputMeasurements measure_input(const std::vector<PointCloud>& scans, const Poses& T_world_sensor,
                                 const InputProfileConfig& config = {});
+
+// Fraction of (up to `sample` strided) points of scan b within radius_m of a point of scan a,
+// both put in the world by their poses.
+double pose_agreement(const PointCloud& a, const Pose3d& T_world_a, const PointCloud& b, const Pose3d& T_world_b,
+                      double radius_m, size_t sample = 2000);
+
+// Checks consecutive pairs (see InputMeasurements::pairs_checked) and records the result in m.
+// pairs[k] = {scan k, scan k + 1} with their poses; only pairs closer than
+// kAgreementMaxDistanceM are counted. first_index[k] names pair k in the input's numbering.
+struct ScanPair {
+  const PointCloud* a = nullptr;
+  const PointCloud* b = nullptr;
+  Pose3d T_world_a = Pose3d::Identity(), T_world_b = Pose3d::Identity();
+  size_t index_a = 0;
+};
+void check_pose_agreement(const std::vector<ScanPair>& pairs, InputMeasurements& m);
 
 // Which scans measure_input() looks at when given `count` of them (indices, increasing).
 std::vector<size_t> scans_to_measure(size_t count, const InputProfileConfig& config = {});
