@@ -2,6 +2,7 @@
 // and exports for viewing (coloured PLY / PCD of the segments, a top-down PNG).
 #include "map_export.h"
 
+#include <segmatch/io/auto_profile.h>
 #include <segmatch/io/error.h>
 #include <segmatch/storage/map_reader.h>
 
@@ -86,6 +87,13 @@ int main(int argc, char** argv) {
     const Segments segments = map.load_segments();
     print_stats(map, segments);
     std::printf("parameters:\n%s\n", map.metadata().parameters_json.c_str());
+    // The profile in words (what the input measured like, what was chosen), when it parses.
+    try {
+      std::printf("profile:\n%s\n",
+                  io::describe_profile(io::parse_pipeline_config(map.metadata().parameters_json, path)).c_str());
+    } catch (const io::IoError& e) {
+      std::printf("profile: the stored parameters do not parse (%s)\n", e.what());
+    }
     if (!ply.empty()) mapbuilder::write_colored_ply(ply, segments), std::printf("wrote %s\n", ply.c_str());
     if (!pcd.empty()) mapbuilder::write_colored_pcd(pcd, segments), std::printf("wrote %s\n", pcd.c_str());
     if (!png.empty()) {
