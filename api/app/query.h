@@ -12,6 +12,8 @@ struct ReplayOptions {
   double every_m = 10.0;     // one query each time the vehicle drove this far
   size_t first = 0;          // first scan index
   size_t last = SIZE_MAX;    // last scan index (inclusive)
+  bool track = false;        // api::Tracker: the last fix is the next query's prior
+  std::string odometry;      // poses file to accumulate with (default: the sequence's poses)
 };
 
 // Replays a recorded sequence like a vehicle: accumulates its scans into a local cloud from

@@ -69,6 +69,10 @@ int main(int argc, char** argv) {
   rep->add_option("--every-m", replay.every_m, "query every this many metres")->capture_default_str()->check(CLI::PositiveNumber);
   rep->add_option("--first", replay.first, "first scan index");
   rep->add_option("--last", replay.last, "last scan index (inclusive)");
+  rep->add_flag("--track", replay.track,
+                "track between fixes: each query carries the last fix as its prior (radius growing with the distance "
+                "driven since); global at start-up and after repeated failures");
+  rep->add_option("--odometry", replay.odometry, "the vehicle's odometry poses file (default: the sequence's poses)");
   CLI11_PARSE(app, argc, argv);
   try {
     api::ClientOptions options;

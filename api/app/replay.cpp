@@ -1,5 +1,6 @@
 #include "query.h"
 
+#include <segmatch/api/tracker.h>
 #include <segmatch/io/pipeline_config.h>
 #include <segmatch/io/replay.h>
 
@@ -41,7 +42,9 @@ double percentile(std::vector<double> v, double p) {
 }  // namespace
 
 int replay(api::Client& client, const ReplayOptions& options) {
-  const io::Sequence seq = io::Sequence::open(options.folder);
+  io::SequenceOptions so;
+  so.poses_path = options.odometry;
+  const io::Sequence seq = io::Sequence::open(options.folder, so);
   io::ReplayConfig config;
   config.every_m = options.every_m;
   config.first = options.first;
@@ -49,8 +52,9 @@ int replay(api::Client& client, const ReplayOptions& options) {
   const io::PipelineConfig map_parameters = parameters_of(client);
   config.local_cloud = map_parameters.local_cloud;
   config.voxel = map_parameters.localizer.segmentation.voxel;
-  size_t queries = 0, localized = 0, errors = 0;
+  size_t queries = 0, localized = 0, errors = 0, tracked = 0;
   std::vector<double> latencies_ms;
+  api::Tracker tracker;  // --track: the last fix is the next query's prior
   io::replay_sequence(seq, config, [&](const io::ReplayQuery& q) {
     api::LocalizeRequest request;
     request.request_id = q.frame;
@@ -59,13 +63,16 @@ int replay(api::Client& client, const ReplayOptions& options) {
     request.sensor_orientation_local = Eigen::Quaterniond(q.T_odom_sensor.linear()).normalized();
     request.points = q.cloud_odom;
     ++queries;
-    std::printf("frame %6zu  %7.1f m  %7zu points  ", q.frame, q.odometer_m, request.points.size());
+    const api::TrackMode mode = options.track ? tracker.prepare(request, q.odometer_m) : api::TrackMode::kGlobal;
+    tracked += mode == api::TrackMode::kTracked;
+    std::printf("frame %6zu  %7.1f m  %7zu points  %-7s ", q.frame, q.odometer_m, request.points.size(), api::to_string(mode));
     const auto start = std::chrono::steady_clock::now();
     try {
       const api::LocalizeReply r = client.localize(request);
       const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
       latencies_ms.push_back(ms);
       localized += r.status == api::LocalizeStatus::kLocalized;
+      if (options.track) tracker.update(r, q.odometer_m);
       print_reply(r, ms);
     } catch (const api::ClientError& e) {
       ++errors;
@@ -74,8 +81,8 @@ int replay(api::Client& client, const ReplayOptions& options) {
     }
     return true;
   });
-  std::printf("summary: %zu queries, %zu localized, %zu errors, latency p50 %.1f ms p99 %.1f ms\n", queries, localized,
-              errors, percentile(latencies_ms, 0.5), percentile(latencies_ms, 0.99));
+  std::printf("summary: %zu queries (%zu tracked), %zu localized, %zu errors, latency p50 %.1f ms p99 %.1f ms\n", queries,
+              tracked, localized, errors, percentile(latencies_ms, 0.5), percentile(latencies_ms, 0.99));
   return errors == 0 ? 0 : 1;
 }
 

@@ -100,6 +100,7 @@ std::vector<uint8_t> encode(const LocalizeRequest& m) {
   } else {
     for (const Point& p : m.points) w.f32s(&p.x, 3);
   }
+  if (m.flags & kFlagPriorHeading) w.f64(m.prior_heading_tolerance_deg);
   return detail::frame(type_of(m), w);
 }
 
@@ -118,7 +119,8 @@ DecodeStatus decode(const uint8_t* payload, size_t size, const Limits&, Localize
   if (m.flags & ~kKnownFlags) return DecodeStatus::kBadField;
   if (m.point_stride != 3 && m.point_stride != 4) return DecodeStatus::kBadStride;
   // 64-bit arithmetic: count * stride * 4 cannot overflow.
-  if (kLocalizeFixedBytes + static_cast<uint64_t>(count) * m.point_stride * 4 != size)
+  const uint64_t trailer = (m.flags & kFlagPriorHeading) ? 8 : 0;
+  if (kLocalizeFixedBytes + static_cast<uint64_t>(count) * m.point_stride * 4 + trailer != size)
     return DecodeStatus::kBadPointCount;
   DecodeStatus s = first_error({s_pos, s_q, s_prior});
   if (s != DecodeStatus::kOk) return s;
@@ -126,6 +128,11 @@ DecodeStatus decode(const uint8_t* payload, size_t size, const Limits&, Localize
   if (m.prior_radius_m < 0.0) return DecodeStatus::kBadField;
   s = get_points(r, count, m.point_stride, m.points);
   if (s != DecodeStatus::kOk) return s;
+  if (m.flags & kFlagPriorHeading) {
+    m.prior_heading_tolerance_deg = r.f64();
+    if (!std::isfinite(m.prior_heading_tolerance_deg)) return DecodeStatus::kNonFinite;
+    if (m.prior_heading_tolerance_deg < 0.0) return DecodeStatus::kBadField;
+  }
   s = detail::finish(r);
   if (s == DecodeStatus::kOk) out = std::move(m);
   return s;

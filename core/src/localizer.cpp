@@ -23,8 +23,9 @@ class Stopwatch {
   std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
 };
 
-LocalizationResult refuse(LocalizationResult r, std::string why) {
+LocalizationResult refuse(LocalizationResult r, Refusal refusal, std::string why) {
   r.status = LocalizationStatus::kNotLocalized;
+  r.refusal = refusal;
   r.reason = std::move(why);
   return r;
 }
@@ -62,19 +63,27 @@ std::vector<PoseHypothesis> within_prior(std::vector<PoseHypothesis> hypotheses,
   return kept;
 }
 
-// The matches whose map segment lies where the prior, within its tolerances, puts the query
-// segment (all of them without a prior).
-Matches gate_matches(Matches matches, const Segments& query, const Segments& targets, const Eigen::Vector3f& sensor,
-                     const PosePrior* prior) {
-  if (!prior) return matches;
-  const double angle = prior->max_rotation_deg * M_PI / 180.0;
-  Matches kept;
-  for (const Match& m : matches) {
-    const Eigen::Vector3d q = query[m.query].centroid.cast<double>();
-    const double slack = prior->radius_m + angle * (q - sensor.cast<double>()).norm();
-    if ((prior->T_map_query * q - targets[m.target].centroid.cast<double>()).norm() <= slack) kept.push_back(m);
+// Per query segment, the map segments lying where the prior, within its tolerances, puts it
+// (see PosePrior). Targets are first cut to the horizontal disc that can hold any of them.
+std::vector<std::vector<int>> targets_near_prior(const Segments& query, const Segments& targets,
+                                                 const Eigen::Vector3f& sensor, const PosePrior& prior) {
+  const double angle = prior.max_rotation_deg * M_PI / 180.0;
+  const Eigen::Vector3d s = sensor.cast<double>(), s_map = prior.T_map_query * s;
+  double reach = 0.0;
+  for (const Segment& q : query) reach = std::max(reach, (q.centroid.cast<double>() - s).norm());
+  const double disc = reach * (1.0 + angle) + prior.radius_m;
+  std::vector<int> nearby;
+  for (size_t t = 0; t < targets.size(); ++t)
+    if ((targets[t].centroid.cast<double>() - s_map).head<2>().norm() <= disc) nearby.push_back(static_cast<int>(t));
+  std::vector<std::vector<int>> allowed(query.size());
+  for (size_t qi = 0; qi < query.size(); ++qi) {
+    const Eigen::Vector3d q = query[qi].centroid.cast<double>();
+    const Eigen::Vector3d expected = prior.T_map_query * q;
+    const double slack = prior.radius_m + angle * (q - s).norm();
+    for (int t : nearby)
+      if ((targets[static_cast<size_t>(t)].centroid.cast<double>() - expected).norm() <= slack) allowed[qi].push_back(t);
   }
-  return kept;
+  return allowed;
 }
 
 // Points of the segments on one side of the matches, for the refinement.
@@ -104,6 +113,21 @@ const char* to_string(LocalizationStatus status) {
   return status == LocalizationStatus::kLocalized ? "localized" : "not_localized";
 }
 
+const char* to_string(Refusal refusal) {
+  switch (refusal) {
+    case Refusal::kNone: return "none";
+    case Refusal::kEmptyMap: return "empty_map";
+    case Refusal::kTooFewSegments: return "too_few_segments";
+    case Refusal::kNoConsistentMatches: return "no_consistent_matches";
+    case Refusal::kOutsidePrior: return "outside_prior";
+    case Refusal::kLowSupport: return "low_support";
+    case Refusal::kAmbiguous: return "ambiguous";
+    case Refusal::kSurfacesDisagree: return "surfaces_disagree";
+    case Refusal::kLowConfidence: return "low_confidence";
+  }
+  return "unknown";
+}
+
 void SegmentationConfig::validate() const {
   voxel.validate();
   ground.validate();
@@ -125,6 +149,12 @@ void LocalizerConfig::validate() const {
     throw std::invalid_argument("support_radius_m must be finite and > 0");
   if (min_support < verification.min_inliers)
     throw std::invalid_argument("min_support must be at least verification.min_inliers");
+  if (min_support_with_prior >= 0 && min_support_with_prior < verification.min_inliers)
+    throw std::invalid_argument("min_support_with_prior must be at least verification.min_inliers (or negative: unused)");
+  if (!(min_refine_fitness_with_prior <= 1.0f))
+    throw std::invalid_argument("min_refine_fitness_with_prior must be <= 1 (negative: unused)");
+  if (!(min_confidence_with_prior <= 1.0f))
+    throw std::invalid_argument("min_confidence_with_prior must be <= 1 (negative: unused)");
   if (!(max_ambiguity > 0.0f && max_ambiguity <= 1.0f)) throw std::invalid_argument("max_ambiguity must be in (0, 1]");
   if (matcher.use_shapes && !segmentation.descriptors.compute_esf)
     throw std::invalid_argument("matcher.use_shapes needs segmentation.descriptors.compute_esf");
@@ -192,29 +222,32 @@ LocalizationResult Localizer::localize(const PointCloud& cloud, const Eigen::Vec
                 : extract_segments(cloud, sensor_position, config_.segmentation, nullptr, &r.timings);
   clock.lap();
   r.query_segments = r.query.size();
-  if (targets_.empty()) return finish(refuse(std::move(r), "the map has no segments"));
+  if (targets_.empty()) return finish(refuse(std::move(r), Refusal::kEmptyMap, "the map has no segments"));
   if (r.query.size() < static_cast<size_t>(min_inliers))
-    return finish(refuse(std::move(r), "only " + std::to_string(r.query.size()) +
+    return finish(refuse(std::move(r), Refusal::kTooFewSegments, "only " + std::to_string(r.query.size()) +
                                            " segments in the query cloud (at least " +
                                            std::to_string(min_inliers) + " needed)"));
-  // Paper III-D: k-NN candidates in feature space, then the classifier.
-  const Matches candidates = retrieve_candidates(r.query, index_, config_.retrieval);
+  // Paper III-D: k-NN candidates in feature space (with a prior, among the map segments it
+  // allows), then the classifier.
+  const Matches candidates =
+      prior ? retrieve_candidates_among(r.query, targets_, index_.scaling(),
+                                        targets_near_prior(r.query, targets_, sensor_position, *prior), config_.retrieval)
+            : retrieve_candidates(r.query, index_, config_.retrieval);
   r.candidates = candidates.size();
   r.timings.retrieve_ms = clock.lap();
-  const Matches matches = gate_matches(filter_matches(r.query, targets_, candidates, config_.matcher, classifier_.get()),
-                                       r.query, targets_, sensor_position, prior);
+  const Matches matches = filter_matches(r.query, targets_, candidates, config_.matcher, classifier_.get());
   r.matches = matches.size();
   r.timings.classify_ms = clock.lap();
   // Paper III-E: geometric verification on the segment centroids.
   VerificationResult v = verify_matches(r.query, targets_, matches, config_.verification);
   r.timings.verify_ms = clock.lap();
   if (!v.found)
-    return finish(refuse(std::move(r), "no geometrically consistent set of " + std::to_string(min_inliers) +
+    return finish(refuse(std::move(r), Refusal::kNoConsistentMatches, "no geometrically consistent set of " + std::to_string(min_inliers) +
                                            " matches among " + std::to_string(matches.size())));
   const size_t verified = v.hypotheses.size();
   const std::vector<PoseHypothesis> hypotheses = within_prior(std::move(v.hypotheses), sensor_position, prior);
   if (hypotheses.empty())
-    return finish(refuse(std::move(r), "none of the " + std::to_string(verified) + " verified poses is within " +
+    return finish(refuse(std::move(r), Refusal::kOutsidePrior, "none of the " + std::to_string(verified) + " verified poses is within " +
                                            std::to_string(prior->radius_m) + " m of the prior"));
   // Beyond the paper: the hypothesis that explains most of the query wins, if unambiguous.
   const Ranked ranked = rank_by_support(hypotheses, r.query, centroids_, config_.support_radius_m);
@@ -225,11 +258,14 @@ LocalizationResult Localizer::localize(const PointCloud& cloud, const Eigen::Vec
   r.inliers = best.inliers;
   r.T_map_query = best.T_target_query;
   r.timings.verify_ms += clock.lap();
-  if (r.support < static_cast<size_t>(config_.min_support))
-    return finish(refuse(std::move(r), "only " + std::to_string(r.support) + " query segments agree with the best pose (at least " +
-                                           std::to_string(config_.min_support) + " needed)"));
+  const int min_support = prior && config_.min_support_with_prior >= 0 ? config_.min_support_with_prior : config_.min_support;
+  const float min_fitness =
+      prior && config_.min_refine_fitness_with_prior >= 0.0f ? config_.min_refine_fitness_with_prior : config_.min_refine_fitness;
+  if (r.support < static_cast<size_t>(min_support))
+    return finish(refuse(std::move(r), Refusal::kLowSupport, "only " + std::to_string(r.support) + " query segments agree with the best pose (at least " +
+                                           std::to_string(min_support) + " needed)"));
   if (static_cast<float>(r.runner_up_support) >= config_.max_ambiguity * static_cast<float>(r.support))
-    return finish(refuse(std::move(r), "ambiguous: two distinct poses are supported by " + std::to_string(r.support) +
+    return finish(refuse(std::move(r), Refusal::kAmbiguous, "ambiguous: two distinct poses are supported by " + std::to_string(r.support) +
                                            " and " + std::to_string(r.runner_up_support) + " query segments"));
   r.refine_fitness = 1.0f;
   if (config_.refine_pose) {
@@ -239,16 +275,18 @@ LocalizationResult Localizer::localize(const PointCloud& cloud, const Eigen::Vec
     r.timings.refine_ms = clock.lap();
     r.refine_fitness = refined.fitness;
     r.refine_rmse_m = refined.rmse_m;
-    if (refined.fitness < config_.min_refine_fitness)
-      return finish(refuse(std::move(r), "matched segments' surfaces disagree (fitness " +
+    if (refined.fitness < min_fitness)
+      return finish(refuse(std::move(r), Refusal::kSurfacesDisagree, "matched segments' surfaces disagree (fitness " +
                                              std::to_string(refined.fitness) + ")"));
     r.T_map_query = refined.T_target_query;
   }
-  r.confidence = confidence_of(r.support, config_.min_support, r.refine_fitness);
-  if (r.confidence < config_.min_confidence) {
+  r.confidence = confidence_of(r.support, min_support, r.refine_fitness);
+  const float min_confidence =
+      prior && config_.min_confidence_with_prior >= 0.0f ? config_.min_confidence_with_prior : config_.min_confidence;
+  if (r.confidence < min_confidence) {
     char why[96];
-    std::snprintf(why, sizeof(why), "confidence %.2f below min_confidence %.2f", r.confidence, config_.min_confidence);
-    return finish(refuse(std::move(r), why));
+    std::snprintf(why, sizeof(why), "confidence %.2f below min_confidence %.2f", r.confidence, min_confidence);
+    return finish(refuse(std::move(r), Refusal::kLowConfidence, why));
   }
   r.status = LocalizationStatus::kLocalized;
   return finish(std::move(r));

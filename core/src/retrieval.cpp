@@ -147,4 +147,25 @@ Matches retrieve_candidates(const Segments& queries, const FeatureIndex& index,
   return out;
 }
 
+Matches retrieve_candidates_among(const Segments& queries, const Segments& targets, const FeatureScaling& scaling,
+                                  const std::vector<std::vector<int>>& allowed, const RetrievalConfig& config) {
+  config.validate();
+  if (allowed.size() != queries.size())
+    throw std::invalid_argument("retrieve_candidates_among: one allowed list per query segment");
+  Matches out;
+  std::vector<std::pair<float, int>> near;
+  for (size_t qi = 0; qi < queries.size(); ++qi) {
+    const Segment& q = queries[qi];
+    if (!q.has_eigen)
+      throw std::invalid_argument("retrieve_candidates_among: query segment " + std::to_string(q.id) + " has no eigen features");
+    near.clear();
+    for (int ti : allowed[qi]) near.emplace_back(scaling.distance(q.eigen, targets[static_cast<size_t>(ti)].eigen), ti);
+    const size_t k = std::min(near.size(), static_cast<size_t>(config.k));
+    // Nearest first, ties by target index (as the k-d tree's exact search orders them).
+    std::partial_sort(near.begin(), near.begin() + static_cast<std::ptrdiff_t>(k), near.end());
+    for (size_t i = 0; i < k; ++i) out.push_back({static_cast<int>(qi), near[i].second, -near[i].first});
+  }
+  return out;
+}
+
 }  // namespace segmatch

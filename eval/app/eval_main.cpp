@@ -152,6 +152,16 @@ int main(int argc, char** argv) {
   loc->add_option("--stride", lc.replay.stride, "use every n-th scan");
   loc->add_option("--mapped-radius-m", lc.thresholds.mapped_radius_m, "a street is mapped within this of the map trajectory");
   loc->add_flag("!--quiet", lc.print_each, "no line per query");
+  loc->add_flag("--track", lc.track,
+                "track between fixes (api::Tracker): each query's prior is the last fix, its radius grows with the distance "
+                "driven since; with --query the vehicle's odometry is the sequence's odom_poses.txt when it has one");
+  auto* odom = loc->add_option("--odometry", lc.odometry_path,
+                               "the vehicle's odometry poses (default with --track: QUERY/odom_poses.txt if present)");
+  loc->add_option("--gnss-sigma-m", lc.gnss_sigma_m,
+                  "GNSS-like priors: the true pose plus Gaussian noise of this many metres (seeded), radius 3 sigma");
+  loc->add_option("--gnss-seed", lc.gnss_seed, "seed of the GNSS noise (default 1)");
+  loc->add_flag("--compare-global", lc.compare_global,
+                "also send every query that has a prior without it (not scored) and report both server times");
   loc->add_option("--out", out_dir, "report folder (JSON + PNG)");
   eval::LocalizationRunConfig fc;
   auto* fun = app.add_subcommand("funnel", "where true matches are lost: segments, counterparts, retrieved, classified");
@@ -177,6 +187,9 @@ int main(int argc, char** argv) {
   try {
     if (*loc) {
       if (lc.query_folder.empty() == lc.sim_dataset.empty()) throw std::runtime_error("give exactly one of --query and --sim");
+      if (lc.track && !odom->count() && !lc.query_folder.empty() && fs::exists(fs::path(lc.query_folder) / "odom_poses.txt"))
+        lc.odometry_path = (fs::path(lc.query_folder) / "odom_poses.txt").string();
+      if (!lc.odometry_path.empty()) std::printf("vehicle odometry: %s\n", lc.odometry_path.c_str());
       return run_localize(lc, server, token_file, out_dir);
     }
     if (*fun) {

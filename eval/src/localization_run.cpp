@@ -1,5 +1,7 @@
 #include "segmatch/eval/localization_run.h"
 
+#include "query_priors.h"
+
 #include "segmatch/cli/progress.h"
 #include "segmatch/eval/plots.h"
 #include "segmatch/io/pipeline_config.h"
@@ -14,6 +16,7 @@
 #include <fstream>
 #include <limits>
 #include <memory>
+#include <optional>
 
 namespace segmatch {
 namespace eval {
@@ -81,20 +84,36 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
   run.replay.voxel = parameters.localizer.segmentation.voxel;
   for (const storage::Keyframe& k : map.trajectory()) run.map_trajectory.push_back(k.T_map_sensor.translation());
   const Truth truth = open_truth(c);
+  std::optional<io::Sequence> odometry;  // the replayed sequence when the vehicle has its own odometry
+  if (!c.odometry_path.empty()) {
+    if (!c.sim_dataset.empty()) throw std::runtime_error("--odometry needs --query");
+    io::SequenceOptions so;
+    so.poses_path = c.odometry_path;
+    odometry = io::Sequence::open(c.query_folder, so);
+  }
+  QueryPriors priors(c, truth.T_map_sensor);
+  PriorComparison comparison;
   run.title = map.metadata().name + ": " + (c.sim_dataset.empty() ? c.query_folder : c.sim_dataset + " (01)");
   std::map<std::string, std::vector<double>> timings;
   std::unique_ptr<cli::Progress> progress;
   io::replay_sequence(
-      truth.sequence, run.replay,
+      odometry ? *odometry : truth.sequence, run.replay,
       [&](const io::ReplayQuery& q) {
+        api::LocalizeRequest request = request_of(q);
+        const std::string mode = priors.prepare(request, q);
         const auto start = std::chrono::steady_clock::now();
-        const api::LocalizeReply reply = localize(request_of(q));
+        const api::LocalizeReply reply = localize(request);
+        const double latency_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+        priors.update(reply, q);
+        if (c.compare_global) comparison.add(request, reply, localize);
         QueryOutcome o;
-        o.latency_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+        o.latency_ms = latency_ms;
         o.frame = q.frame;
         o.odometer_m = q.odometer_m;
         o.localized = reply.status == api::LocalizeStatus::kLocalized;
         o.status = api::to_string(reply.status);
+        o.mode = mode;
+        o.server_ms = reply.timings.server_total;
         o.inliers = reply.inliers;
         o.support = reply.support;
         o.confidence = reply.confidence;
@@ -103,8 +122,8 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
         score(o, reply.T_map_local * q.T_odom_sensor, T_map_sensor_truth, c.thresholds);
         add_timings(timings, reply.timings);
         if (c.print_each)
-          std::printf("frame %5zu  %7.1f m  %-13s %s inliers %3u support %3u conf %.2f  error %6.3f m %5.2f deg  %6.1f ms%s%s\n",
-                      q.frame, q.odometer_m, o.status.c_str(), o.localized ? (o.correct ? "TRUE " : "FALSE") : "     ",
+          std::printf("frame %5zu  %7.1f m  %-8s %-13s %s inliers %3u support %3u conf %.2f  error %6.3f m %5.2f deg  %6.1f ms%s%s\n",
+                      q.frame, q.odometer_m, mode.c_str(), o.status.c_str(), o.localized ? (o.correct ? "TRUE " : "FALSE") : "     ",
                       reply.inliers, reply.support, reply.confidence, o.error_m, o.error_deg, o.latency_ms,
                       o.mapped ? "" : "  (unmapped street)",
                       reply.reason.empty() ? "" : ("  " + reply.reason).c_str());
@@ -117,6 +136,15 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
       });
   if (progress) progress->finish();
   run.summary = summarize(run.outcomes);
+  std::map<std::string, std::vector<double>> by_mode;
+  bool fixed = false;
+  for (const QueryOutcome& o : run.outcomes) {
+    by_mode[o.mode].push_back(o.server_ms);
+    if (fixed) ++run.after_first_fix, run.localized_after_first_fix += o.localized;
+    fixed = fixed || o.localized;
+  }
+  for (auto& [mode, values] : by_mode) run.server_ms_by_mode[mode] = distribution_of(values);
+  comparison.write_to(run);
   for (auto& [name, values] : timings) run.module_ms[name] = distribution_of(values);
   return run;
 }
@@ -133,6 +161,16 @@ void print_summary(const LocalizationRun& run) {
               s.px.total_m, s.px.x95_m);
   std::printf("latency per query: median %.1f ms, p90 %.1f ms, max %.1f ms\n", s.latency_ms.median, s.latency_ms.p90,
               s.latency_ms.max);
+  std::printf("after the first localization: %zu of %zu queries localized (%.1f %%)\n", run.localized_after_first_fix,
+              run.after_first_fix, run.after_first_fix ? 100.0 * run.localized_after_first_fix / run.after_first_fix : 0.0);
+  for (const auto& [mode, d] : run.server_ms_by_mode)
+    std::printf("server time, %s queries: %zu, median %.1f ms, p90 %.1f ms\n", mode.c_str(), d.count, d.median, d.p90);
+  if (run.ab_prior_server_ms.count > 0)
+    std::printf("same queries with and without their prior (%zu): server %.1f vs %.1f ms median, retrieve+classify+verify "
+                "%.1f vs %.1f ms median (%.0f %%)\n",
+                run.ab_prior_server_ms.count, run.ab_prior_server_ms.median, run.ab_global_server_ms.median,
+                run.ab_prior_match_ms.median, run.ab_global_match_ms.median,
+                run.ab_global_match_ms.median > 0 ? 100.0 * run.ab_prior_match_ms.median / run.ab_global_match_ms.median : 0.0);
   std::printf("module medians (ms):");
   for (const auto& [name, d] : run.module_ms) std::printf(" %s %.1f", name.c_str(), d.median);
   std::printf("\n");
@@ -158,12 +196,20 @@ void write_localization_report(const LocalizationRun& run, const std::string& ou
   j["error_deg"] = dist(s.error_deg);
   j["latency_ms"] = dist(s.latency_ms);
   j["px"] = {{"total_mapped_m", s.px.total_m}, {"x95_m", s.px.x95_m}, {"gaps_m", s.px.gaps_m}};
+  j["after_first_fix"] = {{"queries", run.after_first_fix}, {"localized", run.localized_after_first_fix}};
+  for (const auto& [mode, d] : run.server_ms_by_mode) j["server_ms_by_mode"][mode] = dist(d);
+  if (run.ab_prior_server_ms.count > 0)
+    j["same_queries_with_and_without_prior"] = {{"prior_server_ms", dist(run.ab_prior_server_ms)},
+                                                {"prior_retrieve_classify_verify_ms", dist(run.ab_prior_match_ms)},
+                                                {"global_server_ms", dist(run.ab_global_server_ms)},
+                                                {"global_retrieve_classify_verify_ms", dist(run.ab_global_match_ms)}};
   for (const auto& [name, d] : run.module_ms) j["module_ms"][name] = dist(d);
   for (const QueryOutcome& o : run.outcomes) {
     nlohmann::json q = {{"frame", o.frame},         {"odometer_m", o.odometer_m}, {"mapped", o.mapped},
                         {"status", o.status},       {"correct", o.correct},       {"error_m", o.error_m},
                         {"error_deg", o.error_deg}, {"latency_ms", o.latency_ms}, {"inliers", o.inliers},
-                        {"support", o.support},     {"confidence", o.confidence}};
+                        {"support", o.support},     {"confidence", o.confidence}, {"mode", o.mode},
+                        {"server_ms", o.server_ms}};
     if (o.localized) {
       const Eigen::Quaterniond r(o.T_map_sensor.linear());
       const Eigen::Vector3d& t = o.T_map_sensor.translation();

@@ -3,6 +3,7 @@
 #include <segmatch/storage/map_reader.h>
 
 #include <chrono>
+#include <optional>
 #include <stdexcept>
 
 namespace segmatch {
@@ -97,6 +98,17 @@ void copy_timings(const ModuleTimings& t, api::ModuleTimingsMs& out) {
   out.total = static_cast<float>(t.total_ms);
 }
 
+// A prior with a radius narrows the search (docs/protocol.md 5.4); radius 0 keeps revision 1's
+// reject-only meaning (check_prior below).
+std::optional<PosePrior> pose_prior_of(const api::LocalizeRequest& request) {
+  if (!(request.flags & api::kFlagHasPrior) || !(request.prior_radius_m > 0.0)) return std::nullopt;
+  PosePrior prior;
+  prior.T_map_query = request.T_map_local_prior;
+  prior.radius_m = request.prior_radius_m;
+  if (request.flags & api::kFlagPriorHeading) prior.max_rotation_deg = request.prior_heading_tolerance_deg;
+  return prior;
+}
+
 // With a prior: kOutsidePrior when the localized sensor is too far from the prior's guess.
 void check_prior(const api::LocalizeRequest& request, api::LocalizeReply& reply) {
   if (!(request.flags & api::kFlagHasPrior) || reply.status != api::LocalizeStatus::kLocalized) return;
@@ -115,10 +127,14 @@ api::LocalizeReply localize_request(const LoadedMap& map, const api::LocalizeReq
   const PointCloud cloud =
       crop_cylinder(request.points, request.sensor_position_local, map.config.local_cloud.radius_m);
   const CloudKind kind = (request.flags & api::kFlagVoxelized) ? CloudKind::kVoxelized : CloudKind::kRaw;
-  const LocalizationResult r = map.localizer->localize(cloud, request.sensor_position_local.cast<float>(), kind);
+  const std::optional<PosePrior> prior = pose_prior_of(request);
+  const LocalizationResult r =
+      map.localizer->localize(cloud, request.sensor_position_local.cast<float>(), kind, prior ? &*prior : nullptr);
   api::LocalizeReply reply;
   reply.request_id = request.request_id;
-  reply.status = r.localized() ? api::LocalizeStatus::kLocalized : api::LocalizeStatus::kNotLocalized;
+  reply.status = r.localized()                            ? api::LocalizeStatus::kLocalized
+                 : r.refusal == Refusal::kOutsidePrior ? api::LocalizeStatus::kOutsidePrior
+                                                       : api::LocalizeStatus::kNotLocalized;
   reply.reason = r.reason;
   reply.T_map_local = r.T_map_query;
   reply.inliers = static_cast<uint32_t>(r.inliers.size());

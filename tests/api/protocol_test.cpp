@@ -251,8 +251,10 @@ TEST(Protocol, RejectsReservedFlagsAndOverlongStrings) {
   std::vector<uint8_t> f = encode(some_request());
   put_u32(f, kOffFlags, 0x80000001u);
   EXPECT_EQ(decode_request(f), DecodeStatus::kBadField);
-  put_u32(f, kOffFlags, 1u << 2);  // the first bit not defined by protocol version 1
+  put_u32(f, kOffFlags, 1u << 3);  // the first bit not defined by revision 2 (docs/protocol.md 8)
   EXPECT_EQ(decode_request(f), DecodeStatus::kBadField);
+  put_u32(f, kOffFlags, kFlagPriorHeading);  // bit 2 announces 8 more bytes that are not there
+  EXPECT_EQ(decode_request(f), DecodeStatus::kBadPointCount);
   put_u32(f, kOffFlags, kFlagHasPrior | kFlagVoxelized);
   LocalizeRequest both;
   ASSERT_EQ(decode_frame(f, kLimits, both), DecodeStatus::kOk);
@@ -296,4 +298,25 @@ TEST(Protocol, RandomBytesNeverCrashTheDecoders) {
     decode(f.data() + kHeaderBytes, f.size() - kHeaderBytes, kLimits, info);
   }
   EXPECT_LT(accepted, 3000u);
+}
+
+// Revision 2: the heading tolerance travels after the points behind flag bit 2 and round-trips;
+// a bad one is refused by name.
+TEST(Protocol, HeadingToleranceTravelsBehindItsFlagBit) {
+  LocalizeRequest r = some_request();
+  r.flags |= kFlagPriorHeading;
+  r.prior_heading_tolerance_deg = 4.5;
+  const std::vector<uint8_t> f = encode(r);
+  EXPECT_EQ(f.size(), encode(some_request()).size() + 8);
+  const LocalizeRequest back = round_trip(r);
+  EXPECT_EQ(back.flags, r.flags);
+  EXPECT_EQ(back.prior_heading_tolerance_deg, 4.5);
+  EXPECT_EQ(back.points.size(), r.points.size());
+  std::vector<uint8_t> bad = f;
+  put_f64(bad, bad.size() - 8, -1.0);
+  EXPECT_EQ(decode_request(bad), DecodeStatus::kBadField);
+  put_f64(bad, bad.size() - 8, std::numeric_limits<double>::infinity());
+  EXPECT_EQ(decode_request(bad), DecodeStatus::kNonFinite);
+  // Without the bit, the field is not on the wire and decodes to its default.
+  EXPECT_EQ(round_trip(some_request()).prior_heading_tolerance_deg, 10.0);
 }

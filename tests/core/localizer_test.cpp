@@ -151,6 +151,44 @@ TEST(Localizer, APriorSettlesTheStreetOfIdenticalPoles) {
   EXPECT_THROW(localizer.localize(query, sensor, CloudKind::kRaw, &prior), std::invalid_argument);
 }
 
+// Two copies of one street 100 m apart: globally the query is ambiguous; a prior around the
+// first copy narrows retrieval to it and returns it, never the look-alike outside the prior; a
+// prior around neither returns nothing (typed refusals say why).
+TEST(Localizer, ALookAlikeOutsideThePriorIsNeverReturned) {
+  const LocalizerConfig c = config();
+  const PointCloud street = pole_street(true);
+  Pose3d shift = Pose3d::Identity();
+  shift.translation() << 100.0, 0.0, 0.0;
+  PointCloud map_cloud = street;
+  const PointCloud copy = transformed(street, shift);
+  map_cloud.insert(map_cloud.end(), copy.begin(), copy.end());
+  const Localizer localizer(c, extract_segments(map_cloud, Eigen::Vector3f(75, 0, 2), c.segmentation));
+  const Pose3d T = T_query_map();
+  const PointCloud query = transformed(street, T);
+  const Eigen::Vector3f sensor = T.cast<float>() * Eigen::Vector3f(25, 0, 2);
+  const LocalizationResult global = localizer.localize(query, sensor);
+  EXPECT_FALSE(global.localized());
+  EXPECT_EQ(global.refusal, Refusal::kAmbiguous) << global.reason;
+
+  PosePrior prior;
+  prior.T_map_query = T.inverse();
+  prior.T_map_query.translation() += Eigen::Vector3d(1.5, 1.0, 0.0);
+  prior.radius_m = 5.0;
+  prior.max_rotation_deg = 5.0;
+  const LocalizationResult near_a = localizer.localize(query, sensor, CloudKind::kRaw, &prior);
+  ASSERT_TRUE(near_a.localized()) << near_a.reason;
+  EXPECT_EQ(near_a.refusal, Refusal::kNone);
+  EXPECT_LT((near_a.T_map_query * T).translation().norm(), 0.05) << "the copy inside the prior";
+  EXPECT_LT(near_a.candidates, global.candidates) << "retrieval narrowed to the prior";
+
+  prior.T_map_query.translation() += Eigen::Vector3d(0.0, 200.0, 0.0);  // beside both copies
+  const LocalizationResult neither = localizer.localize(query, sensor, CloudKind::kRaw, &prior);
+  EXPECT_FALSE(neither.localized());
+  EXPECT_TRUE(neither.refusal == Refusal::kNoConsistentMatches || neither.refusal == Refusal::kOutsidePrior ||
+              neither.refusal == Refusal::kTooFewSegments)
+      << to_string(neither.refusal);
+}
+
 TEST(Localizer, RefusesEmptyAndNonFiniteQueriesWithAReason) {
   const LocalizerConfig c = config();
   const Localizer localizer(c, extract_segments(pole_street(true), Eigen::Vector3f::Zero(), c.segmentation));

@@ -76,11 +76,20 @@ TEST(ServerLocalization, PosePriorIsEnforced) {
     with_prior.prior_radius_m = 20.0;
     with_prior.T_map_local_prior = free.T_map_local;
     with_prior.T_map_local_prior.translation() += Eigen::Vector3d(5.0, -3.0, 0.0);  // a fair guess
-    EXPECT_EQ(c.localize(with_prior).status, api::LocalizeStatus::kLocalized);
-    with_prior.T_map_local_prior.translation() += Eigen::Vector3d(150.0, 0.0, 0.0);  // a wrong one
+    const api::LocalizeReply fair = c.localize(with_prior);
+    EXPECT_EQ(fair.status, api::LocalizeStatus::kLocalized) << fair.reason;
+    EXPECT_LT((fair.T_map_local.translation() - free.T_map_local.translation()).norm(), 0.2);
+    // A wrong prior narrows the search to where the place is not: no pose, never a false one
+    // (docs/protocol.md 5.4, revision 2).
+    with_prior.T_map_local_prior.translation() += Eigen::Vector3d(150.0, 0.0, 0.0);
     const api::LocalizeReply far = c.localize(with_prior);
-    EXPECT_EQ(far.status, api::LocalizeStatus::kOutsidePrior);
-    EXPECT_NE(far.reason.find("prior"), std::string::npos) << far.reason;
+    EXPECT_NE(far.status, api::LocalizeStatus::kLocalized) << far.reason;
+    // Radius 0 keeps revision 1's meaning: a global search, then OUTSIDE_PRIOR with the pose.
+    with_prior.prior_radius_m = 0.0;
+    const api::LocalizeReply reject_only = c.localize(with_prior);
+    EXPECT_EQ(reject_only.status, api::LocalizeStatus::kOutsidePrior);
+    EXPECT_NE(reject_only.reason.find("prior"), std::string::npos) << reject_only.reason;
+    EXPECT_LT((reject_only.T_map_local.translation() - free.T_map_local.translation()).norm(), 0.2);
     return;
   }
   FAIL() << "no query localized";

@@ -112,7 +112,9 @@ constexpr uint32_t kFlagHasPrior = 1u << 0;
 // The points are voxel centroids of the map's voxel grid (docs/protocol.md 5.4): the server
 // skips its voxel grid.
 constexpr uint32_t kFlagVoxelized = 1u << 1;
-constexpr uint32_t kKnownFlags = kFlagHasPrior | kFlagVoxelized;
+// Revision 2 (docs/protocol.md 8): the prior's heading tolerance follows the points.
+constexpr uint32_t kFlagPriorHeading = 1u << 2;
+constexpr uint32_t kKnownFlags = kFlagHasPrior | kFlagVoxelized | kFlagPriorHeading;
 
 struct LocalizeRequest {
   uint64_t request_id = 0;
@@ -125,6 +127,8 @@ struct LocalizeRequest {
   // and vertical alike) the sensor's map position may be from where that guess puts it.
   Pose3d T_map_local_prior = Pose3d::Identity();
   double prior_radius_m = 0.0;
+  // Sent only with kFlagPriorHeading (after the points); without it the server assumes 10 deg.
+  double prior_heading_tolerance_deg = 10.0;
   uint32_t point_stride = 4;  // floats per point on the wire: 3 (x y z) or 4 (x y z intensity)
   PointCloud points;          // local frame; intensity 0 when the stride is 3
 };

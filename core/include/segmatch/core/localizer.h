@@ -49,11 +49,31 @@ struct LocalizerConfig {
   // reported as not localized. 0 (the core's default) keeps every pose that passed the checks
   // above; the kitti-hdl64 preset sets 0.8 (see io/pipeline_config.cpp for why).
   float min_confidence = 0.0f;
+  // With a PosePrior the candidates and poses are already confined to where the vehicle is
+  // known to be, so look-alikes elsewhere cannot pass; these replace min_support,
+  // min_refine_fitness and min_confidence then (negative: the same as without a prior).
+  int min_support_with_prior = -1;
+  float min_refine_fitness_with_prior = -1.0f;
+  float min_confidence_with_prior = -1.0f;
   void validate() const;
 };
 
 enum class LocalizationStatus { kLocalized, kNotLocalized };
 const char* to_string(LocalizationStatus status);
+
+// Why a query was not localized, stage by stage (LocalizationResult::reason says it in words).
+enum class Refusal {
+  kNone,                 // localized
+  kEmptyMap,             // the map has no segments
+  kTooFewSegments,       // fewer query segments than verification.min_inliers
+  kNoConsistentMatches,  // geometric verification found no consistent set
+  kOutsidePrior,         // poses were verified, none within the prior's radius
+  kLowSupport,           // too few query segments agree with the best pose
+  kAmbiguous,            // another distinct pose is supported almost as well
+  kSurfacesDisagree,     // refinement fitness below min_refine_fitness
+  kLowConfidence,        // confidence below min_confidence
+};
+const char* to_string(Refusal refusal);
 
 // Wall-clock time of each module for one query (milliseconds).
 struct ModuleTimings {
@@ -63,7 +83,8 @@ struct ModuleTimings {
 
 struct LocalizationResult {
   LocalizationStatus status = LocalizationStatus::kNotLocalized;
-  std::string reason;                               // why not localized (empty if localized)
+  Refusal refusal = Refusal::kNone;                 // why not localized, typed
+  std::string reason;                               // the same in words (empty if localized)
   Pose3d T_map_query = Pose3d::Identity();          // maps query-frame points into the map frame
   Matches inliers;                                  // query index -> map segment index
   float confidence = 0.0f;                          // 0..1
@@ -100,10 +121,11 @@ enum class CloudKind { kRaw, kVoxelized };
 // for loop closure): verified hypotheses that put the sensor farther than radius_m from where
 // T_map_query puts it are discarded before ranking, so the prior also settles a choice between
 // distant look-alike places that the support alone would refuse as ambiguous.
-// Candidate matches are gated too, before verification (so that the few matches of the right
-// place are not outnumbered by a larger cluster elsewhere): a query segment at distance d from
-// the sensor may only match a map segment within radius_m + d * max_rotation_deg (in radians)
-// of where the prior puts it.
+// The prior narrows retrieval itself (so that the few matches of the right place are neither
+// crowded out of the k nearest by look-alikes elsewhere in a large map nor outnumbered by a
+// larger cluster elsewhere): a query segment at distance d from the sensor retrieves its k
+// nearest in feature space only among the map segments within radius_m + d * max_rotation_deg
+// (in radians) of where the prior puts it.
 struct PosePrior {
   Pose3d T_map_query = Pose3d::Identity();
   double radius_m = 10.0;         // search radius around the prior's sensor position (finite, > 0)

@@ -58,4 +58,11 @@ class FeatureIndex {
 Matches retrieve_candidates(const Segments& queries, const FeatureIndex& index,
                             const RetrievalConfig& config);
 
+// The same restricted to allowed targets: for each query segment qi, its k nearest (in the
+// index's normalised feature space) among the targets t with allowed(qi, t), by brute force.
+// For a search narrowed by a pose prior, where the allowed targets are a few hundred of a map
+// of any size (Localizer with a PosePrior). Same output order and scores as above.
+Matches retrieve_candidates_among(const Segments& queries, const Segments& targets, const FeatureScaling& scaling,
+                                  const std::vector<std::vector<int>>& allowed, const RetrievalConfig& config);
+
 }  // namespace segmatch

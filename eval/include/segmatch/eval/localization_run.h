@@ -28,6 +28,19 @@ struct LocalizationRunConfig {
   io::ReplayConfig replay;
   Thresholds thresholds;
   bool print_each = true;   // one line per query on stdout
+  // The vehicle's odometry (poses file of the query sequence, e.g. its odom_poses.txt): the
+  // local clouds are accumulated with it, while the sequence's poses stay the reference. Empty:
+  // the reference poses themselves (perfect odometry).
+  std::string odometry_path;
+  // Tracking between fixes (api::Tracker): each query's prior comes from the last fix.
+  bool track = false;
+  // GNSS-like priors: each query's prior is the true pose with Gaussian noise of this many
+  // metres per horizontal axis (seeded), radius 3 sigma. 0: none. Excludes track.
+  double gnss_sigma_m = 0.0;
+  uint64_t gnss_seed = 1;
+  // Same-run A/B: every query sent with a prior is also sent without one (not scored), and the
+  // server times of both are reported.
+  bool compare_global = false;
 };
 
 struct LocalizationRun {
@@ -37,6 +50,13 @@ struct LocalizationRun {
   std::vector<Eigen::Vector3d> map_trajectory;
   std::string title;
   io::ReplayConfig replay;  // as run, so that a regression test can replay the same queries
+  // From the first localization on (tracking's figure: a pose carried by odometry alone is not
+  // a localization): queries, and those the server answered LOCALIZED.
+  size_t after_first_fix = 0, localized_after_first_fix = 0;
+  std::map<std::string, Distribution> server_ms_by_mode;  // server_total per query mode
+  // With compare_global, over the queries sent with a prior: server_total and retrieve +
+  // classify + verify, with the prior and for the same query without it.
+  Distribution ab_prior_server_ms, ab_prior_match_ms, ab_global_server_ms, ab_global_match_ms;
 };
 
 // Throws io::IoError / storage::StorageError / std::runtime_error naming the bad input.

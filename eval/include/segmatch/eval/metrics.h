@@ -34,6 +34,8 @@ struct QueryOutcome {
   uint32_t inliers = 0, support = 0;  // the localizer's evidence (LocalizeReply)
   float confidence = 0.f;
   std::string status;                // the localizer's status word, for reports
+  std::string mode = "global";       // how the query was asked: global, tracked (Tracker), gnss
+  double server_ms = 0.0;            // the server's own time (server_total)
   Eigen::Vector3d truth_xy = Eigen::Vector3d::Zero();     // map-frame truth position
   Eigen::Vector3d estimate_xy = Eigen::Vector3d::Zero();  // map-frame estimate when localized
   Pose3d T_map_sensor = Pose3d::Identity();              // the estimate when localized
