@@ -185,6 +185,7 @@ void serve_connection(Server::State& s, api::Socket socket, const std::string& p
         s.log(peer + " closed: frame cut off (" + api::to_string(r) + ")");
         return;
       }
+      s.stats.received();
       h = d == DecodeStatus::kUnknownType
               ? error_reply(ErrorCode::kUnknownType, "unknown message type " + std::to_string(header.type), !authed)
               : handle_frame(s, header, payload, authed, start);

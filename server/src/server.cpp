@@ -29,6 +29,11 @@ void Stats::record(bool is_localize, bool localized, bool error, double latency_
   if (is_localize && !error) period_latencies_ms_.push_back(latency_ms);
 }
 
+void Stats::received() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++counters_.frames_received;
+}
+
 void Stats::connection(bool refused) {
   std::lock_guard<std::mutex> lock(mutex_);
   (refused ? counters_.refused_connections : counters_.connections) += 1;

@@ -20,6 +20,7 @@ namespace server {
 class Stats {
  public:
   void record(bool is_localize, bool localized, bool error, double latency_ms);
+  void received();
   void connection(bool refused);
   ServerCounters counters() const;
   // "stats: ..." for the period since the last call, then starts a new period.

@@ -195,7 +195,10 @@ TEST(ServerRobustness, StopFinishesRequestsInFlight) {
   api::Client c = s->client();
   const api::LocalizeRequest request = test_world().queries.front().request;  // a full local cloud
   std::future<api::LocalizeReply> reply = std::async(std::launch::async, [&] { return c.localize(request); });
-  std::this_thread::sleep_for(Ms(150));  // the frame is read and queued (a localization takes longer)
+  // Wait until the server has the whole frame (a fixed sleep lost the race on a loaded machine:
+  // the 2-core CI runs two tests at once), then stop while it localizes.
+  for (int i = 0; i < 2000 && s->server->counters().frames_received < 1; ++i) std::this_thread::sleep_for(Ms(5));
+  ASSERT_GE(s->server->counters().frames_received, 1u) << "the request never arrived";
   api::Client idle = s->client();
   s->server->stop();
   const api::LocalizeReply r = reply.get();  // answered, not dropped

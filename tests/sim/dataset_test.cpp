@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include "sim_test_util.h"
+
 #include <sys/wait.h>
 
 #include <cstdlib>
@@ -22,26 +24,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
-class TempDir {
- public:
-  TempDir() {
-    std::random_device rd;
-    path_ = fs::temp_directory_path() / ("segmatch_sim_test_" + std::to_string(rd()) + std::to_string(rd()));
-    fs::create_directories(path_);
-  }
-  ~TempDir() { fs::remove_all(path_); }
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
-};
-
-std::string read_all(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
+using segmatch::sim_test::TempDir;
+using segmatch::sim_test::read_all;
 
 std::map<std::string, std::string> all_files(const fs::path& root) {
   std::map<std::string, std::string> out;
@@ -62,7 +46,7 @@ DatasetConfig small(uint64_t seed, double first_m, double second_m) {
 }  // namespace
 
 TEST(Dataset, WritesKittiLayoutThatTheSequenceReaderLoads) {
-  TempDir dir;
+  TempDir dir("segmatch_sim_test_");
   const DatasetConfig c = small(21, 300, 160);
   size_t calls = 0;
   const DatasetSummary s = generate_dataset(c, dir.path().string(), [&](const std::string&, size_t, size_t) { ++calls; });
@@ -99,7 +83,7 @@ TEST(Dataset, WritesKittiLayoutThatTheSequenceReaderLoads) {
 }
 
 TEST(Dataset, SecondTraversalRevisitsTheFirst) {
-  TempDir dir;
+  TempDir dir("segmatch_sim_test_");
   const DatasetSummary s = generate_dataset(small(21, 300, 160), dir.path().string());
   std::ifstream f(dir.path() / "ground_truth/revisits_01_00.txt");
   std::string line;
@@ -120,7 +104,7 @@ TEST(Dataset, SecondTraversalRevisitsTheFirst) {
 }
 
 TEST(Dataset, SameSeedSameBytesWhateverTheThreadCount) {
-  TempDir a, b, other;
+  TempDir a("segmatch_sim_test_"), b("segmatch_sim_test_"), other("segmatch_sim_test_");
   DatasetConfig c = small(5, 60, 60);
   c.threads = 1;
   generate_dataset(c, a.path().string());
@@ -140,7 +124,7 @@ TEST(Dataset, SameSeedSameBytesWhateverTheThreadCount) {
 }
 
 TEST(Dataset, InvalidConfigurationIsRefusedBeforeAnythingIsWritten) {
-  TempDir dir;
+  TempDir dir("segmatch_sim_test_");
   DatasetConfig c = small(1, 60, 60);
   c.sensor = "hdl128";
   EXPECT_THROW(generate_dataset(c, (dir.path() / "x").string()), std::invalid_argument);
@@ -151,7 +135,7 @@ TEST(Dataset, InvalidConfigurationIsRefusedBeforeAnythingIsWritten) {
 TEST(SimCli, RefusesToOverwriteWithoutForceAndRejectsBadArguments) {
   const std::string bin = std::string(SEGMATCH_BIN_DIR) + "/segmatch-sim";
   if (!fs::exists(bin)) GTEST_SKIP() << bin << " not built";
-  TempDir dir;
+  TempDir dir("segmatch_sim_test_");
   std::ofstream(dir.path() / "keep.txt") << "user data";
   const std::string out = dir.path().string();
   auto run = [](const std::string& cmd) { return WEXITSTATUS(std::system((cmd + " > /dev/null 2>&1").c_str())); };

@@ -11,6 +11,8 @@
 
 #include <gtest/gtest.h>
 
+#include "sim_test_util.h"
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -24,26 +26,8 @@ namespace fs = std::filesystem;
 
 constexpr uint32_t kGround = 40;
 
-class TempDir {
- public:
-  TempDir() {
-    std::random_device rd;
-    path_ = fs::temp_directory_path() / ("segmatch_keyframes_test_" + std::to_string(rd()) + std::to_string(rd()));
-    fs::create_directories(path_);
-  }
-  ~TempDir() { fs::remove_all(path_); }
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
-};
-
-std::string read_all(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
+using segmatch::sim_test::TempDir;
+using segmatch::sim_test::read_all;
 
 // A 40 m street: ground, two facades 6 m either side and a pole every 4 m.
 Scene street() {
@@ -108,7 +92,7 @@ double median_spacing(const PointCloud& cloud) {
 }
 
 TEST(Keyframes, SequenceReaderLoadsTheFolder) {
-  TempDir dir;
+  TempDir dir("segmatch_keyframes_test_");
   const Exported e = export_walk(dir.path(), every(3.0, 5));
   const io::Sequence seq = io::Sequence::open(dir.path().string());
   EXPECT_EQ(seq.layout(), io::SequenceLayout::kPcdKeyframes);
@@ -127,7 +111,7 @@ TEST(Keyframes, SequenceReaderLoadsTheFolder) {
 }
 
 TEST(Keyframes, SpacedByEveryMetresAndFirstHasAllItsFrames) {
-  TempDir dir;
+  TempDir dir("segmatch_keyframes_test_");
   const Exported e = export_walk(dir.path(), every(3.0, 5));
   ASSERT_FALSE(e.summary.frames.empty());
   EXPECT_EQ(e.summary.frames[0], 4u) << "the first keyframe integrates frames 0..4";
@@ -139,7 +123,7 @@ TEST(Keyframes, SpacedByEveryMetresAndFirstHasAllItsFrames) {
 }
 
 TEST(Keyframes, PointsAreOnePerVoxelAtAboutTheLeafSpacingInTheSensorFrame) {
-  TempDir dir;
+  TempDir dir("segmatch_keyframes_test_");
   export_walk(dir.path(), every(3.0, 5));
   const io::Sequence seq = io::Sequence::open(dir.path().string());
   for (size_t k : {size_t{0}, seq.size() / 2}) {
@@ -168,7 +152,7 @@ TEST(Keyframes, PointsAreOnePerVoxelAtAboutTheLeafSpacingInTheSensorFrame) {
 }
 
 TEST(Keyframes, IntegratingFramesAddsPoints) {
-  TempDir one, five;
+  TempDir one("segmatch_keyframes_test_"), five("segmatch_keyframes_test_");
   export_walk(one.path(), every(3.0, 1));
   export_walk(five.path(), every(3.0, 5));
   const io::Sequence a = io::Sequence::open(one.path().string()), b = io::Sequence::open(five.path().string());
@@ -200,7 +184,7 @@ TEST(Keyframes, OdometryDriftIsSystematicAndCanBeOff) {
 }
 
 TEST(Keyframes, SameInputSameBytes) {
-  TempDir a, b;
+  TempDir a("segmatch_keyframes_test_"), b("segmatch_keyframes_test_");
   export_walk(a.path(), every(4.0, 3));
   export_walk(b.path(), every(4.0, 3));
   for (const char* f : {"scans/000000.pcd", "scans/000003.pcd", "poses.txt", "odom_poses.txt", "times.txt"})
@@ -224,7 +208,7 @@ TEST(Keyframes, InvalidConfigurationsAreRefused) {
 // generate_dataset with the handheld Livox: keyframes of both traversals next to the KITTI
 // layout, their ground truth in the shared world frame, the same bytes on 1 and 2 threads.
 TEST(Keyframes, DatasetExportsBothTraversals) {
-  TempDir a, b;
+  TempDir a("segmatch_keyframes_test_"), b("segmatch_keyframes_test_");
   DatasetConfig c = dataset_preset("tiny", 4);
   c.use_sensor("livox-avia");
   EXPECT_DOUBLE_EQ(c.drive_first.sensor_height_m, 1.0);
@@ -258,7 +242,7 @@ TEST(Keyframes, DatasetExportsBothTraversals) {
 TEST(SimCli, LivoxKeyframesFromTheCommandLine) {
   const std::string bin = std::string(SEGMATCH_BIN_DIR) + "/segmatch-sim";
   if (!fs::exists(bin)) GTEST_SKIP() << bin << " not built";
-  TempDir dir;
+  TempDir dir("segmatch_keyframes_test_");
   const auto r = test::run_command(bin + " --preset tiny --sensor livox-avia --speed-mps 1.5 --length-00-m 50 "
                                          "--length-01-m 50 --keyframes-every-m 2 --keyframe-leaf-m 0.25 "
                                          "--keyframe-frames 3 --odom-drift-pct 0 --odom-yaw-drift-deg-per-m 0 "

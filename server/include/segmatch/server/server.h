@@ -39,6 +39,7 @@ struct ServerConfig {
 };
 
 struct ServerCounters {
+  uint64_t frames_received = 0; // frames read whole (answered or still in work)
   uint64_t requests = 0;        // frames answered (any type)
   uint64_t localize_requests = 0;
   uint64_t localized = 0;
