@@ -86,6 +86,17 @@ std::vector<std::vector<int>> targets_near_prior(const Segments& query, const Se
   return allowed;
 }
 
+// The floors in force: with a prior, the *_with_prior ones that are set (>= 0).
+struct Floors {
+  int min_support;
+  float min_fitness, min_confidence;
+};
+Floors floors_of(const LocalizerConfig& c, bool prior) {
+  auto pick = [prior](auto with_prior, auto without) { return prior && with_prior >= 0 ? with_prior : without; };
+  return {pick(c.min_support_with_prior, c.min_support), pick(c.min_refine_fitness_with_prior, c.min_refine_fitness),
+          pick(c.min_confidence_with_prior, c.min_confidence)};
+}
+
 // Points of the segments on one side of the matches, for the refinement.
 PointCloud gather(const Segments& segments, const Matches& inliers, bool query_side) {
   PointCloud out;
@@ -258,9 +269,8 @@ LocalizationResult Localizer::localize(const PointCloud& cloud, const Eigen::Vec
   r.inliers = best.inliers;
   r.T_map_query = best.T_target_query;
   r.timings.verify_ms += clock.lap();
-  const int min_support = prior && config_.min_support_with_prior >= 0 ? config_.min_support_with_prior : config_.min_support;
-  const float min_fitness =
-      prior && config_.min_refine_fitness_with_prior >= 0.0f ? config_.min_refine_fitness_with_prior : config_.min_refine_fitness;
+  const Floors floors = floors_of(config_, prior != nullptr);
+  const int min_support = floors.min_support;
   if (r.support < static_cast<size_t>(min_support))
     return finish(refuse(std::move(r), Refusal::kLowSupport, "only " + std::to_string(r.support) + " query segments agree with the best pose (at least " +
                                            std::to_string(min_support) + " needed)"));
@@ -275,14 +285,13 @@ LocalizationResult Localizer::localize(const PointCloud& cloud, const Eigen::Vec
     r.timings.refine_ms = clock.lap();
     r.refine_fitness = refined.fitness;
     r.refine_rmse_m = refined.rmse_m;
-    if (refined.fitness < min_fitness)
+    if (refined.fitness < floors.min_fitness)
       return finish(refuse(std::move(r), Refusal::kSurfacesDisagree, "matched segments' surfaces disagree (fitness " +
                                              std::to_string(refined.fitness) + ")"));
     r.T_map_query = refined.T_target_query;
   }
   r.confidence = confidence_of(r.support, min_support, r.refine_fitness);
-  const float min_confidence =
-      prior && config_.min_confidence_with_prior >= 0.0f ? config_.min_confidence_with_prior : config_.min_confidence;
+  const float min_confidence = floors.min_confidence;
   if (r.confidence < min_confidence) {
     char why[96];
     std::snprintf(why, sizeof(why), "confidence %.2f below min_confidence %.2f", r.confidence, min_confidence);

@@ -189,6 +189,27 @@ TEST(Localizer, ALookAlikeOutsideThePriorIsNeverReturned) {
       << to_string(neither.refusal);
 }
 
+// The floors a prior may lower (LocalizerConfig::*_with_prior) apply with a prior only.
+TEST(Localizer, FloorsWithAPriorApplyOnlyWithAPrior) {
+  LocalizerConfig c = config();
+  c.min_support = 40;  // more than the street's segments: refused without a prior
+  c.min_support_with_prior = 6;
+  const PointCloud street = pole_street(true);
+  const Localizer localizer(c, extract_segments(street, Eigen::Vector3f(25, 0, 2), c.segmentation));
+  const Pose3d T = T_query_map();
+  const PointCloud query = transformed(street, T);
+  const Eigen::Vector3f sensor = T.cast<float>() * Eigen::Vector3f(25, 0, 2);
+  const LocalizationResult global = localizer.localize(query, sensor);
+  EXPECT_EQ(global.refusal, Refusal::kLowSupport) << global.reason;
+  PosePrior prior;
+  prior.T_map_query = T.inverse();
+  prior.radius_m = 3.0;
+  const LocalizationResult with_prior = localizer.localize(query, sensor, CloudKind::kRaw, &prior);
+  EXPECT_TRUE(with_prior.localized()) << with_prior.reason;
+  c.min_support_with_prior = 3;  // below verification.min_inliers
+  EXPECT_THROW(c.validate(), std::invalid_argument);
+}
+
 TEST(Localizer, RefusesEmptyAndNonFiniteQueriesWithAReason) {
   const LocalizerConfig c = config();
   const Localizer localizer(c, extract_segments(pole_street(true), Eigen::Vector3f::Zero(), c.segmentation));
