@@ -7,6 +7,7 @@
 #include "segmatch/eval/localization_run.h"
 #include "segmatch/eval/real_pairs.h"
 #include "segmatch/eval/roc.h"
+#include "segmatch/io/auto_profile.h"
 #include "segmatch/io/error.h"
 #include "segmatch/io/pipeline_config.h"
 #include "segmatch/server/map_service.h"
@@ -71,9 +72,12 @@ RandomForestMatcher load_model(const std::string& path) {
 }
 
 int run_classifier(const ClassifierOptions& o) {
+  // Default: the auto profile; simulated HDL-64E scans measure as kitti-hdl64, so only a real
+  // folder is measured.
   const io::PipelineConfig config =
       !o.config_path.empty() ? io::read_pipeline_config(o.config_path)
-                             : io::pipeline_preset(o.real_dir.empty() ? "kitti-hdl64" : "sparse-keyframes");
+      : o.real_dir.empty()   ? io::pipeline_preset("kitti-hdl64")
+                             : io::auto_pipeline_config(io::measure_sequence(io::Sequence::open(o.real_dir)));
   TrainingPairConfig pc;
   pc.k = config.localizer.retrieval.k;
   pc.seed = o.seed;
@@ -181,7 +185,7 @@ int main(int argc, char** argv) {
   cls->add_option("--config", co.config_path, "pipeline config JSON");
   cls->add_option("--real", co.real_dir,
                   "real keyframe folder instead of a city: every candidate pair of the stretches segmatch-train --real "
-                  "holds out, labelled by centroid distance (default config: sparse-keyframes)");
+                  "holds out, labelled by centroid distance (default config: the auto profile measured from it)");
   cls->add_option("--out", co.out_dir, "report folder");
   CLI11_PARSE(app, argc, argv);
   try {
