@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <cstdint>
 #include <unordered_map>
 
 namespace segmatch {
@@ -15,35 +16,49 @@ double percentile(std::vector<double> v, double p) {
   return v[k];
 }
 
-// Nearest-neighbour distances of up to n evenly strided points of a scan, by a hash grid of
-// cell `cell_m` (neighbours farther than one cell are reported as cell_m: only the small
-// spacings matter for telling raw from downsampled).
-std::vector<double> nearest_neighbour_distances(const PointCloud& scan, size_t n, double cell_m,
-                                                std::vector<double>* ranges_of_sampled) {
-  auto key = [cell_m](double x, double y, double z) {
-    const auto c = [cell_m](double v) { return static_cast<int64_t>(std::floor(v / cell_m)) & 0x1FFFFF; };
-    return (c(x) << 42) | (c(y) << 21) | c(z);
-  };
-  std::unordered_multimap<int64_t, uint32_t> grid;
-  grid.reserve(scan.size());
-  for (uint32_t i = 0; i < scan.size(); ++i) grid.emplace(key(scan[i].x, scan[i].y, scan[i].z), i);
-  std::vector<double> out;
-  const size_t step = std::max<size_t>(1, scan.size() / std::max<size_t>(1, n));
-  for (size_t i = 0; i < scan.size(); i += step) {
-    const Point& p = scan[i];
-    double best = cell_m;
+// The points of a cloud hashed by cells of cell_m: the distance from a point to its nearest
+// cloud point, when that is within one cell (both measurements below only ask about short
+// distances: the spacing of a scan, and whether a point of another scan lies near).
+class PointGrid {
+ public:
+  PointGrid(const PointCloud& cloud, double cell_m) : cloud_(cloud), cell_m_(cell_m) {
+    grid_.reserve(cloud.size());
+    for (uint32_t i = 0; i < cloud.size(); ++i) grid_.emplace(key(cloud[i].xyz()), i);
+  }
+  // Distance to the nearest cloud point other than index `skip`, capped at cell_m.
+  double nearest(const Eigen::Vector3f& p, uint32_t skip = UINT32_MAX) const {
+    double best = cell_m_;
     for (int dx = -1; dx <= 1; ++dx)
       for (int dy = -1; dy <= 1; ++dy)
         for (int dz = -1; dz <= 1; ++dz) {
-          const auto range = grid.equal_range(key(p.x + dx * cell_m, p.y + dy * cell_m, p.z + dz * cell_m));
-          for (auto it = range.first; it != range.second; ++it) {
-            if (it->second == i) continue;
-            const Point& q = scan[it->second];
-            best = std::min(best, static_cast<double>((q.xyz() - p.xyz()).norm()));
-          }
+          const auto range = grid_.equal_range(key(p + Eigen::Vector3f(dx, dy, dz) * static_cast<float>(cell_m_)));
+          for (auto it = range.first; it != range.second; ++it)
+            if (it->second != skip) best = std::min(best, static_cast<double>((cloud_[it->second].xyz() - p).norm()));
         }
-    out.push_back(best);
-    if (ranges_of_sampled) ranges_of_sampled->push_back(p.xyz().norm());
+    return best;
+  }
+
+ private:
+  int64_t key(const Eigen::Vector3f& p) const {
+    const auto c = [this](float v) { return static_cast<int64_t>(std::floor(v / cell_m_)) & 0x1FFFFF; };
+    return (c(p.x()) << 42) | (c(p.y()) << 21) | c(p.z());
+  }
+  const PointCloud& cloud_;
+  double cell_m_;
+  std::unordered_multimap<int64_t, uint32_t> grid_;
+};
+
+// Every step-th index of n things, at most `sample` of them.
+size_t stride_for(size_t n, size_t sample) { return std::max<size_t>(1, n / std::max<size_t>(1, sample)); }
+
+// Nearest-neighbour distances (capped at 1 m) of up to n evenly strided points of a scan.
+std::vector<double> nearest_neighbour_distances(const PointCloud& scan, size_t n, std::vector<double>* ranges_of_sampled) {
+  const PointGrid grid(scan, 1.0);
+  std::vector<double> out;
+  const size_t step = stride_for(scan.size(), n);
+  for (size_t i = 0; i < scan.size(); i += step) {
+    out.push_back(grid.nearest(scan[i].xyz(), static_cast<uint32_t>(i)));
+    if (ranges_of_sampled) ranges_of_sampled->push_back(scan[i].xyz().norm());
   }
   return out;
 }
@@ -53,32 +68,13 @@ std::vector<double> nearest_neighbour_distances(const PointCloud& scan, size_t n
 double pose_agreement(const PointCloud& a, const Pose3d& T_world_a, const PointCloud& b, const Pose3d& T_world_b,
                       double radius_m, size_t sample) {
   if (a.empty() || b.empty()) return 0.0;
-  // b in a's frame, then the nearest-neighbour distances of the sampled points of b against a.
+  // The sampled points of b, put in a's frame, against a.
   const Eigen::Isometry3f T_a_b = (T_world_a.inverse() * T_world_b).cast<float>();
-  const size_t step = std::max<size_t>(1, b.size() / std::max<size_t>(1, sample));
-  std::vector<Eigen::Vector3f> probes;
-  for (size_t i = 0; i < b.size(); i += step) probes.push_back(T_a_b * b[i].xyz());
-  auto key = [radius_m](const Eigen::Vector3f& p) {
-    const auto c = [radius_m](double v) { return static_cast<int64_t>(std::floor(v / radius_m)) & 0x1FFFFF; };
-    return (c(p.x()) << 42) | (c(p.y()) << 21) | c(p.z());
-  };
-  std::unordered_multimap<int64_t, uint32_t> grid;
-  grid.reserve(a.size());
-  for (uint32_t i = 0; i < a.size(); ++i) grid.emplace(key(a[i].xyz()), i);
-  size_t near = 0;
-  const float r2 = static_cast<float>(radius_m * radius_m);
-  for (const Eigen::Vector3f& p : probes) {
-    bool hit = false;
-    for (int dx = -1; dx <= 1 && !hit; ++dx)
-      for (int dy = -1; dy <= 1 && !hit; ++dy)
-        for (int dz = -1; dz <= 1 && !hit; ++dz) {
-          const Eigen::Vector3f c = p + Eigen::Vector3f(dx, dy, dz) * static_cast<float>(radius_m);
-          const auto range = grid.equal_range(key(c));
-          for (auto it = range.first; it != range.second && !hit; ++it) hit = (a[it->second].xyz() - p).squaredNorm() <= r2;
-        }
-    near += hit;
-  }
-  return static_cast<double>(near) / static_cast<double>(probes.size());
+  const PointGrid grid(a, radius_m);
+  const size_t step = stride_for(b.size(), sample);
+  size_t probes = 0, near = 0;
+  for (size_t i = 0; i < b.size(); i += step, ++probes) near += grid.nearest(T_a_b * b[i].xyz()) < radius_m;
+  return static_cast<double>(near) / static_cast<double>(probes);
 }
 
 void check_pose_agreement(const std::vector<ScanPair>& pairs, InputMeasurements& m) {
@@ -141,7 +137,7 @@ InputMeasurements measure_input(const std::vector<PointCloud>& scans, const Pose
     r50.push_back(percentile(range, 0.5));
     r95.push_back(percentile(range, 0.95));
     std::vector<double> ranges;
-    const std::vector<double> nn = nearest_neighbour_distances(scan, config.sample_points, 1.0, &ranges);
+    const std::vector<double> nn = nearest_neighbour_distances(scan, config.sample_points, &ranges);
     spacing.insert(spacing.end(), nn.begin(), nn.end());
     for (size_t i = 0; i < nn.size(); ++i)
       if (ranges[i] > 1.0 && nn[i] < 1.0) per_range.push_back(nn[i] / ranges[i]);

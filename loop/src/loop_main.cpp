@@ -74,7 +74,7 @@ LoopDetectorConfig detector_config(const Options& o, const io::PipelineConfig& p
               p.preset.c_str(), c.local_cloud_every_m, c.exclude_recent_distance_m, c.local_cloud_history_m,
               c.min_inliers, c.min_confidence, c.max_drift_m,
               c.max_drift_fraction > 0 ? (" or " + std::to_string(c.max_drift_fraction * 100).substr(0, 4) + " % of the distance driven").c_str() : "",
-              c.max_drift_deg, c.max_drift_m > 0 ? "" : " (off)");
+              c.max_drift_deg, c.max_drift_m > 0 || c.max_drift_fraction > 0 ? "" : " (off)");
   return c;
 }
 
