@@ -233,5 +233,10 @@ double LoopDetector::odometer_m() const { return impl_->odometer; }
 size_t LoopDetector::map_size() const { return impl_->map.size(); }
 const std::vector<LoopClosure>& LoopDetector::loops() const { return impl_->loops; }
 Segments LoopDetector::map_segments() const { return impl_->map.segments(); }
+std::vector<size_t> LoopDetector::map_segment_frames() const {
+  std::vector<size_t> frames;
+  for (const Sighting& s : impl_->map.sightings()) frames.push_back(s.frame);
+  return frames;
+}
 
 }  // namespace segmatch

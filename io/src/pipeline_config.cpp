@@ -361,6 +361,8 @@ PipelineConfig parse_pipeline_config(const std::string& json_text, const std::st
     c.measured = parse_measured(in["measured"], origin);
     in.erase("measured");
   }
+  // How segmatch-mapbuilder --close-loops corrected the poses: a record, not a parameter.
+  in.erase("loop_closure");
   reader.check_unknown();
   try {
     c.validate();

@@ -1,18 +1,21 @@
 // segmatch-loop: online loop-closure detection over a recorded sequence (paper IV-D). The
 // target map is built online from the segments of past local clouds (odometry frame); each
 // new local cloud is matched against it. Writes loops.txt, loops.g2o, loops.png and, against
-// ground-truth poses, eval.json.
+// ground-truth poses, eval.json. With --optimize each loop re-optimises the pose graph
+// (posegraph/) and the corrected trajectory is written too.
 #include "loop_eval.h"
 #include "loop_output.h"
+#include "trajectory_output.h"
 
-#include <segmatch/cli/progress.h>
 #include <segmatch/core/loop_closure.h>
 #include <segmatch/io/auto_profile.h>
 #include <segmatch/io/pipeline_config.h>
 #include <segmatch/io/pose_io.h>
 #include <segmatch/io/sequence.h>
+#include <segmatch/posegraph/close_loops.h>
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <cstdio>
@@ -30,11 +33,12 @@ namespace {
 struct Options {
   std::string input, config_path, preset, classifier, odometry, truth, out;
   long first = 0, last = -1;
-  bool l2 = false, no_eval = false, verbose = false;
+  bool l2 = false, no_eval = false, verbose = false, optimize = false;
   double every_m = 0, exclude_m = -1, exclude_s = -1, radius_m = 0, history_m = 0, min_confidence = -1;
   double max_drift_m = -1, max_drift_deg = -1;  // < 0: not given
   int min_inliers = 0;
   loop::EvalConfig eval;
+  posegraph::PoseGraphConfig graph;
   bool revisit_gap_given = false;  // else the gap is the recent past excluded
 };
 
@@ -97,46 +101,18 @@ std::shared_ptr<const RandomForestMatcher> pick_matcher(const Options& o, LoopDe
   return rf;
 }
 
-struct Run {
-  std::vector<size_t> frames;     // every frame fed
-  Poses T_odom_sensor;            // their odometry poses
-  std::vector<size_t> processed;  // frames where a local cloud was matched
-  std::vector<double> step_ms;    // time of each processed local cloud
-  std::vector<LoopClosure> loops;
-};
-
-Run run(const io::Sequence& seq, size_t first, size_t last, LoopDetector& detector, bool verbose) {
-  Run r;
-  cli::Progress progress("loop", last - first + 1, "scans");
-  for (size_t i = first; i <= last; ++i) {
-    const io::CloudData scan = seq.scan(i);
-    const LoopStep step = detector.process(scan.points, seq.poses()[i], i, seq.times()[i]);
-    r.frames.push_back(i);
-    r.T_odom_sensor.push_back(seq.poses()[i]);
-    if (step.processed) {
-      r.processed.push_back(i);
-      r.step_ms.push_back(step.total_ms);
-      if (verbose)
-        std::fprintf(stderr, "\nframe %zu: %zu segments, %zu eligible targets, %zu in map, %.0f ms%s %s\n", i,
-                     step.query_segments, step.eligible_targets, step.map_segments, step.total_ms,
-                     step.loop ? " LOOP" : ":", step.reason.c_str());
-    }
-    if (step.loop) {
-      const LoopClosure& l = *step.loop;
-      std::fprintf(stderr, "\nloop: frame %zu -> %zu, %zu inliers, confidence %.2f, |t| %.2f m\n", l.query_frame,
-                   l.match_frame, l.inliers, l.confidence, l.T_query_match.translation().norm());
-    }
-    progress.advance();
-  }
-  progress.finish();
-  r.loops = detector.loops();
-  return r;
-}
-
 double percentile(std::vector<double> v, double p) {
   if (v.empty()) return 0.0;
   std::sort(v.begin(), v.end());
   return v[std::min(v.size() - 1, static_cast<size_t>(p * v.size()))];
+}
+
+// --truth, else the folder's own poses.txt: with --odometry the sequence's poses are the
+// odometry, which must not be scored against itself.
+Poses reference_poses(const Options& o, const io::Sequence& seq) {
+  if (!o.truth.empty()) return io::read_kitti_poses(o.truth);
+  if (o.odometry.empty()) return seq.poses();
+  return io::Sequence::open(o.input).poses();
 }
 
 void write_text(const std::string& path, const std::string& text) {
@@ -162,23 +138,49 @@ int run_main(Options o) {
   std::printf("%s: %ld scans, local cloud every %.1f m (radius %.0f m), recent past %.0f m / %.0f s excluded\n",
               o.input.c_str(), last - o.first + 1, config.local_cloud_every_m, config.local_cloud.radius_m,
               config.exclude_recent_distance_m, config.exclude_recent_time_s);
-  const Run r = run(seq, static_cast<size_t>(o.first), static_cast<size_t>(last), detector, o.verbose);
+  posegraph::CloseLoopsOptions co;
+  for (long i = o.first; i <= last; ++i) co.frames.push_back(static_cast<size_t>(i));
+  co.optimize = o.optimize;
+  co.graph = o.graph;
+  co.verbose = o.verbose;
+  const posegraph::ClosedLoops r = posegraph::close_loops(seq, config, classifier, co);
   std::printf("%zu local clouds, %zu loops, %zu map segments; per local cloud %.0f ms median, %.0f ms p90\n",
-              r.processed.size(), r.loops.size(), detector.map_size(), percentile(r.step_ms, 0.5),
+              r.processed.size(), r.loops.size(), r.map_odom.size(), percentile(r.step_ms, 0.5),
               percentile(r.step_ms, 0.9));
-  loop::write_loops_txt((fs::path(o.out) / "loops.txt").string(), r.loops);
-  loop::write_g2o((fs::path(o.out) / "loops.g2o").string(), r.frames, r.T_odom_sensor, r.loops);
+  const fs::path out(o.out);
+  loop::write_loops_txt((out / "loops.txt").string(), r.loops);
+  loop::write_g2o((out / "loops.g2o").string(), r.frames, r.T_odom_sensor, r.graph);
+  Poses reference;
   std::vector<bool> correct;
+  nlohmann::json eval_json;
   if (!o.no_eval) {
-    const Poses truth = o.truth.empty() ? seq.poses() : io::read_kitti_poses(o.truth);
+    const Poses truth = reference_poses(o, seq);
     const loop::Evaluation e = loop::evaluate(r.loops, r.processed, truth, static_cast<size_t>(o.first), o.eval);
     for (const loop::LoopScore& s : e.scores) correct.push_back(s.correct);
+    for (size_t f : r.frames) reference.push_back(truth.at(f));
     loop::print_summary(e, o.eval);
-    write_text((fs::path(o.out) / "eval.json").string(), loop::to_json(e, o.eval));
-    loop::write_curve_png((fs::path(o.out) / "precision_recall.png").string(), e.curve, o.eval.max_rotation_error_deg);
+    eval_json = nlohmann::json::parse(loop::to_json(e, o.eval));
+    loop::write_curve_png((out / "precision_recall.png").string(), e.curve, o.eval.max_rotation_error_deg);
   }
-  loop::write_png((fs::path(o.out) / "loops.png").string(), r.frames, r.T_odom_sensor, r.processed, r.loops, correct);
-  std::printf("wrote %s/{loops.txt,loops.g2o,loops.png%s}\n", o.out.c_str(), o.no_eval ? "" : ",eval.json,precision_recall.png");
+  loop::write_png((out / "loops.png").string(), r.frames, r.T_odom_sensor, r.processed, r.loops, correct);
+  std::string written = "loops.txt,loops.g2o,loops.png";
+  if (o.optimize) {
+    const loop::TrajectorySummary t = loop::summarize(r, reference);
+    loop::print_summary(t, r.loops);
+    std::vector<double> times;
+    for (size_t f : r.frames) times.push_back(seq.times()[f]);
+    io::write_kitti_poses((out / "poses_corrected.txt").string(), r.T_corrected_sensor);
+    loop::write_tum((out / "poses_corrected.tum").string(), times, r.T_corrected_sensor);
+    loop::write_g2o((out / "optimized.g2o").string(), r.frames, r.T_corrected_sensor, r.graph);
+    loop::write_trajectory_png((out / "trajectory.png").string(), r, reference, t);
+    written += ",poses_corrected.txt,poses_corrected.tum,optimized.g2o,trajectory.png";
+    if (!o.no_eval) eval_json["trajectory"] = loop::to_json(t, r.loops);
+  }
+  if (!o.no_eval) {
+    write_text((out / "eval.json").string(), eval_json.dump(2) + "\n");
+    written += ",eval.json,precision_recall.png";
+  }
+  std::printf("wrote %s/{%s}\n", o.out.c_str(), written.c_str());
   return 0;
 }
 
@@ -193,9 +195,19 @@ int main(int argc, char** argv) {
   app.add_option("--classifier", o.classifier, "random forest model (default: maps/models/default-rf.yml if present)");
   app.add_flag("--l2", o.l2, "use the L2 feature-distance matcher instead of a random forest");
   app.add_option("--odometry", o.odometry, "odometry poses (KITTI 12 numbers) instead of the sequence's poses.txt");
-  app.add_option("--truth", o.truth, "ground-truth T_world_lidar poses, KITTI 12 numbers (default: the sequence's poses)");
+  app.add_option("--truth", o.truth,
+                 "ground-truth T_world_lidar poses, KITTI 12 numbers (default: the sequence's poses.txt, also with --odometry)");
   app.add_flag("-v,--verbose", o.verbose, "print what each local cloud did");
   app.add_flag("--no-eval", o.no_eval, "do not evaluate (the input has no ground truth)");
+  app.add_flag("--optimize", o.optimize,
+               "optimise the pose graph at each loop (Ceres, robust loop edges) and write the corrected "
+               "trajectory (KITTI, TUM), optimized.g2o, trajectory.png and its error in eval.json");
+  app.add_option("--odometry-sigma-pct", o.graph.odometry_sigma_fraction,
+                 "--optimize: odometry translation sigma as a fraction of each step (default 0.02)");
+  app.add_option("--odometry-lateral-ratio", o.graph.odometry_lateral_ratio,
+                 "--optimize: sideways and vertical sigma relative to along-track (default 1)");
+  app.add_option("--gravity-sigma-deg", o.graph.gravity_sigma_deg,
+                 "--optimize: hold roll and pitch to the odometry's within this sigma (default 0: off)");
   app.add_option("--first", o.first, "first frame (default 0)");
   app.add_option("--last", o.last, "last frame (default: the sequence's last)");
   app.add_option("--every-m", o.every_m, "local cloud every this many metres (default 10; livox-keyframes: 1)");

@@ -32,10 +32,11 @@ void put_pose(std::ostream& out, const Pose3d& T) {
   out << t.x() << ' ' << t.y() << ' ' << t.z() << ' ' << q.x() << ' ' << q.y() << ' ' << q.z() << ' ' << q.w();
 }
 
-// Upper triangle of diag(t, t, t, r, r, r), row by row (21 values).
-void put_information(std::ostream& out, double t, double r) {
+// Upper triangle of the information matrix, row by row (21 values).
+void put_information(std::ostream& out, const posegraph::Matrix6d& sqrt_information) {
+  const posegraph::Matrix6d info = sqrt_information.transpose() * sqrt_information;
   for (int i = 0; i < 6; ++i)
-    for (int j = i; j < 6; ++j) out << ' ' << (i == j ? (i < 3 ? t : r) : 0.0);
+    for (int j = i; j < 6; ++j) out << ' ' << info(i, j);
 }
 
 }  // namespace
@@ -51,26 +52,21 @@ void write_loops_txt(const std::string& path, const std::vector<LoopClosure>& lo
   close_out(out, path);
 }
 
-void write_g2o(const std::string& path, const std::vector<size_t>& frames, const Poses& T_odom_sensor,
-               const std::vector<LoopClosure>& loops, const G2oInformation& info) {
+void write_g2o(const std::string& path, const std::vector<size_t>& frames, const Poses& T_world_node,
+               const posegraph::PoseGraph& graph) {
   std::ofstream out = open_out(path);
   for (size_t i = 0; i < frames.size(); ++i) {
     out << "VERTEX_SE3:QUAT " << frames[i] << ' ';
-    put_pose(out, T_odom_sensor[i]);
+    put_pose(out, T_world_node[i]);
     out << '\n';
   }
-  for (size_t i = 0; i + 1 < frames.size(); ++i) {
-    out << "EDGE_SE3:QUAT " << frames[i] << ' ' << frames[i + 1] << ' ';
-    put_pose(out, T_odom_sensor[i].inverse() * T_odom_sensor[i + 1]);
-    put_information(out, info.odometry_translation, info.odometry_rotation);
-    out << '\n';
-  }
-  for (const LoopClosure& l : loops) {
-    out << "EDGE_SE3:QUAT " << l.query_frame << ' ' << l.match_frame << ' ';
-    put_pose(out, l.T_query_match);
-    put_information(out, info.loop_translation, info.loop_rotation);
-    out << '\n';
-  }
+  for (const auto* edges : {&graph.odometry, &graph.loops})
+    for (const posegraph::Edge& e : *edges) {
+      out << "EDGE_SE3:QUAT " << frames.at(e.from) << ' ' << frames.at(e.to) << ' ';
+      put_pose(out, e.T_from_to);
+      put_information(out, e.sqrt_information);
+      out << '\n';
+    }
   if (!frames.empty()) out << "FIX " << frames.front() << '\n';
   close_out(out, path);
 }

@@ -5,6 +5,8 @@
 
 #include "loop_eval.h"
 
+#include <segmatch/posegraph/pose_graph.h>
+
 #include <string>
 #include <vector>
 
@@ -14,21 +16,13 @@ namespace segmatch::loop {
 // x..qw is T_query_match (translation in metres, unit quaternion). Throws std::runtime_error.
 void write_loops_txt(const std::string& path, const std::vector<LoopClosure>& loops);
 
-// Information (inverse covariance) of the edges of the pose graph, upper triangle written
-// row by row as g2o expects (translation first, then rotation as quaternion vector part).
-struct G2oInformation {
-  double loop_translation = 100.0;   // 1 / (0.1 m)^2
-  double loop_rotation = 3283.0;     // 1 / (1 deg in rad)^2
-  double odometry_translation = 400.0;   // 1 / (0.05 m)^2 per step
-  double odometry_rotation = 13131.0;    // 1 / (0.5 deg in rad)^2 per step
-};
-
-// VERTEX_SE3:QUAT for each frame (ids = frame indices, odometry poses T_odom_sensor), an
-// odometry EDGE_SE3:QUAT between consecutive frames and one loop EDGE_SE3:QUAT
-// (id_query id_match, measurement T_query_match) per loop. frames: the frame index of each
-// pose. Throws std::runtime_error.
-void write_g2o(const std::string& path, const std::vector<size_t>& frames, const Poses& T_odom_sensor,
-               const std::vector<LoopClosure>& loops, const G2oInformation& info = {});
+// VERTEX_SE3:QUAT for each node at T_world_node (ids = frame indices), then every edge of the
+// graph (odometry first, then loops: id_query id_match, measurement T_query_match) with its
+// information (inverse covariance) as g2o expects: the upper triangle row by row, translation
+// first, then rotation as quaternion vector part. FIX on the first node. Throws
+// std::runtime_error.
+void write_g2o(const std::string& path, const std::vector<size_t>& frames, const Poses& T_world_node,
+               const posegraph::PoseGraph& graph);
 
 // Top-down picture: the odometry trajectory (grey), the processed local clouds (blue dots),
 // and the loop edges between the query and match positions (green: true or unscored, red:

@@ -1,4 +1,5 @@
 #include "build_map.h"
+#include "loop_poses.h"
 
 #include <segmatch/cli/progress.h>
 #include <segmatch/core/map_builder.h>
@@ -103,12 +104,26 @@ ScanRange scan_range(const BuildOptions& o, const io::Sequence& seq) {
   return r;
 }
 
-storage::MapMetadata metadata_for(const BuildOptions& o, const io::PipelineConfig& config) {
+// The parameters used; with --close-loops also what the loop closure did to the poses.
+storage::MapMetadata metadata_for(const BuildOptions& o, const io::PipelineConfig& config,
+                                  const std::optional<LoopCorrectedPoses>& corrected) {
   storage::MapMetadata m;
   m.name = o.name.empty() ? fs::path(o.output).stem().string() : o.name;
   m.tool_version = std::string("segmatch-mapbuilder ") + SEGMATCH_VERSION;
   m.parameters_json = io::to_json(config);
+  if (corrected) {
+    nlohmann::json j = nlohmann::json::parse(m.parameters_json);
+    j["loop_closure"] = corrected->summary;
+    j["loop_closure"]["odometry"] = o.odometry_path.empty() ? "poses.txt" : o.odometry_path;
+    m.parameters_json = j.dump(2);
+  }
   return m;
+}
+
+std::vector<size_t> frames_of(const ScanRange& r) {
+  std::vector<size_t> frames;
+  for (size_t i = r.first; i <= r.last; i += r.stride) frames.push_back(i);
+  return frames;
 }
 
 void print_summary(const MapBuilder& b, size_t scans, double seconds, const std::string& path) {
@@ -132,7 +147,11 @@ int build_map(const BuildOptions& o, const volatile std::sig_atomic_t* stop_sign
   const auto start = std::chrono::steady_clock::now();
   if (!o.print_config) check_output(o);
   if (!fs::is_directory(o.input)) throw UsageError("input folder " + o.input + " does not exist");
-  const io::Sequence seq = io::Sequence::open(o.input);
+  if (!o.odometry_path.empty() && !fs::is_regular_file(o.odometry_path))
+    throw UsageError("--odometry " + o.odometry_path + " is not a file");
+  io::SequenceOptions so;
+  so.poses_path = o.odometry_path;
+  const io::Sequence seq = io::Sequence::open(o.input, so);
   const ScanRange range = scan_range(o, seq);
   const io::PipelineConfig config = load_config(o, seq, range.first, range.last, range.stride);
   MapBuilder builder(builder_config(config, o.map_every_m));
@@ -141,20 +160,24 @@ int build_map(const BuildOptions& o, const volatile std::sig_atomic_t* stop_sign
     return 0;
   }
   const std::optional<storage::ClassifierBlob> classifier = load_classifier(o);
+  const std::vector<size_t> frames = frames_of(range);
+  std::optional<LoopCorrectedPoses> corrected;
+  if (o.close_loops) corrected = close_loops_first(seq, frames, config, classifier);
 
   // Created before the loop: an unwritable target fails now, and an interrupted build leaves
   // nothing behind (the writer's destructor deletes its temporary file).
-  storage::MapWriter writer = storage::MapWriter::create(o.output, metadata_for(o, config), o.force);
+  storage::MapWriter writer = storage::MapWriter::create(o.output, metadata_for(o, config, corrected), o.force);
   std::vector<storage::Keyframe> trajectory;
   trajectory.reserve(range.count());
   {
     cli::Progress progress("map " + fs::path(o.input).filename().string(), range.count(), "scans");
-    for (size_t i = range.first; i <= range.last; i += range.stride) {
+    for (size_t k = 0; k < frames.size(); ++k) {
       if (*stop_signal) break;
+      const size_t i = frames[k];
       const io::CloudData scan = seq.scan(i);
-      builder.add_scan(scan.points, seq.poses()[i], static_cast<uint32_t>(i),
-                       scan.labels.empty() ? nullptr : &scan.labels);
-      trajectory.push_back({static_cast<uint32_t>(i), seq.times()[i], seq.poses()[i]});
+      const Pose3d& T_map_sensor = corrected ? corrected->T_map_sensor[k] : seq.poses()[i];
+      builder.add_scan(scan.points, T_map_sensor, static_cast<uint32_t>(i), scan.labels.empty() ? nullptr : &scan.labels);
+      trajectory.push_back({static_cast<uint32_t>(i), seq.times()[i], T_map_sensor});
       progress.advance();
     }
     if (!*stop_signal) builder.finish();

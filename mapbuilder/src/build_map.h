@@ -30,6 +30,8 @@ struct BuildOptions {
   size_t stride = 1;            // use every stride-th scan of the range
   double map_every_m = 5.0;     // MapBuilderConfig::map_every_m
   bool force = false;           // replace an existing map
+  std::string odometry_path;    // poses to use instead of the sequence's poses.txt (empty: those)
+  bool close_loops = false;     // detect loops and optimise the poses first (loop_poses.h)
 };
 
 // Builds the map. Returns the process exit code: 0 written, 128 + signal when *stop_signal

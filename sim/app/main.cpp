@@ -65,10 +65,11 @@ void add_keyframe_options(CLI::App& app, KeyframeOptions* k) {
   app.add_option("--keyframe-frames", k->config.frames,
                  "scans integrated per keyframe (default: 5 for livox-avia, 1 for spinning sensors)");
   app.add_option("--odom-drift-pct", k->odom_drift_pct,
-                 "keyframe odom_poses.txt reads every step this % too long (default 0.5; 0 with "
-                 "--odom-yaw-drift-deg-per-m 0: equal to poses.txt)");
+                 "odom_poses.txt (sequences and keyframes) reads every step this % too long (default 0.5; 0 "
+                 "with the two below 0: equal to poses.txt)");
   app.add_option("--odom-yaw-drift-deg-per-m", k->config.odom_yaw_drift_deg_per_m,
                  "and turns this much left per metre (default 0.01)");
+  app.add_option("--odom-climb-m-per-m", k->config.odom_climb_m_per_m, "and climbs this much per metre (default 0)");
 }
 
 void print_summary(const sim::DatasetConfig& config, const sim::DatasetSummary& s, const std::string& out) {
@@ -94,7 +95,7 @@ void print_summary(const sim::DatasetConfig& config, const sim::DatasetSummary& 
 
 int main(int argc, char** argv) {
   CLI::App app{"Generate a simulated urban LiDAR dataset (two traversals, KITTI layout, exact ground truth)"};
-  std::string preset = "demo", out, sensor;
+  std::string preset = "demo", out, sensor, route_00 = "random";
   uint64_t seed = 1;
   double first_m = 0, second_m = 0, speed_mps = 0;
   KeyframeOptions keyframes;
@@ -110,6 +111,10 @@ int main(int argc, char** argv) {
   app.add_option("--speed-mps", speed_mps, "cruise speed of both traversals (default 10; e.g. 1.5 for walking)")
       ->check(CLI::Range(0.3, 40.0));
   add_keyframe_options(app, &keyframes);
+  app.add_option("--route-00", route_00,
+                 "route of the first traversal: random (default) or loop (around the city and along its first "
+                 "streets again, for loop closure; ignores --length-00-m)")
+      ->check(CLI::IsMember({"random", "loop"}));
   app.add_option("--length-00-m", first_m, "route length of the first traversal (default from preset)");
   app.add_option("--length-01-m", second_m, "route length of the second traversal (default from preset)");
   app.add_option("--threads", threads, "worker threads (0: one per core)");
@@ -124,6 +129,7 @@ int main(int argc, char** argv) {
     if (speed_mps > 0) config.drive_first.cruise_speed_mps = config.drive_second.cruise_speed_mps = speed_mps;
     config.keyframes = keyframes.resolved();
     if (first_m > 0) config.first_length_m = first_m;
+    config.first_route = route_00;
     if (second_m > 0) config.second_length_m = second_m;
     config.threads = threads;
     config.write_labels = !no_labels;

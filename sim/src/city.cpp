@@ -9,7 +9,8 @@ City make_city(const DatasetConfig& c) {
   city.world = generate_world(c.world);
   city.changed = change_world(city.world, c.change);
   Rng rng(mix_seed(c.world.seed, 0x7a5e));
-  const Route first = plan_route(city.world.streets, c.first_length_m, rng);
+  const Route first = c.first_route == "loop" ? plan_loop_route(city.world.streets, 3)
+                                              : plan_route(city.world.streets, c.first_length_m, rng);
   const Route second = plan_revisit_route(city.world.streets, first, c.second_length_m, rng);
   city.first = drive(city.world, first, c.drive_first);
   city.second = drive(city.changed, second, c.drive_second);

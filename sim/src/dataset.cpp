@@ -50,13 +50,16 @@ void write_text(const fs::path& path, const std::string& text) {
   if (!f) throw std::runtime_error("cannot write " + path.string());
 }
 
-void write_sequence_metadata(const fs::path& dir, const Traversal& t) {
+// poses.txt and, drifted as the keyframes' odometry (KeyframeConfig), odom_poses.txt.
+void write_sequence_metadata(const fs::path& dir, const Traversal& t, const KeyframeConfig& drift) {
   fs::create_directories(dir / "velodyne");
   const Pose3d T_cam0_velo = kitti_T_cam0_velo();
   Poses relative;
   const Pose3d T_lidar0_world = t.T_world_lidar.front().inverse();
   for (const auto& T : t.T_world_lidar) relative.push_back(T_lidar0_world * T);
   io::write_kitti_poses((dir / "poses.txt").string(), io::lidar_to_camera_poses(relative, T_cam0_velo));
+  io::write_kitti_poses((dir / "odom_poses.txt").string(),
+                        io::lidar_to_camera_poses(drifted_odometry(relative, drift), T_cam0_velo));
   io::write_kitti_calib((dir / "calib.txt").string(), io::KittiCalib{T_cam0_velo});
   io::write_times((dir / "times.txt").string(), t.times_s);
 }
@@ -221,6 +224,8 @@ void DatasetConfig::validate() const {
     throw std::invalid_argument("first traversal length must be in 50..200000 m");
   if (!(second_length_m >= 50.0 && second_length_m <= 200000.0))
     throw std::invalid_argument("second traversal length must be in 50..200000 m");
+  if (first_route != "random" && first_route != "loop")
+    throw std::invalid_argument("first route '" + first_route + "' is not random or loop");
   if (threads < 0 || threads > 256) throw std::invalid_argument("threads must be in 0..256");
 }
 
@@ -274,7 +279,7 @@ DatasetSummary generate_dataset(const DatasetConfig& c, const std::string& out_d
   const World* worlds[2] = {&world, &changed};
   for (int k = 0; k < 2; ++k) {
     const fs::path dir = out / "sequences" / (k == 0 ? "00" : "01");
-    write_sequence_metadata(dir, *trav[k]);
+    write_sequence_metadata(dir, *trav[k], c.keyframes);
     io::write_kitti_poses((out / "ground_truth" / (k == 0 ? "lidar_poses_00.txt" : "lidar_poses_01.txt")).string(),
                           trav[k]->T_world_lidar);
     write_objects_csv(out / "ground_truth" / (k == 0 ? "objects_00.csv" : "objects_01.csv"), *worlds[k]);

@@ -53,6 +53,8 @@ void KeyframeConfig::validate() const {
     throw std::invalid_argument("keyframe odom_scale_error must be in -0.5..0.5");
   if (!(std::fabs(odom_yaw_drift_deg_per_m) <= 10.0))
     throw std::invalid_argument("keyframe odom_yaw_drift_deg_per_m must be in -10..10");
+  if (!(std::fabs(odom_climb_m_per_m) <= 0.1))
+    throw std::invalid_argument("keyframe odom_climb_m_per_m must be in -0.1..0.1");
 }
 
 int default_keyframe_frames(const LidarModel& model) { return model.pattern == ScanPattern::kRosette ? 5 : 1; }
@@ -70,7 +72,8 @@ std::vector<size_t> keyframe_frames(const Traversal& traversal, double every_m, 
 
 Poses drifted_odometry(const Poses& T_world_sensor, const KeyframeConfig& c) {
   // No drift: the very same poses (composing the steps again would round differently).
-  if (c.odom_scale_error == 0.0 && c.odom_yaw_drift_deg_per_m == 0.0) return T_world_sensor;
+  if (c.odom_scale_error == 0.0 && c.odom_yaw_drift_deg_per_m == 0.0 && c.odom_climb_m_per_m == 0.0)
+    return T_world_sensor;
   Poses out;
   if (T_world_sensor.empty()) return out;
   out.push_back(T_world_sensor.front());
@@ -79,6 +82,7 @@ Poses drifted_odometry(const Poses& T_world_sensor, const KeyframeConfig& c) {
     const double length_m = step.translation().norm();
     Pose3d read = step;
     read.translation() *= 1.0 + c.odom_scale_error;
+    read.translation().z() += c.odom_climb_m_per_m * length_m;
     read.linear() = Eigen::AngleAxisd(c.odom_yaw_drift_deg_per_m * length_m * kPi / 180.0, Eigen::Vector3d::UnitZ())
                         .toRotationMatrix() * step.linear();
     out.push_back(out.back() * read);

@@ -172,6 +172,26 @@ Route plan_route(const StreetGraph& g, double length_m, Rng& rng) {
   });
 }
 
+Route plan_loop_route(const StreetGraph& g, int again) {
+  Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+  for (const auto& n : g.nodes) centre += n;
+  centre /= static_cast<double>(g.nodes.size());
+  std::vector<int> outer;
+  for (size_t i = 0; i < g.nodes.size(); ++i)
+    if (g.node_edges[i].size() < 4) outer.push_back(static_cast<int>(i));
+  auto angle = [&](int i) { return std::atan2(g.nodes[i].y() - centre.y(), g.nodes[i].x() - centre.x()); };
+  std::sort(outer.begin(), outer.end(), [&](int a, int b) { return angle(a) > angle(b); });  // clockwise
+  Route r;
+  r.nodes = outer;
+  for (int k = 0; k <= again; ++k) r.nodes.push_back(outer[static_cast<size_t>(k) % outer.size()]);
+  for (size_t i = 0; i + 1 < r.nodes.size(); ++i) {
+    const auto& edges = g.node_edges[r.nodes[i]];
+    if (std::none_of(edges.begin(), edges.end(), [&](int e) { return g.other_end(e, r.nodes[i]) == r.nodes[i + 1]; }))
+      throw std::runtime_error("the city's outer nodes do not form a closed route");
+  }
+  return r;
+}
+
 Route plan_revisit_route(const StreetGraph& g, const Route& first, double length_m, Rng& rng) {
   std::set<int> first_dir;
   for (size_t i = 0; i + 1 < first.nodes.size(); ++i) first_dir.insert(directed(g, first.nodes[i], first.nodes[i + 1]));

@@ -4,4 +4,4 @@ segmatch_test_suite(test_loop loop segmatch_core segmatch_sim segmatch_io nlohma
 target_sources(test_loop PRIVATE ${PROJECT_SOURCE_DIR}/loop/src/loop_eval.cpp)
 target_include_directories(test_loop PRIVATE ${PROJECT_SOURCE_DIR}/loop/src)
 # The CLI tests run the built tool.
-add_dependencies(test_loop segmatch-loop)
+add_dependencies(test_loop segmatch-loop segmatch-sim segmatch-mapbuilder segmatch-mapinfo)

@@ -154,6 +154,9 @@ class LoopDetector {
   size_t map_size() const;           // target segments in the growing map
   const std::vector<LoopClosure>& loops() const;  // every loop detected so far
   Segments map_segments() const;     // copy of the map (odometry frame), for pictures and tests
+  // For each map segment (same order), the frame of the local cloud it was last seen from:
+  // the keyframe it moves with when the trajectory is corrected (map_correction.h).
+  std::vector<size_t> map_segment_frames() const;
 
  private:
   struct Impl;

@@ -7,6 +7,7 @@
 //   OUT/sequences/NN/poses.txt             camera-0 poses relative to the first frame, as KITTI
 //   OUT/sequences/NN/calib.txt             P0..P3 and Tr (T_cam0_velo), KITTI 00's values
 //   OUT/sequences/NN/times.txt             seconds
+//   OUT/sequences/NN/odom_poses.txt        poses.txt as a drifting odometry reports them (keyframes.h)
 //   OUT/ground_truth/lidar_poses_NN.txt    T_world_lidar per scan (12 numbers, shared world frame)
 //   OUT/ground_truth/revisits_01_00.txt    per scan of 01: nearest scan of 00, distance, heading diff
 //   OUT/ground_truth/objects_NN.csv        every object: instance, kind, position, size
@@ -38,6 +39,9 @@ struct DatasetConfig {
   DriveConfig drive_second;      // sequence 01 (inner lane, shifted)
   std::string sensor = "hdl64e";
   double first_length_m = 1200.0;   // route length of sequence 00
+  // Route of sequence 00: "random" (first_length_m, preferring new streets) or "loop" (around
+  // the city and along its first streets again: plan_loop_route, for loop closure).
+  std::string first_route = "random";
   double second_length_m = 800.0;   // route length of sequence 01
   int threads = 0;                  // 0: one per core
   bool write_labels = true;

@@ -36,6 +36,8 @@ struct KeyframeConfig {
   // Both 0: odom_poses.txt equals poses.txt.
   double odom_scale_error = 0.005;
   double odom_yaw_drift_deg_per_m = 0.01;
+  // ... and climbs this much per metre of the step (LiDAR odometry drifts in height too).
+  double odom_climb_m_per_m = 0.0;
   bool write_labels = true;  // label field in the PCDs (majority ground-truth label per voxel)
 
   void validate() const;  // throws std::invalid_argument naming the bad field

@@ -44,6 +44,11 @@ struct Traversal {
 // Random route of at least length_m, preferring streets it has not driven yet.
 Route plan_route(const StreetGraph& graph, double length_m, Rng& rng);
 
+// A closed route around the city: its outer nodes in clockwise order back to the start, then
+// its first `again` nodes once more (a loop that drives its first streets twice, for loop
+// closure). Throws std::runtime_error when the outer nodes do not form a route.
+Route plan_loop_route(const StreetGraph& graph, int again);
+
 // A route for a revisit: starts on a street of `first`, drives streets of `first` in the
 // same and in the opposite direction, and some streets `first` never drove.
 Route plan_revisit_route(const StreetGraph& graph, const Route& first, double length_m, Rng& rng);

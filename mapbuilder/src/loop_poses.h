@@ -1,0 +1,28 @@
+// segmatch-mapbuilder --close-loops: the traversal's poses are an odometry that drifts; loops
+// are detected and the pose graph optimised first (posegraph/close_loops.h), and the map is
+// built on the corrected poses.
+#pragma once
+
+#include <segmatch/io/pipeline_config.h>
+#include <segmatch/io/sequence.h>
+#include <segmatch/storage/map_types.h>
+
+#include <nlohmann/json.hpp>
+
+#include <optional>
+#include <vector>
+
+namespace segmatch::mapbuilder {
+
+struct LoopCorrectedPoses {
+  Poses T_map_sensor;          // one per frame given, corrected
+  nlohmann::json summary;      // loops, down-weighted loops, correction size: stored in the map
+};
+
+// frames: the scans the map is built from (increasing). classifier: the model the map stores
+// (used when the profile's matcher is the random forest; otherwise, or without one, L2).
+LoopCorrectedPoses close_loops_first(const io::Sequence& sequence, const std::vector<size_t>& frames,
+                                     const io::PipelineConfig& config,
+                                     const std::optional<storage::ClassifierBlob>& classifier);
+
+}  // namespace segmatch::mapbuilder

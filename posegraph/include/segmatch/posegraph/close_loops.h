@@ -1,0 +1,46 @@
+// Loop closure over a recorded sequence, online as on a vehicle: each scan goes to the
+// LoopDetector (paper IV-D) and becomes a node of the pose graph; each detected loop becomes
+// a loop edge and re-optimises the graph at once (IncrementalPoseGraph). At the end the
+// detector's segment map is moved onto the corrected trajectory and its duplicates merged
+// (core/map_correction.h). Used by segmatch-loop and segmatch-mapbuilder --close-loops.
+#pragma once
+
+#include "segmatch/core/loop_closure.h"
+#include "segmatch/core/map_correction.h"
+#include "segmatch/io/sequence.h"
+#include "segmatch/posegraph/pose_graph.h"
+
+#include <memory>
+#include <optional>
+#include <vector>
+
+namespace segmatch::posegraph {
+
+struct CloseLoopsOptions {
+  std::vector<size_t> frames;  // frames of the sequence to feed, increasing (node i = frames[i])
+  bool optimize = true;        // false: detect only (T_corrected_sensor = odometry)
+  PoseGraphConfig graph;
+  bool verbose = false;        // print what each local cloud did (stderr)
+  bool progress = true;        // progress bar with ETA (stderr)
+};
+
+struct ClosedLoops {
+  std::vector<size_t> frames;     // every frame fed
+  Poses T_odom_sensor;            // the sequence's poses of those frames (the odometry)
+  Poses T_corrected_sensor;       // after the last optimisation (odometry without loops)
+  std::vector<size_t> processed;  // frames where a local cloud was matched
+  std::vector<double> step_ms;    // detector time of each processed local cloud
+  std::vector<LoopClosure> loops;
+  PoseGraph graph;                // odometry chain and one edge per loop (initial = odometry)
+  std::optional<OptimizationResult> last_solve;  // the final optimisation, if any loop
+  std::vector<double> solve_ms;   // every optimisation, in order (one per loop)
+  Segments map_odom;              // the detector's segment map (odometry frame)
+  CorrectedMap map_corrected;     // the same on the corrected trajectory, duplicates merged
+  size_t node_of(size_t frame) const;  // index into frames; throws std::out_of_range
+};
+
+// classifier: required when the detector's matcher is kRandomForest.
+ClosedLoops close_loops(const io::Sequence& sequence, const LoopDetectorConfig& detector_config,
+                        std::shared_ptr<const RandomForestMatcher> classifier, const CloseLoopsOptions& options);
+
+}  // namespace segmatch::posegraph

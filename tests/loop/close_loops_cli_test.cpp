@@ -1,0 +1,90 @@
+// Loop closure that closes the loop (issue 21), end to end with the built tools on a
+// simulated closed route (segmatch-sim --route-00 loop) whose odometry drifts as in
+// loop_closure_test.cpp (0.3 % long, 0.2 deg / 100 m yaw, 2 mm / m climb): segmatch-loop
+// --optimize corrects the trajectory and writes every output; segmatch-mapbuilder
+// --close-loops stores a map on the corrected poses. The dataset is simulated once.
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "support/run_command.h"
+
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+const std::string kBin = std::string(SEGMATCH_BIN_DIR);
+
+class ClosedRoute : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = fs::temp_directory_path() / ("segmatch_close_loops_" + std::to_string(getpid()));
+    fs::remove_all(dir_);
+    const auto r = segmatch::test::run_command(
+        kBin + "/segmatch-sim --preset tiny --seed 3 --route-00 loop --odom-drift-pct 0.3 "
+               "--odom-yaw-drift-deg-per-m 0.002 --odom-climb-m-per-m 0.002 --no-images --out " + (dir_ / "sim").string());
+    ASSERT_EQ(r.code, 0) << r.output;
+    seq_ = (dir_ / "sim" / "sequences" / "00").string();
+  }
+  static void TearDownTestSuite() { fs::remove_all(dir_); }
+  static fs::path dir_;
+  static std::string seq_;
+};
+fs::path ClosedRoute::dir_;
+std::string ClosedRoute::seq_;
+
+}  // namespace
+
+TEST_F(ClosedRoute, LoopOptimizeCorrectsTheDriftedOdometry) {
+  const fs::path out = dir_ / "loop";
+  const auto r = segmatch::test::run_command(kBin + "/segmatch-loop --input " + seq_ + " --odometry " + seq_ +
+                                             "/odom_poses.txt --optimize --out " + out.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  for (const char* f : {"loops.txt", "loops.g2o", "optimized.g2o", "poses_corrected.txt", "poses_corrected.tum",
+                        "trajectory.png", "eval.json"})
+    EXPECT_GT(fs::file_size(out / f), 0u) << f;
+  std::ifstream in(out / "eval.json");
+  const nlohmann::json e = nlohmann::json::parse(in);
+  EXPECT_EQ(e["false_loops"].get<int>(), 0) << r.output;
+  ASSERT_GE(e["true_loops"].get<int>(), 5) << r.output;
+  const nlohmann::json& t = e["trajectory"];
+  const double before = t["odometry_error"]["rmse_m"], after = t["corrected_error"]["rmse_m"];
+  std::printf("[close loops] ATE RMSE %.3f -> %.3f m\n", before, after);
+  EXPECT_GT(before, 1.0) << "the odometry must drift";
+  EXPECT_LT(after, 0.5 * before);
+  EXPECT_EQ(t["loop_weights"].size(), e["loops"].get<size_t>());
+  EXPECT_EQ(t["downweighted_loops"].size(), 0u) << "every loop here is true";
+  EXPECT_GT(t["map"]["duplicates_merged"].get<int>(), 0) << "the revisit's copies merge with the old views";
+  // The corrected trajectory files hold one pose per scan.
+  std::ifstream kitti(out / "poses_corrected.txt"), tum(out / "poses_corrected.tum");
+  size_t kitti_lines = 0, tum_lines = 0;
+  for (std::string line; std::getline(kitti, line);) kitti_lines += !line.empty();
+  for (std::string line; std::getline(tum, line);) tum_lines += !line.empty() && line[0] != '#';
+  EXPECT_EQ(kitti_lines, tum_lines);
+  EXPECT_GT(kitti_lines, 900u);
+}
+
+TEST_F(ClosedRoute, MapbuilderCloseLoopsStoresTheCorrection) {
+  const fs::path map = dir_ / "closed.sqlite";
+  const auto r = segmatch::test::run_command(kBin + "/segmatch-mapbuilder --input " + seq_ + " --odometry " + seq_ +
+                                             "/odom_poses.txt --close-loops --output " + map.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("closing loops first"), std::string::npos) << r.output;
+  const auto info = segmatch::test::run_command(kBin + "/segmatch-mapinfo " + map.string() + " --json");
+  ASSERT_EQ(info.code, 0) << info.output;
+  EXPECT_NE(info.output.find("loop_closure"), std::string::npos) << info.output.substr(0, 2000);
+}
+
+TEST_F(ClosedRoute, MapbuilderRefusesAMissingOdometryFile) {
+  const auto r = segmatch::test::run_command(kBin + "/segmatch-mapbuilder --input " + seq_ +
+                                             " --odometry /nonexistent/odom.txt --close-loops --output " +
+                                             (dir_ / "never.sqlite").string());
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("/nonexistent/odom.txt"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(dir_ / "never.sqlite"));
+}
