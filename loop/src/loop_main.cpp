@@ -202,7 +202,7 @@ int main(int argc, char** argv) {
   app.add_flag("--optimize", o.optimize,
                "optimise the pose graph at each loop (Ceres, robust loop edges) and write the corrected "
                "trajectory (KITTI, TUM), optimized.g2o, trajectory.png and its error in eval.json");
-  app.add_option("--odometry-sigma-pct", o.graph.odometry_sigma_fraction,
+  app.add_option("--odometry-sigma-fraction", o.graph.odometry_sigma_fraction,
                  "--optimize: odometry translation sigma as a fraction of each step (default 0.02)");
   app.add_option("--odometry-lateral-ratio", o.graph.odometry_lateral_ratio,
                  "--optimize: sideways and vertical sigma relative to along-track (default 1)");
