@@ -129,11 +129,14 @@ bool LoopDetector::Impl::rebuild_if_due(const Sighting& now) {
 }
 
 // The loop a localization result describes, if it is one: the match frame is the local cloud
-// the majority of the matched target segments were last seen from.
+// the majority of the matched target segments' points come from (their kept view), so that the
+// edge relates the query to the odometry pose whose drift those points carry. (The last
+// sighting would be wrong by the drift in between: on hku-loop1 objects seen from frame 10 on
+// were last seen at frame 112.)
 std::optional<LoopClosure> LoopDetector::Impl::to_loop(const LocalizationResult& r, const Sighting& now,
                                                        const Pose3d& T_odom_query) const {
   std::map<size_t, int> votes;
-  for (const Match& m : r.inliers) ++votes[map.sightings()[target_map_index[m.target]].frame];
+  for (const Match& m : r.inliers) ++votes[map.view_frames()[target_map_index[m.target]]];
   size_t match_frame = 0;
   int best = -1;
   for (const auto& [frame, n] : votes)
@@ -234,9 +237,7 @@ size_t LoopDetector::map_size() const { return impl_->map.size(); }
 const std::vector<LoopClosure>& LoopDetector::loops() const { return impl_->loops; }
 Segments LoopDetector::map_segments() const { return impl_->map.segments(); }
 std::vector<size_t> LoopDetector::map_segment_frames() const {
-  std::vector<size_t> frames;
-  for (const Sighting& s : impl_->map.sightings()) frames.push_back(s.frame);
-  return frames;
+  return impl_->map.view_frames();
 }
 
 }  // namespace segmatch

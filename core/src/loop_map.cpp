@@ -57,6 +57,7 @@ size_t LoopSegmentMap::add(Segments segments, const Sighting& now) {
       grid_.emplace(cell_of(s.centroid), static_cast<int>(segments_.size()));
       segments_.push_back(std::move(s));
       sightings_.push_back(now);
+      view_frames_.push_back(now.frame);
       ++added;
       continue;
     }
@@ -67,6 +68,7 @@ size_t LoopSegmentMap::add(Segments segments, const Sighting& now) {
     const Eigen::Vector3f old_centroid = old.centroid;
     s.id = old.id;
     old = std::move(s);  // the more complete view wins
+    view_frames_[dup] = now.frame;
     refile(dup, old_centroid);
   }
   return added;

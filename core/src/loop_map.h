@@ -46,6 +46,10 @@ class LoopSegmentMap {
 
   const Segments& segments() const { return segments_; }
   const std::vector<Sighting>& sightings() const { return sightings_; }
+  // The local cloud each segment's points come from (its kept view). Not the last sighting: a
+  // sighting that keeps the old, larger view leaves the points, and so the odometry drift
+  // they carry, those of the earlier frame.
+  const std::vector<size_t>& view_frames() const { return view_frames_; }
   size_t size() const { return segments_.size(); }
 
  private:
@@ -57,6 +61,7 @@ class LoopSegmentMap {
   RecencyWindow window_;
   Segments segments_;
   std::vector<Sighting> sightings_;               // parallel to segments_
+  std::vector<size_t> view_frames_;               // parallel to segments_
   std::unordered_multimap<uint64_t, int> grid_;  // centroid cell -> segment index
   uint64_t next_id_ = 0;
 };

@@ -208,6 +208,8 @@ int main(int argc, char** argv) {
                  "--optimize: sideways and vertical sigma relative to along-track (default 1)");
   app.add_option("--gravity-sigma-deg", o.graph.gravity_sigma_deg,
                  "--optimize: hold roll and pitch to the odometry's within this sigma (default 0: off)");
+  app.add_option("--bias-stretch-m", o.graph.bias_stretch_m,
+                 "--optimize: estimate the odometry's yaw-rate and climb bias per stretch of this length (default 100; 0: off)");
   app.add_option("--first", o.first, "first frame (default 0)");
   app.add_option("--last", o.last, "last frame (default: the sequence's last)");
   app.add_option("--every-m", o.every_m, "local cloud every this many metres (default 10; livox-keyframes: 1)");

@@ -3,9 +3,12 @@
 // of the rotation difference), quaternions on Ceres' EigenQuaternionManifold.
 #include "segmatch/posegraph/pose_graph.h"
 
+#include "residuals.h"
+
 #include <ceres/ceres.h>
 #include <ceres/manifold.h>
 
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <memory>
@@ -20,47 +23,6 @@ constexpr double kRadPerDeg = M_PI / 180.0;
 void require(bool ok, const std::string& field) {
   if (!ok) throw std::invalid_argument("PoseGraphConfig: " + field);
 }
-
-// Residual of one edge: the measured T_ab against the estimated T_world_a^-1 * T_world_b.
-struct RelativePoseError {
-  RelativePoseError(const Pose3d& T_ab, const Matrix6d& sqrt_info)
-      : p_ab(T_ab.translation()), q_ab(T_ab.linear()), sqrt_information(sqrt_info) {}
-
-  template <typename T>
-  bool operator()(const T* p_a_ptr, const T* q_a_ptr, const T* p_b_ptr, const T* q_b_ptr, T* residual_ptr) const {
-    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> p_a(p_a_ptr), p_b(p_b_ptr);
-    const Eigen::Map<const Eigen::Quaternion<T>> q_a(q_a_ptr), q_b(q_b_ptr);
-    const Eigen::Quaternion<T> q_a_inverse = q_a.conjugate();
-    const Eigen::Quaternion<T> q_ab_estimated = q_a_inverse * q_b;
-    const Eigen::Matrix<T, 3, 1> p_ab_estimated = q_a_inverse * (p_b - p_a);
-    const Eigen::Quaternion<T> delta_q = q_ab.template cast<T>() * q_ab_estimated.conjugate();
-    Eigen::Map<Eigen::Matrix<T, 6, 1>> residual(residual_ptr);
-    residual.template head<3>() = p_ab_estimated - p_ab.template cast<T>();
-    residual.template tail<3>() = T(2.0) * delta_q.vec();
-    residual.applyOnTheLeft(sqrt_information.template cast<T>());
-    return true;
-  }
-
-  Eigen::Vector3d p_ab;
-  Eigen::Quaterniond q_ab;
-  Matrix6d sqrt_information;
-};
-
-// A node's "up" direction in its own frame against the odometry's: roll and pitch only, yaw
-// is free (2 dof; the third component is second order).
-struct GravityError {
-  GravityError(const Eigen::Vector3d& up_in_node, double sigma_rad) : up(up_in_node), weight(1.0 / sigma_rad) {}
-  template <typename T>
-  bool operator()(const T* q_ptr, T* residual_ptr) const {
-    const Eigen::Map<const Eigen::Quaternion<T>> q(q_ptr);
-    const Eigen::Matrix<T, 3, 1> estimated = q.conjugate() * Eigen::Matrix<T, 3, 1>(T(0), T(0), T(1));
-    Eigen::Map<Eigen::Matrix<T, 3, 1>> residual(residual_ptr);
-    residual = (estimated - up.template cast<T>()) * T(weight);
-    return true;
-  }
-  Eigen::Vector3d up;
-  double weight;
-};
 
 // Parameter blocks of the nodes: position and Eigen-ordered quaternion (x, y, z, w).
 struct NodeBlocks {
@@ -101,6 +63,33 @@ void add_edge(ceres::Problem& problem, NodeBlocks& nodes, const Edge& e, ceres::
                            nodes.q[e.to].coeffs().data());
 }
 
+// Odometry edges with a bias per stretch of bias_stretch_m (in the order of the edges, by the
+// distance their steps cover), a prior on the first stretch and a random walk between stretches.
+void add_biased_odometry(ceres::Problem& problem, NodeBlocks& nodes, const std::vector<Edge>& odometry,
+                         const PoseGraphConfig& c, std::vector<std::array<double, 2>>& biases) {
+  double odometer = 0;
+  std::vector<size_t> stretch_of;
+  for (const Edge& e : odometry) {
+    stretch_of.push_back(static_cast<size_t>(odometer / c.bias_stretch_m));
+    odometer += e.T_from_to.translation().norm();
+  }
+  biases.assign(stretch_of.empty() ? 1 : stretch_of.back() + 1, {0.0, 0.0});
+  for (size_t i = 0; i < odometry.size(); ++i) {
+    const Edge& e = odometry[i];
+    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<BiasedRelativePoseError, 6, 3, 4, 3, 4, 2>(
+                                 new BiasedRelativePoseError(e.T_from_to, e.sqrt_information)),
+                             nullptr, nodes.p[e.from].data(), nodes.q[e.from].coeffs().data(), nodes.p[e.to].data(),
+                             nodes.q[e.to].coeffs().data(), biases[stretch_of[i]].data());
+  }
+  problem.AddResidualBlock(new ceres::AutoDiffCostFunction<BiasPrior, 2, 2>(
+                               new BiasPrior(c.bias_yaw_sigma_deg_per_m * kRadPerDeg, c.bias_climb_sigma)),
+                           nullptr, biases[0].data());
+  for (size_t k = 1; k < biases.size(); ++k)
+    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<BiasStep, 2, 2, 2>(
+                                 new BiasStep(c.bias_yaw_walk_deg_per_m * kRadPerDeg, c.bias_climb_walk)),
+                             nullptr, biases[k - 1].data(), biases[k].data());
+}
+
 LoopReport report_loop(size_t index, const Edge& e, const Poses& T, const PoseGraphConfig& c) {
   const Pose3d estimated = T[e.from].inverse() * T[e.to];
   const Pose3d delta = e.T_from_to.inverse() * estimated;
@@ -133,6 +122,9 @@ void PoseGraphConfig::validate() const {
   require(max_iterations > 0, "max_iterations must be > 0");
   require(odometry_lateral_ratio > 0 && odometry_lateral_ratio <= 1, "odometry_lateral_ratio must be in (0, 1]");
   require(gravity_sigma_deg >= 0 && std::isfinite(gravity_sigma_deg), "gravity_sigma_deg must be >= 0");
+  require(bias_stretch_m >= 0 && std::isfinite(bias_stretch_m), "bias_stretch_m must be >= 0");
+  require(bias_yaw_sigma_deg_per_m > 0 && bias_climb_sigma > 0 && bias_yaw_walk_deg_per_m > 0 && bias_climb_walk > 0,
+          "the bias sigmas must be > 0");
 }
 
 Matrix6d sqrt_information(double sigma_m, double sigma_rad) {
@@ -203,7 +195,11 @@ OptimizationResult optimize(const PoseGraph& graph, const PoseGraphConfig& c) {
     problem.AddParameterBlock(nodes.p[i].data(), 3);
     problem.AddParameterBlock(nodes.q[i].coeffs().data(), 4, &quaternion);
   }
-  for (const Edge& e : graph.odometry) add_edge(problem, nodes, e, nullptr);
+  std::vector<std::array<double, 2>> biases;  // per stretch: yaw rate (rad/m), climb (m/m)
+  if (c.bias_stretch_m > 0)
+    add_biased_odometry(problem, nodes, graph.odometry, c, biases);
+  else
+    for (const Edge& e : graph.odometry) add_edge(problem, nodes, e, nullptr);
   for (const Edge& e : graph.loops) add_edge(problem, nodes, e, new ceres::CauchyLoss(c.robust_scale_sigma));
   if (c.gravity_sigma_deg > 0 && graph.up_in_node.size() == nodes.q.size())
     for (size_t i = 1; i < nodes.q.size(); ++i) {

@@ -101,3 +101,12 @@ TEST(PipelineConfig, FileErrorsNameThePath) {
   EXPECT_EQ(read_pipeline_config(path).localizer.retrieval.k, 50);
   std::remove(path.c_str());
 }
+
+// segmatch-mapbuilder --close-loops records what the loop closure did under "loop_closure" in
+// the map's parameters: a record, not a parameter. It parses, and is not written back, so the
+// parameters a server sends (io::to_json of the parsed config) stay readable by older clients.
+TEST(PipelineConfig, LoopClosureRecordIsReadAndNotWrittenBack) {
+  const std::string text = R"({"preset": "kitti-hdl64", "loop_closure": {"loops": [], "downweighted": 0}})";
+  const segmatch::io::PipelineConfig c = segmatch::io::parse_pipeline_config(text, "test");
+  EXPECT_EQ(segmatch::io::to_json(c).find("loop_closure"), std::string::npos);
+}

@@ -75,7 +75,7 @@ TEST_F(ClosedRoute, MapbuilderCloseLoopsStoresTheCorrection) {
                                              "/odom_poses.txt --close-loops --output " + map.string());
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_NE(r.output.find("closing loops first"), std::string::npos) << r.output;
-  const auto info = segmatch::test::run_command(kBin + "/segmatch-mapinfo " + map.string() + " --json");
+  const auto info = segmatch::test::run_command(kBin + "/segmatch-mapinfo " + map.string());
   ASSERT_EQ(info.code, 0) << info.output;
   EXPECT_NE(info.output.find("loop_closure"), std::string::npos) << info.output.substr(0, 2000);
 }

@@ -177,7 +177,9 @@ TEST(IncrementalPoseGraph, EndsWhereOneBatchSolveDoes) {
   ASSERT_EQ(next_loop, batch.loops.size());
   EXPECT_EQ(online.solves().size(), batch.loops.size());
   const OptimizationResult r = optimize(batch, c);
-  EXPECT_LT(max_distance(online.estimate(), r.T_world_node), 0.01);
+  // Within 3 cm (of 1.8 m corrected): the warm starts and the bias stretches estimated afresh at
+  // each solve stop at slightly different points of a flat minimum.
+  EXPECT_LT(max_distance(online.estimate(), r.T_world_node), 0.03);
 }
 
 TEST(IncrementalPoseGraph, NewNodesFollowTheOdometryFromTheLastSolve) {
@@ -242,4 +244,23 @@ TEST(PoseGraph, GravityPriorKeepsTheTrajectoryLevel) {
   const double without = vertical_rmse({}), with = vertical_rmse(level);
   std::printf("[pose graph] climb drift: vertical RMSE %.3f m without the gravity prior, %.3f m with it\n", without, with);
   EXPECT_LT(with, 0.5 * without);
+}
+
+// The odometry bias model (bias_stretch_m): a drift that is systematic along the route is
+// undone as it was made. Without it, the least-squares correction is the smallest change that
+// closes the loops, which is not the drift's shape.
+TEST(PoseGraph, BiasModelUndoesASystematicDrift) {
+  const Poses truth = block_loop();
+  const Poses odom = drifted(truth);
+  auto rmse = [&](const PoseGraphConfig& c) {
+    PoseGraph g = odometry_graph(odom, c);
+    add_true_loops(g, truth, c);
+    return trajectory_error(optimize(g, c).T_world_node, truth).rmse_m;
+  };
+  PoseGraphConfig white;
+  white.bias_stretch_m = 0;
+  const double without = rmse(white), with = rmse({});
+  std::printf("[pose graph] systematic drift: RMSE %.3f m with white odometry noise only, %.3f m with the bias model\n",
+              without, with);
+  EXPECT_LT(with, 0.25 * without);
 }

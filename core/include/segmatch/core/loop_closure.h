@@ -105,7 +105,7 @@ struct LoopDetectorConfig {
 // A detected loop: the vehicle at query_frame is where it was at match_frame.
 struct LoopClosure {
   size_t query_frame = 0;
-  size_t match_frame = 0;    // frame of the local cloud most matched target segments came from
+  size_t match_frame = 0;    // local cloud most matched target segments' points come from (their kept view)
   double query_time_s = 0, match_time_s = 0;
   double query_odometer_m = 0, match_odometer_m = 0;
   // Relative pose (a pose-graph edge): maps points of the sensor at match_frame into the
@@ -154,7 +154,7 @@ class LoopDetector {
   size_t map_size() const;           // target segments in the growing map
   const std::vector<LoopClosure>& loops() const;  // every loop detected so far
   Segments map_segments() const;     // copy of the map (odometry frame), for pictures and tests
-  // For each map segment (same order), the frame of the local cloud it was last seen from:
+  // For each map segment (same order), the local cloud its points come from (its kept view):
   // the keyframe it moves with when the trajectory is corrected (map_correction.h).
   std::vector<size_t> map_segment_frames() const;
 

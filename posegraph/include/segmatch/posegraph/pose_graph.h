@@ -39,6 +39,15 @@ struct PoseGraphConfig {
   // sees gravity, so LiDAR-inertial odometry does not drift in roll and pitch); a height
   // drift is then undone by the steps' translations, not by tilting the trajectory. 0: off.
   double gravity_sigma_deg = 0.0;
+  // If > 0: the odometry's yaw-rate and climb biases are estimated per stretch of this many
+  // metres (a random walk from one stretch to the next) and removed from its steps. Odometry
+  // errors are correlated along a route; white per-step noise alone lets a loop's correction
+  // be spread as the smallest change, not as a drift would have made it. 0: off.
+  double bias_stretch_m = 100.0;
+  double bias_yaw_sigma_deg_per_m = 0.02;   // prior on the first stretch's yaw-rate bias
+  double bias_climb_sigma = 0.01;           // ... and its climb bias (metres per metre)
+  double bias_yaw_walk_deg_per_m = 0.002;   // change from one stretch to the next
+  double bias_climb_walk = 0.001;
   double odometry_sigma_deg_per_m = 0.05;
   double odometry_min_sigma_deg = 0.05;
   // Loop edge at confidence 1 (refined loops: errors of a few cm and < 1 deg measured); the

@@ -1,0 +1,108 @@
+// The residuals of the pose graph (Ceres auto-diff functors). Internal to pose_graph.cpp.
+#pragma once
+
+#include "segmatch/posegraph/pose_graph.h"
+
+#include <Eigen/Geometry>
+
+namespace segmatch::posegraph {
+
+// Residual of one edge: the measured T_ab against the estimated T_world_a^-1 * T_world_b.
+struct RelativePoseError {
+  RelativePoseError(const Pose3d& T_ab, const Matrix6d& sqrt_info)
+      : p_ab(T_ab.translation()), q_ab(T_ab.linear()), sqrt_information(sqrt_info) {}
+
+  template <typename T>
+  bool operator()(const T* p_a_ptr, const T* q_a_ptr, const T* p_b_ptr, const T* q_b_ptr, T* residual_ptr) const {
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> p_a(p_a_ptr), p_b(p_b_ptr);
+    const Eigen::Map<const Eigen::Quaternion<T>> q_a(q_a_ptr), q_b(q_b_ptr);
+    const Eigen::Quaternion<T> q_a_inverse = q_a.conjugate();
+    const Eigen::Quaternion<T> q_ab_estimated = q_a_inverse * q_b;
+    const Eigen::Matrix<T, 3, 1> p_ab_estimated = q_a_inverse * (p_b - p_a);
+    const Eigen::Quaternion<T> delta_q = q_ab.template cast<T>() * q_ab_estimated.conjugate();
+    Eigen::Map<Eigen::Matrix<T, 6, 1>> residual(residual_ptr);
+    residual.template head<3>() = p_ab_estimated - p_ab.template cast<T>();
+    residual.template tail<3>() = T(2.0) * delta_q.vec();
+    residual.applyOnTheLeft(sqrt_information.template cast<T>());
+    return true;
+  }
+
+  Eigen::Vector3d p_ab;
+  Eigen::Quaterniond q_ab;
+  Matrix6d sqrt_information;
+};
+
+// A node's "up" direction in its own frame against the odometry's: roll and pitch only, yaw
+// is free (2 dof; the third component is second order).
+struct GravityError {
+  GravityError(const Eigen::Vector3d& up_in_node, double sigma_rad) : up(up_in_node), weight(1.0 / sigma_rad) {}
+  template <typename T>
+  bool operator()(const T* q_ptr, T* residual_ptr) const {
+    const Eigen::Map<const Eigen::Quaternion<T>> q(q_ptr);
+    const Eigen::Matrix<T, 3, 1> estimated = q.conjugate() * Eigen::Matrix<T, 3, 1>(T(0), T(0), T(1));
+    Eigen::Map<Eigen::Matrix<T, 3, 1>> residual(residual_ptr);
+    residual = (estimated - up.template cast<T>()) * T(weight);
+    return true;
+  }
+  Eigen::Vector3d up;
+  double weight;
+};
+
+// An odometry edge whose measurement carries a slowly varying bias (bias[0]: yaw rate, rad per
+// metre; bias[1]: climb, metres per metre), removed before comparing: the measured step is
+// turned back by bias[0] * d about its z axis and lowered by bias[1] * d. Odometry errors are
+// correlated along a route (a gyro bias, a miscalibrated mount), which white per-step noise
+// cannot express: with it, the optimiser spreads a loop's correction as a drift would have made
+// it, not as the smallest change.
+struct BiasedRelativePoseError {
+  BiasedRelativePoseError(const Pose3d& T_ab, const Matrix6d& sqrt_info)
+      : p_ab(T_ab.translation()), q_ab(T_ab.linear()), d(T_ab.translation().norm()), sqrt_information(sqrt_info) {}
+
+  template <typename T>
+  bool operator()(const T* p_a_ptr, const T* q_a_ptr, const T* p_b_ptr, const T* q_b_ptr, const T* bias,
+                  T* residual_ptr) const {
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> p_a(p_a_ptr), p_b(p_b_ptr);
+    const Eigen::Map<const Eigen::Quaternion<T>> q_a(q_a_ptr), q_b(q_b_ptr);
+    const T half = -bias[0] * T(d) * T(0.5);
+    const Eigen::Quaternion<T> unturn(cos(half), T(0), T(0), sin(half));
+    const Eigen::Quaternion<T> q_measured = unturn * q_ab.template cast<T>();
+    Eigen::Matrix<T, 3, 1> p_measured = p_ab.template cast<T>();
+    p_measured.z() -= bias[1] * T(d);
+    const Eigen::Quaternion<T> q_a_inverse = q_a.conjugate();
+    const Eigen::Quaternion<T> delta_q = q_measured * (q_a_inverse * q_b).conjugate();
+    Eigen::Map<Eigen::Matrix<T, 6, 1>> residual(residual_ptr);
+    residual.template head<3>() = q_a_inverse * (p_b - p_a) - p_measured;
+    residual.template tail<3>() = T(2.0) * delta_q.vec();
+    residual.applyOnTheLeft(sqrt_information.template cast<T>());
+    return true;
+  }
+
+  Eigen::Vector3d p_ab;
+  Eigen::Quaterniond q_ab;
+  double d;
+  Matrix6d sqrt_information;
+};
+
+// The bias of one stretch against the next (a random walk) or against zero (the first).
+struct BiasStep {
+  BiasStep(double yaw_sigma, double climb_sigma) : w_yaw(1.0 / yaw_sigma), w_climb(1.0 / climb_sigma) {}
+  template <typename T>
+  bool operator()(const T* a, const T* b, T* residual) const {
+    residual[0] = (b[0] - a[0]) * T(w_yaw);
+    residual[1] = (b[1] - a[1]) * T(w_climb);
+    return true;
+  }
+  double w_yaw, w_climb;
+};
+struct BiasPrior {
+  BiasPrior(double yaw_sigma, double climb_sigma) : w_yaw(1.0 / yaw_sigma), w_climb(1.0 / climb_sigma) {}
+  template <typename T>
+  bool operator()(const T* b, T* residual) const {
+    residual[0] = b[0] * T(w_yaw);
+    residual[1] = b[1] * T(w_climb);
+    return true;
+  }
+  double w_yaw, w_climb;
+};
+
+}  // namespace segmatch::posegraph
