@@ -27,6 +27,35 @@ bool downweighted(const TrajectorySummary& s, size_t loop) {
   return loop < s.loop_weights.size() && s.loop_weights[loop].downweighted;
 }
 
+// Below the map: position error against the reference along the route, odometry (grey) and
+// corrected (blue), with the loops' query frames marked. ref is already aligned.
+void draw_error_strip(cv::Mat& img, int top, const posegraph::ClosedLoops& r, const Poses& ref) {
+  const int left = 60, right = 20, height = img.rows - top - 40;
+  std::vector<double> odom, corrected;
+  double peak = 0.05;
+  for (size_t i = 0; i < ref.size(); ++i) {
+    odom.push_back((r.T_odom_sensor[i].translation() - ref[i].translation()).norm());
+    corrected.push_back((r.T_corrected_sensor[i].translation() - ref[i].translation()).norm());
+    peak = std::max({peak, odom.back(), corrected.back()});
+  }
+  const double n = static_cast<double>(std::max<size_t>(ref.size() - 1, 1));
+  auto px = [&](size_t i, double e) {
+    return cv::Point(left + static_cast<int>(i / n * (img.cols - left - right)), top + height - static_cast<int>(e / peak * height));
+  };
+  const cv::Scalar black(0, 0, 0), grey(160, 160, 160), blue(200, 100, 30);
+  cv::line(img, px(0, 0), px(ref.size() - 1, 0), black, 1);
+  cv::line(img, px(0, 0), px(0, peak), black, 1);
+  for (const LoopClosure& l : r.loops) cv::line(img, px(r.node_of(l.query_frame), 0), px(r.node_of(l.query_frame), peak),
+                                                cv::Scalar(0, 200, 255), 1);
+  for (size_t i = 1; i < ref.size(); ++i) {
+    cv::line(img, px(i - 1, odom[i - 1]), px(i, odom[i]), grey, 2, cv::LINE_AA);
+    cv::line(img, px(i - 1, corrected[i - 1]), px(i, corrected[i]), blue, 2, cv::LINE_AA);
+  }
+  cv::putText(img, cv::format("%.2f m", peak), cv::Point(5, top + 12), cv::FONT_HERSHEY_SIMPLEX, 0.45, black, 1, cv::LINE_AA);
+  cv::putText(img, "position error along the route: odometry (grey), corrected (blue), loops (orange)",
+              cv::Point(left, top + height + 25), cv::FONT_HERSHEY_SIMPLEX, 0.5, black, 1, cv::LINE_AA);
+}
+
 }  // namespace
 
 TrajectorySummary summarize(const posegraph::ClosedLoops& r, const Poses& reference) {
@@ -109,7 +138,8 @@ void write_trajectory_png(const std::string& path, const posegraph::ClosedLoops&
     return cv::Point(margin_px + static_cast<int>((T.translation().x() - lo.x()) * scale),
                      size_px - margin_px - static_cast<int>((T.translation().y() - lo.y()) * scale));
   };
-  cv::Mat img(size_px, size_px, CV_8UC3, cv::Scalar(255, 255, 255));
+  const int strip_px = ref.empty() ? 0 : 260;
+  cv::Mat img(size_px + strip_px, size_px, CV_8UC3, cv::Scalar(255, 255, 255));
   auto polyline = [&](const Poses& P, const cv::Scalar& colour, int width) {
     for (size_t i = 0; i + 1 < P.size(); ++i) cv::line(img, px(P[i]), px(P[i + 1]), colour, width, cv::LINE_AA);
   };
@@ -131,6 +161,7 @@ void write_trajectory_png(const std::string& path, const posegraph::ClosedLoops&
     cv::putText(img, cv::format("error (first pose aligned): odometry RMSE %.2f m, max %.2f m; corrected RMSE %.2f m, max %.2f m",
                                 s.odometry->rmse_m, s.odometry->max_m, s.corrected->rmse_m, s.corrected->max_m),
                 cv::Point(10, 44), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
+  if (!ref.empty()) draw_error_strip(img, size_px, r, ref);
   if (!cv::imwrite(path, img)) throw std::runtime_error("cannot write " + path);
 }
 

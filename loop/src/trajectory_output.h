@@ -32,7 +32,8 @@ void write_tum(const std::string& path, const std::vector<double>& times, const 
 
 // Top-down: odometry (grey), corrected (blue), reference (green, when given, aligned on the
 // first pose like the error), loop edges on the corrected trajectory (orange; red when the
-// optimiser down-weighted them). Throws std::runtime_error when it cannot write.
+// optimiser down-weighted them); with a reference, a strip below plots the position error
+// along the route. Throws std::runtime_error when it cannot write.
 void write_trajectory_png(const std::string& path, const posegraph::ClosedLoops& r, const Poses& reference,
                           const TrajectorySummary& s);
 

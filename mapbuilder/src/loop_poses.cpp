@@ -10,7 +10,8 @@ namespace segmatch::mapbuilder {
 
 LoopCorrectedPoses close_loops_first(const io::Sequence& seq, const std::vector<size_t>& frames,
                                      const io::PipelineConfig& pipeline,
-                                     const std::optional<storage::ClassifierBlob>& classifier) {
+                                     const std::optional<storage::ClassifierBlob>& classifier,
+                                     const volatile std::sig_atomic_t* stop_signal) {
   LoopDetectorConfig config = io::loop_detector_config(pipeline);
   std::shared_ptr<const RandomForestMatcher> rf;
   if (config.localizer.matcher.type == MatcherType::kRandomForest && classifier) {
@@ -24,6 +25,7 @@ LoopCorrectedPoses close_loops_first(const io::Sequence& seq, const std::vector<
               config.local_cloud_every_m, config.exclude_recent_distance_m, rf ? "random forest" : "L2");
   posegraph::CloseLoopsOptions o;
   o.frames = frames;
+  o.should_stop = [stop_signal] { return *stop_signal != 0; };
   const posegraph::ClosedLoops r = posegraph::close_loops(seq, config, rf, o);
 
   size_t downweighted = 0;

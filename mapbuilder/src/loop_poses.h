@@ -9,6 +9,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <csignal>
 #include <optional>
 #include <vector>
 
@@ -21,8 +22,10 @@ struct LoopCorrectedPoses {
 
 // frames: the scans the map is built from (increasing). classifier: the model the map stores
 // (used when the profile's matcher is the random forest; otherwise, or without one, L2).
+// *stop_signal non-zero stops early (the caller then writes no map).
 LoopCorrectedPoses close_loops_first(const io::Sequence& sequence, const std::vector<size_t>& frames,
                                      const io::PipelineConfig& config,
-                                     const std::optional<storage::ClassifierBlob>& classifier);
+                                     const std::optional<storage::ClassifierBlob>& classifier,
+                                     const volatile std::sig_atomic_t* stop_signal);
 
 }  // namespace segmatch::mapbuilder

@@ -53,6 +53,7 @@ ClosedLoops close_loops(const io::Sequence& seq, const LoopDetectorConfig& confi
   ClosedLoops r;
   cli::Progress progress("loop", o.frames.size(), "scans", o.progress ? stderr : nullptr);
   for (size_t frame : o.frames) {
+    if (o.should_stop && o.should_stop()) break;
     const io::CloudData scan = seq.scan(frame);
     const LoopStep step = detector.process(scan.points, seq.poses()[frame], frame, seq.times()[frame]);
     r.frames.push_back(frame);
@@ -65,8 +66,9 @@ ClosedLoops close_loops(const io::Sequence& seq, const LoopDetectorConfig& confi
     }
     if (step.loop) {
       const LoopClosure& l = *step.loop;
+      graph.add_loop_edge(r.node_of(l.query_frame), r.node_of(l.match_frame), l.T_query_match, l.confidence);
       if (o.optimize) {
-        r.last_solve = graph.add_loop(r.node_of(l.query_frame), r.node_of(l.match_frame), l.T_query_match, l.confidence);
+        r.last_solve = graph.solve();
         r.solve_ms.push_back(r.last_solve->solve_ms);
       }
       print_loop(l, o.optimize ? &*r.last_solve : nullptr);
@@ -75,9 +77,7 @@ ClosedLoops close_loops(const io::Sequence& seq, const LoopDetectorConfig& confi
   }
   progress.finish();
   r.loops = detector.loops();
-  r.graph = odometry_graph(r.T_odom_sensor, o.graph);
-  for (const LoopClosure& l : r.loops)
-    r.graph.loops.push_back(loop_edge(r.node_of(l.query_frame), r.node_of(l.match_frame), l.T_query_match, l.confidence, o.graph));
+  r.graph = graph.graph();
   r.T_corrected_sensor = o.optimize ? graph.estimate() : r.T_odom_sensor;
   correct_map(detector, r, config.segment_map);
   return r;

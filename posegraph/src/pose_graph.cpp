@@ -254,9 +254,12 @@ Poses IncrementalPoseGraph::estimate() const {
   return out;
 }
 
-OptimizationResult IncrementalPoseGraph::add_loop(size_t query, size_t match, const Pose3d& T_query_match,
-                                                  double confidence) {
+void IncrementalPoseGraph::add_loop_edge(size_t query, size_t match, const Pose3d& T_query_match,
+                                         double confidence) {
   graph_.loops.push_back(loop_edge(query, match, T_query_match, confidence, config_));
+}
+
+OptimizationResult IncrementalPoseGraph::solve() {
   PoseGraph warm = graph_;
   warm.T_world_node = estimate();
   OptimizationResult r = optimize(warm, config_);

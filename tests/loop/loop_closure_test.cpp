@@ -4,6 +4,7 @@
 // never comes back is a route without revisits.
 #include "segmatch/core/loop_closure.h"
 #include "segmatch/sim/dataset.h"
+#include "segmatch/sim/keyframes.h"
 #include "segmatch/sim/lidar.h"
 #include "segmatch/sim/traversal.h"
 #include "segmatch/sim/world.h"
@@ -24,29 +25,6 @@ namespace {
 
 constexpr double kDegPerRad = 180.0 / M_PI;
 
-// The outer nodes of the street grid in angular order around its centre, closed, then the
-// first `again` nodes once more: a loop around the city that drives its first streets twice.
-Route perimeter_route(const StreetGraph& g, int again) {
-  Eigen::Vector2d centre = Eigen::Vector2d::Zero();
-  for (const auto& n : g.nodes) centre += n;
-  centre /= static_cast<double>(g.nodes.size());
-  std::vector<int> outer;
-  for (size_t i = 0; i < g.nodes.size(); ++i)
-    if (g.node_edges[i].size() < 4) outer.push_back(static_cast<int>(i));
-  auto angle = [&](int i) { return std::atan2(g.nodes[i].y() - centre.y(), g.nodes[i].x() - centre.x()); };
-  std::sort(outer.begin(), outer.end(), [&](int a, int b) { return angle(a) > angle(b); });  // clockwise
-  Route r;
-  r.nodes = outer;
-  for (int k = 0; k <= again; ++k) r.nodes.push_back(outer[k % outer.size()]);
-  return r;
-}
-
-bool adjacent(const StreetGraph& g, int a, int b) {
-  for (int e : g.node_edges[a])
-    if (g.other_end(e, a) == b) return true;
-  return false;
-}
-
 // Frames at least 1 m apart (the local cloud keeps no others, paper IV-A).
 std::vector<size_t> metre_frames(const Traversal& t) {
   std::vector<size_t> frames;
@@ -59,16 +37,11 @@ std::vector<size_t> metre_frames(const Traversal& t) {
 // Odometry that drifts: each step's translation is 0.3 % too long, it turns 0.2 deg per
 // 100 m too much (yaw) and climbs 2 mm per metre.
 Poses drifted(const Poses& truth) {
-  Poses out{truth.front()};
-  for (size_t i = 1; i < truth.size(); ++i) {
-    Pose3d step = truth[i - 1].inverse() * truth[i];
-    const double d = step.translation().norm();
-    step.translation() *= 1.003;
-    step.translation().z() += 0.002 * d;
-    step.linear() = Eigen::AngleAxisd(0.002 / kDegPerRad * d, Eigen::Vector3d::UnitZ()) * step.linear();
-    out.push_back(out.back() * step);
-  }
-  return out;
+  KeyframeConfig drift;
+  drift.odom_scale_error = 0.003;
+  drift.odom_yaw_drift_deg_per_m = 0.002;
+  drift.odom_climb_m_per_m = 0.002;
+  return drifted_odometry(truth, drift);
 }
 
 LoopDetectorConfig l2_config() {
@@ -101,9 +74,7 @@ struct SimLoop {
 std::unique_ptr<SimLoop> simulate_loop(uint64_t seed) {
   const DatasetConfig dc = dataset_preset("tiny", seed);
   const World world = generate_world(dc.world);
-  const Route route = perimeter_route(world.streets, 3);
-  for (size_t i = 0; i + 1 < route.nodes.size(); ++i)
-    if (!adjacent(world.streets, route.nodes[i], route.nodes[i + 1])) throw std::runtime_error("perimeter is not a route");
+  const Route route = plan_loop_route(world.streets, 3);
   auto s = std::make_unique<SimLoop>();
   s->traversal = drive(world, route, dc.drive_first);
   const Traversal& t = s->traversal;

@@ -4,6 +4,7 @@
 // (incremental) optimiser ends where one batch solve does; the trajectory error is exact on
 // hand-made cases.
 #include "segmatch/posegraph/pose_graph.h"
+#include "segmatch/sim/keyframes.h"
 
 #include <gtest/gtest.h>
 
@@ -43,16 +44,11 @@ Poses block_loop() {
 // to the same places cannot observe a scale error (a scaled closed loop still closes), so
 // the known-answer tests leave it out.
 Poses drifted(const Poses& truth, double scale_error = 0.0) {
-  Poses out{truth.front()};
-  for (size_t i = 1; i < truth.size(); ++i) {
-    Pose3d step = truth[i - 1].inverse() * truth[i];
-    const double d = step.translation().norm();
-    step.translation() *= 1.0 + scale_error;
-    step.translation().z() += 0.002 * d;
-    step.linear() = Eigen::AngleAxisd(0.002 * kRadPerDeg * d, Eigen::Vector3d::UnitZ()) * step.linear();
-    out.push_back(out.back() * step);
-  }
-  return out;
+  sim::KeyframeConfig drift;
+  drift.odom_scale_error = scale_error;
+  drift.odom_yaw_drift_deg_per_m = 0.002;
+  drift.odom_climb_m_per_m = 0.002;
+  return sim::drifted_odometry(truth, drift);
 }
 
 // True loop edges: every 20 nodes of the second lap to the same place on the first.
@@ -228,12 +224,11 @@ TEST(PoseGraph, LateralRatioTightensAcrossTheStep) {
 // tilting the trajectory: the vertical error left is smaller than without it.
 TEST(PoseGraph, GravityPriorKeepsTheTrajectoryLevel) {
   const Poses truth = block_loop();
-  Poses odom{truth.front()};
-  for (size_t i = 1; i < truth.size(); ++i) {  // climbs 2 mm per metre, nothing else
-    Pose3d step = truth[i - 1].inverse() * truth[i];
-    step.translation().z() += 0.002 * step.translation().norm();
-    odom.push_back(odom.back() * step);
-  }
+  sim::KeyframeConfig climb;  // climbs 2 mm per metre, nothing else
+  climb.odom_scale_error = 0;
+  climb.odom_yaw_drift_deg_per_m = 0;
+  climb.odom_climb_m_per_m = 0.002;
+  const Poses odom = sim::drifted_odometry(truth, climb);
   auto vertical_rmse = [&](const PoseGraphConfig& c) {
     PoseGraph g = odometry_graph(odom, c);
     add_true_loops(g, truth, c);

@@ -10,6 +10,7 @@
 #include "segmatch/io/sequence.h"
 #include "segmatch/posegraph/pose_graph.h"
 
+#include <functional>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -22,6 +23,8 @@ struct CloseLoopsOptions {
   PoseGraphConfig graph;
   bool verbose = false;        // print what each local cloud did (stderr)
   bool progress = true;        // progress bar with ETA (stderr)
+  // Polled before each scan: true stops the run early (what was fed so far is returned).
+  std::function<bool()> should_stop;
 };
 
 struct ClosedLoops {

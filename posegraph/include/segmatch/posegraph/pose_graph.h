@@ -129,8 +129,15 @@ class IncrementalPoseGraph {
   explicit IncrementalPoseGraph(const PoseGraphConfig& config = {});
   // Appends a node at odometry pose T_odom_node; returns its index.
   size_t add_node(const Pose3d& T_odom_node);
-  // Adds a loop edge and re-optimises; returns the solve's result.
-  OptimizationResult add_loop(size_t query, size_t match, const Pose3d& T_query_match, double confidence);
+  // Adds a loop edge (no solve).
+  void add_loop_edge(size_t query, size_t match, const Pose3d& T_query_match, double confidence);
+  // Solves the graph warm-started from the current estimate; returns the solve's result.
+  OptimizationResult solve();
+  // add_loop_edge, then solve.
+  OptimizationResult add_loop(size_t query, size_t match, const Pose3d& T_query_match, double confidence) {
+    add_loop_edge(query, match, T_query_match, confidence);
+    return solve();
+  }
   // Current estimate of every node (odometry before the first loop).
   Poses estimate() const;
   const PoseGraph& graph() const { return graph_; }
