@@ -90,6 +90,9 @@ void add_biased_odometry(ceres::Problem& problem, NodeBlocks& nodes, const std::
                              nullptr, biases[k - 1].data(), biases[k].data());
 }
 
+// The world's up direction in the frame of a node at pose T (the gravity prior's reference).
+Eigen::Vector3d up_in(const Pose3d& T) { return T.linear().transpose() * Eigen::Vector3d::UnitZ(); }
+
 LoopReport report_loop(size_t index, const Edge& e, const Poses& T, const PoseGraphConfig& c) {
   const Pose3d estimated = T[e.from].inverse() * T[e.to];
   const Pose3d delta = e.T_from_to.inverse() * estimated;
@@ -153,19 +156,24 @@ Matrix6d odometry_sqrt_information(const Pose3d& T_a_b, const PoseGraphConfig& c
   return s;
 }
 
+namespace {
+// The edge from node `from` at T_from to the next node at T_to.
+Edge odometry_edge(size_t from, const Pose3d& T_from, const Pose3d& T_to, const PoseGraphConfig& c) {
+  Edge e;
+  e.from = from;
+  e.to = from + 1;
+  e.T_from_to = T_from.inverse() * T_to;
+  e.sqrt_information = odometry_sqrt_information(e.T_from_to, c);
+  return e;
+}
+}  // namespace
+
 PoseGraph odometry_graph(const Poses& T_odom_node, const PoseGraphConfig& c) {
   c.validate();
   PoseGraph g;
   g.T_world_node = T_odom_node;
-  for (const Pose3d& T : T_odom_node) g.up_in_node.push_back(T.linear().transpose() * Eigen::Vector3d::UnitZ());
-  for (size_t i = 1; i < T_odom_node.size(); ++i) {
-    Edge e;
-    e.from = i - 1;
-    e.to = i;
-    e.T_from_to = T_odom_node[i - 1].inverse() * T_odom_node[i];
-    e.sqrt_information = odometry_sqrt_information(e.T_from_to, c);
-    g.odometry.push_back(e);
-  }
+  for (const Pose3d& T : T_odom_node) g.up_in_node.push_back(up_in(T));
+  for (size_t i = 1; i < T_odom_node.size(); ++i) g.odometry.push_back(odometry_edge(i - 1, T_odom_node[i - 1], T_odom_node[i], c));
   return g;
 }
 
@@ -234,15 +242,9 @@ IncrementalPoseGraph::IncrementalPoseGraph(const PoseGraphConfig& config) : conf
 size_t IncrementalPoseGraph::add_node(const Pose3d& T_odom_node) {
   if (!T_odom_node.matrix().allFinite()) throw std::invalid_argument("pose graph: a node's pose is not finite");
   graph_.T_world_node.push_back(T_odom_node);
-  graph_.up_in_node.push_back(T_odom_node.linear().transpose() * Eigen::Vector3d::UnitZ());
+  graph_.up_in_node.push_back(up_in(T_odom_node));
   const size_t n = graph_.T_world_node.size();
-  if (n > 1) {
-    const PoseGraph step = odometry_graph({graph_.T_world_node[n - 2], T_odom_node}, config_);
-    Edge e = step.odometry.front();
-    e.from = n - 2;
-    e.to = n - 1;
-    graph_.odometry.push_back(e);
-  }
+  if (n > 1) graph_.odometry.push_back(odometry_edge(n - 2, graph_.T_world_node[n - 2], T_odom_node, config_));
   return n - 1;
 }
 
