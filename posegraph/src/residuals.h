@@ -7,23 +7,32 @@
 
 namespace segmatch::posegraph {
 
-// Residual of one edge: the measured T_ab against the estimated T_world_a^-1 * T_world_b.
+// The residual of an edge: a measured relative pose (p_ab, q_ab) against the estimated
+// T_world_a^-1 * T_world_b, whitened. Translation in a's frame, then 2 * the vector part of the
+// rotation difference (Ceres' pose_graph_3d example).
+template <typename T>
+void relative_pose_residual(const T* p_a_ptr, const T* q_a_ptr, const T* p_b_ptr, const T* q_b_ptr,
+                            const Eigen::Matrix<T, 3, 1>& p_ab, const Eigen::Quaternion<T>& q_ab,
+                            const Matrix6d& sqrt_information, T* residual_ptr) {
+  const Eigen::Map<const Eigen::Matrix<T, 3, 1>> p_a(p_a_ptr), p_b(p_b_ptr);
+  const Eigen::Map<const Eigen::Quaternion<T>> q_a(q_a_ptr), q_b(q_b_ptr);
+  const Eigen::Quaternion<T> q_a_inverse = q_a.conjugate();
+  const Eigen::Quaternion<T> delta_q = q_ab * (q_a_inverse * q_b).conjugate();
+  Eigen::Map<Eigen::Matrix<T, 6, 1>> residual(residual_ptr);
+  residual.template head<3>() = q_a_inverse * (p_b - p_a) - p_ab;
+  residual.template tail<3>() = T(2.0) * delta_q.vec();
+  residual.applyOnTheLeft(sqrt_information.template cast<T>());
+}
+
+// One edge with its measurement as given.
 struct RelativePoseError {
   RelativePoseError(const Pose3d& T_ab, const Matrix6d& sqrt_info)
       : p_ab(T_ab.translation()), q_ab(T_ab.linear()), sqrt_information(sqrt_info) {}
 
   template <typename T>
-  bool operator()(const T* p_a_ptr, const T* q_a_ptr, const T* p_b_ptr, const T* q_b_ptr, T* residual_ptr) const {
-    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> p_a(p_a_ptr), p_b(p_b_ptr);
-    const Eigen::Map<const Eigen::Quaternion<T>> q_a(q_a_ptr), q_b(q_b_ptr);
-    const Eigen::Quaternion<T> q_a_inverse = q_a.conjugate();
-    const Eigen::Quaternion<T> q_ab_estimated = q_a_inverse * q_b;
-    const Eigen::Matrix<T, 3, 1> p_ab_estimated = q_a_inverse * (p_b - p_a);
-    const Eigen::Quaternion<T> delta_q = q_ab.template cast<T>() * q_ab_estimated.conjugate();
-    Eigen::Map<Eigen::Matrix<T, 6, 1>> residual(residual_ptr);
-    residual.template head<3>() = p_ab_estimated - p_ab.template cast<T>();
-    residual.template tail<3>() = T(2.0) * delta_q.vec();
-    residual.applyOnTheLeft(sqrt_information.template cast<T>());
+  bool operator()(const T* p_a, const T* q_a, const T* p_b, const T* q_b, T* residual) const {
+    relative_pose_residual<T>(p_a, q_a, p_b, q_b, p_ab.template cast<T>(), q_ab.template cast<T>(), sqrt_information,
+                              residual);
     return true;
   }
 
@@ -59,21 +68,13 @@ struct BiasedRelativePoseError {
       : p_ab(T_ab.translation()), q_ab(T_ab.linear()), d(T_ab.translation().norm()), sqrt_information(sqrt_info) {}
 
   template <typename T>
-  bool operator()(const T* p_a_ptr, const T* q_a_ptr, const T* p_b_ptr, const T* q_b_ptr, const T* bias,
-                  T* residual_ptr) const {
-    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> p_a(p_a_ptr), p_b(p_b_ptr);
-    const Eigen::Map<const Eigen::Quaternion<T>> q_a(q_a_ptr), q_b(q_b_ptr);
+  bool operator()(const T* p_a, const T* q_a, const T* p_b, const T* q_b, const T* bias, T* residual) const {
     const T half = -bias[0] * T(d) * T(0.5);
     const Eigen::Quaternion<T> unturn(cos(half), T(0), T(0), sin(half));
-    const Eigen::Quaternion<T> q_measured = unturn * q_ab.template cast<T>();
     Eigen::Matrix<T, 3, 1> p_measured = p_ab.template cast<T>();
     p_measured.z() -= bias[1] * T(d);
-    const Eigen::Quaternion<T> q_a_inverse = q_a.conjugate();
-    const Eigen::Quaternion<T> delta_q = q_measured * (q_a_inverse * q_b).conjugate();
-    Eigen::Map<Eigen::Matrix<T, 6, 1>> residual(residual_ptr);
-    residual.template head<3>() = q_a_inverse * (p_b - p_a) - p_measured;
-    residual.template tail<3>() = T(2.0) * delta_q.vec();
-    residual.applyOnTheLeft(sqrt_information.template cast<T>());
+    relative_pose_residual<T>(p_a, q_a, p_b, q_b, p_measured, unturn * q_ab.template cast<T>(), sqrt_information,
+                              residual);
     return true;
   }
 

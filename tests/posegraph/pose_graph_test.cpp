@@ -51,11 +51,14 @@ Poses drifted(const Poses& truth, double scale_error = 0.0) {
   return sim::drifted_odometry(truth, drift);
 }
 
-// True loop edges: every 20 nodes of the second lap to the same place on the first.
-void add_true_loops(PoseGraph& g, const Poses& truth, const PoseGraphConfig& c) {
+// The odometry chain plus true loop edges: every 20 nodes of the second lap to the same place
+// on the first.
+PoseGraph graph_with_true_loops(const Poses& odom, const Poses& truth, const PoseGraphConfig& c) {
+  PoseGraph g = odometry_graph(odom, c);
   const size_t lap = truth.size() / 2;
   for (size_t q = lap + 10; q < truth.size(); q += 20)
     g.loops.push_back(loop_edge(q, q - lap, truth[q].inverse() * truth[q - lap], 0.9, c));
+  return g;
 }
 
 double max_distance(const Poses& a, const Poses& b) {
@@ -103,8 +106,7 @@ TEST(PoseGraph, LoopsCorrectADriftedOdometry) {
   const Poses truth = block_loop();
   const Poses odom = drifted(truth);
   const PoseGraphConfig c;
-  PoseGraph g = odometry_graph(odom, c);
-  add_true_loops(g, truth, c);
+  PoseGraph g = graph_with_true_loops(odom, truth, c);
   const TrajectoryError before = trajectory_error(odom, truth);
   const OptimizationResult r = optimize(g, c);
   const TrajectoryError after = trajectory_error(r.T_world_node, truth);
@@ -126,8 +128,7 @@ TEST(PoseGraph, AWrongLoopIsDownWeightedAndDoesNotBendTheGraph) {
   const Poses truth = block_loop();
   const Poses odom = drifted(truth);
   const PoseGraphConfig c;
-  PoseGraph g = odometry_graph(odom, c);
-  add_true_loops(g, truth, c);
+  PoseGraph g = graph_with_true_loops(odom, truth, c);
   const OptimizationResult clean = optimize(g, c);
   const size_t q = 450, m = 442;  // 8 m apart along the second lap's long side
   const Pose3d off = pose(0, 3.0, 0, 0);  // the measurement says 3 m to the side
@@ -159,8 +160,7 @@ TEST(IncrementalPoseGraph, EndsWhereOneBatchSolveDoes) {
   const Poses truth = block_loop();
   const Poses odom = drifted(truth, 0.003);
   const PoseGraphConfig c;
-  PoseGraph batch = odometry_graph(odom, c);
-  add_true_loops(batch, truth, c);
+  PoseGraph batch = graph_with_true_loops(odom, truth, c);
   IncrementalPoseGraph online(c);
   size_t next_loop = 0;
   for (size_t i = 0; i < odom.size(); ++i) {
@@ -230,8 +230,7 @@ TEST(PoseGraph, GravityPriorKeepsTheTrajectoryLevel) {
   climb.odom_climb_m_per_m = 0.002;
   const Poses odom = sim::drifted_odometry(truth, climb);
   auto vertical_rmse = [&](const PoseGraphConfig& c) {
-    PoseGraph g = odometry_graph(odom, c);
-    add_true_loops(g, truth, c);
+    PoseGraph g = graph_with_true_loops(odom, truth, c);
     return trajectory_error(optimize(g, c).T_world_node, truth).rmse_vertical_m;
   };
   PoseGraphConfig level;
@@ -248,8 +247,7 @@ TEST(PoseGraph, BiasModelUndoesASystematicDrift) {
   const Poses truth = block_loop();
   const Poses odom = drifted(truth);
   auto rmse = [&](const PoseGraphConfig& c) {
-    PoseGraph g = odometry_graph(odom, c);
-    add_true_loops(g, truth, c);
+    PoseGraph g = graph_with_true_loops(odom, truth, c);
     return trajectory_error(optimize(g, c).T_world_node, truth).rmse_m;
   };
   PoseGraphConfig white;
