@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include "support/poses.h"
+
 using namespace segmatch;
 
 namespace {
@@ -23,11 +25,7 @@ Segment box_at(uint64_t id, const Eigen::Vector3f& c, int points) {
   return s;
 }
 
-Pose3d shift(double x, double y) {
-  Pose3d T = Pose3d::Identity();
-  T.translation() = Eigen::Vector3d(x, y, 0);
-  return T;
-}
+Pose3d shift(double x, double y) { return test::pose_at(x, y); }
 
 }  // namespace
 

@@ -8,6 +8,8 @@
 
 #include <gtest/gtest.h>
 
+#include "support/poses.h"
+
 namespace segmatch {
 namespace {
 
@@ -19,11 +21,7 @@ Segment at(float x, float y, float z, uint32_t label = 0) {
   return s;
 }
 
-Pose3d shift(double dx, double dy) {
-  Pose3d T = Pose3d::Identity();
-  T.translation() = Eigen::Vector3d(dx, dy, 0.0);
-  return T;
-}
+Pose3d shift(double x, double y) { return test::pose_at(x, y); }
 
 TEST(CentroidIndex, NearestWithinEqualsBruteForce) {
   Rng rng(5);

@@ -5,6 +5,7 @@
 // hand-made cases.
 #include "segmatch/posegraph/pose_graph.h"
 #include "segmatch/sim/keyframes.h"
+#include "support/poses.h"
 
 #include <gtest/gtest.h>
 
@@ -15,14 +16,7 @@ using namespace segmatch::posegraph;
 
 namespace {
 
-constexpr double kRadPerDeg = M_PI / 180.0;
-
-Pose3d pose(double x, double y, double z, double yaw_deg) {
-  Pose3d T = Pose3d::Identity();
-  T.linear() = Eigen::AngleAxisd(yaw_deg * kRadPerDeg, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-  T.translation() = Eigen::Vector3d(x, y, z);
-  return T;
-}
+Pose3d pose(double x, double y, double z, double yaw_deg) { return test::pose_at(x, y, z, yaw_deg); }
 
 // Around a 100 m x 60 m block twice (1 m steps, turning at the corners): 640 poses.
 Poses block_loop() {
