@@ -1,14 +1,20 @@
 // segmatch-bench-server: throughput and latency of segmatch-server over loopback with 1, 4
 // and 16 concurrent clients, on a simulated tiny city mapped by its first traversal and
 // queried with the revisit's voxelized local clouds (HDL-64E, 60 m cylinder), with the shipped
-// RF model (or --l2). Closed loop (clients back to back) and open loop (a fleet on fixed
-// schedules at an offered rate). Prints figures, asserts nothing.
+// RF model (or --l2). Both request kinds in the same run: LOCALIZE (the cloud) and
+// LOCALIZE_SEGMENTS (the vehicle's segments, made beforehand by segmatch_vehicle and timed
+// apart as the client's own work). Each query encodes its request inside the timed loop.
+// Closed loop (clients back to back) and open loop (a fleet on fixed schedules at an offered
+// rate). Prints figures (and --json FILE), asserts nothing.
 #include <segmatch/api/client.h>
 #include <segmatch/core/preprocess.h>
 #include <segmatch/io/pipeline_config.h>
 #include <segmatch/server/server.h>
 #include <segmatch/sim/city.h>
 #include <segmatch/storage/map_writer.h>
+#include <segmatch/vehicle/segment_query.h>
+
+#include <nlohmann/json.hpp>
 
 #include <CLI/CLI.hpp>
 
@@ -20,6 +26,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <mutex>
 #include <thread>
 
@@ -77,28 +84,56 @@ double percentile(std::vector<double> v, double p) {
   return v[std::min(v.size() - 1, static_cast<size_t>(p * (v.size() - 1) + 0.5))];
 }
 
+// One request kind: how a client sends query i.
+struct Kind {
+  std::string name;
+  std::function<api::LocalizeReply(api::Client&, size_t)> send;
+  size_t count = 0;
+};
+
+struct LevelResult {
+  int clients = 0;
+  double queries_per_s = 0, p50_ms = 0, p99_ms = 0, server_p50_ms = 0;
+  int errors = 0, localized = 0, answered = 0;
+  nlohmann::json to_json() const {
+    return {{"clients", clients}, {"queries_per_s", queries_per_s}, {"p50_ms", p50_ms}, {"p99_ms", p99_ms},
+            {"errors", errors}, {"localized", localized}, {"answered", answered}, {"server_p50_ms", server_p50_ms}};
+  }
+};
+
 // What the clients of one level saw: latencies of answered queries, errors, localizations.
 struct Tally {
   std::mutex mutex;
-  std::vector<double> latencies_ms;
+  std::vector<double> latencies_ms, server_ms;
   std::atomic<int> errors{0}, localized{0};
 
   // One query; its latency counts from `since` (the send, or the scheduled send time).
-  void query(api::Client& client, const api::LocalizeRequest& r, Clock::time_point since) {
+  void query(api::Client& client, const Kind& kind, size_t i, Clock::time_point since) {
+    api::LocalizeReply reply;
     try {
-      localized += client.localize(r).status == api::LocalizeStatus::kLocalized;
+      reply = kind.send(client, i);
     } catch (const std::exception&) {
       ++errors;
       return;
     }
+    localized += reply.status == api::LocalizeStatus::kLocalized;
     const double ms = std::chrono::duration<double, std::milli>(Clock::now() - since).count();
     std::lock_guard<std::mutex> lock(mutex);
     latencies_ms.push_back(ms);
+    server_ms.push_back(reply.timings.server_total);
   }
-  void print(double seconds) const {
-    std::printf("%4zu queries in %6.1f s = %6.2f queries/s, latency p50 %7.1f ms p99 %7.1f ms, %d localized, %d errors\n",
-                latencies_ms.size(), seconds, latencies_ms.size() / seconds, percentile(latencies_ms, 0.5),
-                percentile(latencies_ms, 0.99), localized.load(), errors.load());
+  LevelResult result(int clients, double seconds) const {
+    LevelResult r;
+    r.clients = clients;
+    r.answered = static_cast<int>(latencies_ms.size());
+    r.queries_per_s = latencies_ms.size() / seconds;
+    r.p50_ms = percentile(latencies_ms, 0.5), r.p99_ms = percentile(latencies_ms, 0.99);
+    r.server_p50_ms = percentile(server_ms, 0.5);
+    r.errors = errors.load(), r.localized = localized.load();
+    std::printf("%4d queries in %6.1f s = %6.2f queries/s, latency p50 %7.1f ms p99 %7.1f ms, server p50 %6.1f ms, "
+                "%d localized, %d errors\n",
+                r.answered, seconds, r.queries_per_s, r.p50_ms, r.p99_ms, r.server_p50_ms, r.localized, r.errors);
+    return r;
   }
 };
 
@@ -109,26 +144,25 @@ api::Client connect(uint16_t port) {
 }
 
 // `clients` connections, each sending `per_client` queries back to back.
-void run_level(uint16_t port, const std::vector<api::LocalizeRequest>& requests, int clients, int per_client) {
+LevelResult run_level(uint16_t port, const Kind& kind, int clients, int per_client) {
   Tally tally;
   const auto start = Clock::now();
   std::vector<std::thread> threads;
   for (int c = 0; c < clients; ++c)
     threads.emplace_back([&, c] {
       api::Client client = connect(port);
-      for (int i = 0; i < per_client; ++i) tally.query(client, requests[(c * 7 + i) % requests.size()], Clock::now());
+      for (int i = 0; i < per_client; ++i) tally.query(client, kind, (c * 7 + i) % kind.count, Clock::now());
     });
   for (std::thread& t : threads) t.join();
-  std::printf("%2d clients: ", clients);
-  tally.print(std::chrono::duration<double>(Clock::now() - start).count());
+  std::printf("  %2d clients: ", clients);
+  return tally.result(clients, std::chrono::duration<double>(Clock::now() - start).count());
 }
 
 // A fleet: `clients` vehicles together asking `rate` queries/s, each on its own fixed schedule
 // (a vehicle queries every few metres whether or not the previous answer was quick), for
 // `seconds`. Latency counts from the scheduled send time, so a queue that builds up shows in
 // it (no coordinated omission); a vehicle whose answer is late sends its next query at once.
-void run_fleet(uint16_t port, const std::vector<api::LocalizeRequest>& requests, int clients, double rate,
-               double seconds) {
+LevelResult run_fleet(uint16_t port, const Kind& kind, int clients, double rate, double seconds) {
   Tally tally;
   const auto start = Clock::now() + std::chrono::milliseconds(200);
   const std::chrono::duration<double> period(clients / rate);
@@ -141,35 +175,60 @@ void run_fleet(uint16_t port, const std::vector<api::LocalizeRequest>& requests,
       for (int i = 0; i < per_client; ++i) {
         const auto due = first + std::chrono::duration_cast<Clock::duration>(period * static_cast<double>(i));
         std::this_thread::sleep_until(due);
-        tally.query(client, requests[(c * 7 + i) % requests.size()], due);
+        tally.query(client, kind, (c * 7 + i) % kind.count, due);
       }
     });
   for (std::thread& t : threads) t.join();
-  std::printf("%2d vehicles at %.1f queries/s offered: ", clients, rate);
-  tally.print(std::chrono::duration<double>(Clock::now() - start).count());
+  std::printf("  %2d vehicles at %.1f queries/s offered: ", clients, rate);
+  return tally.result(clients, std::chrono::duration<double>(Clock::now() - start).count());
+}
+
+template <typename Request>
+double median_bytes(const std::vector<Request>& requests) {
+  std::vector<double> bytes;
+  for (const Request& r : requests) bytes.push_back(static_cast<double>(api::encode(r).size()));
+  return percentile(bytes, 0.5);
+}
+
+struct BenchOptions {
+  int queries_per_level = 32, fleet_vehicles = 16;
+  double fleet_rate = 20.0, fleet_seconds = 30.0;
+};
+
+nlohmann::json run_kind(uint16_t port, const Kind& kind, double request_bytes_median, const BenchOptions& o) {
+  std::printf("%s: median request %.0f bytes\n", kind.name.c_str(), request_bytes_median);
+  nlohmann::json j = {{"request_bytes_median", request_bytes_median}, {"closed_loop", nlohmann::json::array()}};
+  for (int clients : {1, 4, 16})
+    j["closed_loop"].push_back(run_level(port, kind, clients, std::max(1, o.queries_per_level / clients)).to_json());
+  if (o.fleet_rate > 0.0) {
+    const LevelResult f = run_fleet(port, kind, o.fleet_vehicles, o.fleet_rate, o.fleet_seconds);
+    j["open_loop"] = f.to_json();
+    j["open_loop"]["offered_queries_per_s"] = o.fleet_rate;
+  }
+  return j;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"segmatch-bench-server: loopback throughput and latency of segmatch-server"};
-  int workers = 0, queries_per_level = 32;
+  CLI::App app{"segmatch-bench-server: loopback throughput and latency of segmatch-server, cloud and segments queries"};
+  int workers = 0;
+  BenchOptions o;
   uint64_t seed = 3;
   double subsample_leaf_m = 0.0;
   bool raw = false, l2 = false;
-  double fleet_rate = 20.0, fleet_seconds = 30.0;
-  int fleet_vehicles = 16;
-  std::string model_path = SEGMATCH_SOURCE_DIR "/maps/models/default-rf.yml";
+  std::string model_path = SEGMATCH_SOURCE_DIR "/maps/models/default-rf.yml", json_path;
   app.add_option("--workers", workers, "server localization threads (0 = cores)");
-  app.add_option("--queries", queries_per_level, "queries per level, spread over its clients (at least one each)");
+  app.add_option("--queries", o.queries_per_level, "queries per level, spread over its clients (at least one each)");
   app.add_option("--seed", seed, "city seed");
   app.add_option("--subsample-leaf-m", subsample_leaf_m, "per-scan subsampling of the local cloud (0 = full scans)");
   app.add_flag("--raw", raw, "send raw points (60-230 MB clouds: use with --subsample-leaf-m 0.1) instead of voxels");
   app.add_flag("--l2", l2, "L2 matcher on eigen features instead of the shipped RF_eigen+shapes");
   app.add_option("--model", model_path, "RF model file");
-  app.add_option("--fleet-rate", fleet_rate, "fleet level: queries/s offered in total (0: skip the level)");
-  app.add_option("--fleet-vehicles", fleet_vehicles, "fleet level: vehicles, each on its own schedule")->check(CLI::Range(1, 256));
-  app.add_option("--fleet-seconds", fleet_seconds, "fleet level: duration")->check(CLI::Range(1.0, 3600.0));
+  app.add_option("--fleet-rate", o.fleet_rate, "fleet level: queries/s offered in total (0: skip the level)");
+  app.add_option("--fleet-vehicles", o.fleet_vehicles, "fleet level: vehicles, each on its own schedule")->check(CLI::Range(1, 256));
+  app.add_option("--fleet-seconds", o.fleet_seconds, "fleet level: duration")->check(CLI::Range(1.0, 3600.0));
+  app.add_option("--json", json_path, "write the figures as JSON: {\"cloud\": {...}, \"segments\": {...}}");
   CLI11_PARSE(app, argc, argv);
   io::PipelineConfig config = io::pipeline_preset("kitti-hdl64");
   std::string model;
@@ -203,13 +262,50 @@ int main(int argc, char** argv) {
   server::Server server(sc, server::load_map(map_path));
   server.start();
   std::printf("server on %s, %u cores\n", server.address().c_str(), std::thread::hardware_concurrency());
-  std::printf("closed loop: each client sends its next query as soon as it has the answer\n");
-  for (int clients : {1, 4, 16}) run_level(server.port(), requests, clients, std::max(1, queries_per_level / clients));
-  if (fleet_rate > 0.0) {
-    std::printf("open loop: a fleet querying on fixed schedules, latency from the scheduled send time\n");
-    run_fleet(server.port(), requests, fleet_vehicles, fleet_rate, fleet_seconds);
+
+  // The vehicle's own work, apart: segment every cloud as a car would, with the map's parameters.
+  const vehicle::SegmentQuery vehicle_side = vehicle::SegmentQuery::from_info(connect(server.port()).info());
+  std::vector<api::LocalizeSegmentsRequest> segment_requests;
+  std::vector<double> client_ms;
+  for (const api::LocalizeRequest& r : requests) {
+    ModuleTimings t;
+    segment_requests.push_back(vehicle_side.make_request(r, &t));
+    client_ms.push_back(t.total_ms);
   }
+  const double client_ms_median = percentile(client_ms, 0.5);
+  {
+    std::vector<double> segs, pts;
+    for (const auto& r : segment_requests) {
+      segs.push_back(double(r.segments.size()));
+      double n = 0;
+      for (const Segment& seg : r.segments) n += seg.points.size();
+      pts.push_back(n);
+    }
+    std::printf("segments per query: median %.0f, segment points per query: median %.0f\n", percentile(segs, 0.5),
+                percentile(pts, 0.5));
+  }
+  std::printf("vehicle side (segmentation and description, one thread): median %.1f ms per query\n", client_ms_median);
+
+  std::printf("closed loop: each client sends its next query as soon as it has the answer\n");
+  const Kind cloud{"cloud (LOCALIZE)", [&](api::Client& c, size_t i) { return c.localize(requests[i]); }, requests.size()};
+  const Kind segments{"segments (LOCALIZE_SEGMENTS)",
+                      [&](api::Client& c, size_t i) { return c.localize_segments(segment_requests[i]); },
+                      segment_requests.size()};
+  nlohmann::json out;
+  out["cloud"] = run_kind(server.port(), cloud, median_bytes(requests), o);
+  out["segments"] = run_kind(server.port(), segments, median_bytes(segment_requests), o);
+  out["segments"]["client_segmenting_ms_median"] = client_ms_median;
+  out["setup"] = {{"queries", requests.size()}, {"points_mean", double(points) / requests.size()},
+                  {"cores", std::thread::hardware_concurrency()}, {"matcher", l2 ? "L2" : "RF_eigen+shapes"}};
   server.stop();
   std::filesystem::remove(map_path);
+  if (!json_path.empty()) {
+    std::ofstream f(json_path);
+    f << out.dump(2) << "\n";
+    if (!f) {
+      std::fprintf(stderr, "segmatch-bench-server: cannot write %s\n", json_path.c_str());
+      return 1;
+    }
+  }
   return 0;
 }

@@ -14,6 +14,7 @@ struct ReplayOptions {
   size_t last = SIZE_MAX;    // last scan index (inclusive)
   bool track = false;        // api::Tracker: the last fix is the next query's prior
   std::string odometry;      // poses file to accumulate with (default: the sequence's poses)
+  bool segments = false;     // LOCALIZE_SEGMENTS: segment here, send the segments
 };
 
 // Replays a recorded sequence like a vehicle: accumulates its scans into a local cloud from

@@ -73,6 +73,9 @@ int main(int argc, char** argv) {
                 "track between fixes: each query carries the last fix as its prior (radius growing with the distance "
                 "driven since); global at start-up and after repeated failures");
   rep->add_option("--odometry", replay.odometry, "the vehicle's odometry poses file (default: the sequence's poses)");
+  rep->add_flag("--segments", replay.segments,
+                "query by segments (LOCALIZE_SEGMENTS): segment and describe each local cloud here with the map's "
+                "parameters and send the segments (a few hundred KB) instead of the cloud (MB)");
   CLI11_PARSE(app, argc, argv);
   try {
     api::ClientOptions options;

@@ -3,10 +3,12 @@
 #include <segmatch/api/tracker.h>
 #include <segmatch/io/pipeline_config.h>
 #include <segmatch/io/replay.h>
+#include <segmatch/vehicle/segment_query.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <memory>
 #include <vector>
 
 namespace segmatch::query {
@@ -23,8 +25,7 @@ void print_reply(const api::LocalizeReply& r, double round_trip_ms) {
 namespace {
 
 // The map's parameters, so the vehicle accumulates and voxelizes as the map was built.
-io::PipelineConfig parameters_of(api::Client& client) {
-  const api::InfoReply info = client.info();
+io::PipelineConfig parameters_of(const api::InfoReply& info) {
   try {
     return io::parse_pipeline_config(info.parameters_json, "INFO_REPLY");
   } catch (const std::exception& e) {
@@ -49,7 +50,12 @@ int replay(api::Client& client, const ReplayOptions& options) {
   config.every_m = options.every_m;
   config.first = options.first;
   config.last = options.last;
-  const io::PipelineConfig map_parameters = parameters_of(client);
+  const api::InfoReply info = client.info();
+  const io::PipelineConfig map_parameters = parameters_of(info);
+  // --segments: the vehicle's side (throws, naming the problem, if the parameters do not parse).
+  std::unique_ptr<vehicle::SegmentQuery> segmenter;
+  if (options.segments) segmenter = std::make_unique<vehicle::SegmentQuery>(vehicle::SegmentQuery::from_info(info));
+  std::vector<double> vehicle_ms, request_kb;
   config.local_cloud = map_parameters.local_cloud;
   config.voxel = map_parameters.localizer.segmentation.voxel;
   size_t queries = 0, localized = 0, errors = 0, tracked = 0;
@@ -68,7 +74,16 @@ int replay(api::Client& client, const ReplayOptions& options) {
     std::printf("frame %6zu  %7.1f m  %7zu points  %-7s ", q.frame, q.odometer_m, request.points.size(), api::to_string(mode));
     const auto start = std::chrono::steady_clock::now();
     try {
-      const api::LocalizeReply r = client.localize(request);
+      api::LocalizeReply r;
+      if (segmenter) {
+        ModuleTimings t;
+        const api::LocalizeSegmentsRequest s = segmenter->make_request(request, &t);
+        vehicle_ms.push_back(t.total_ms);
+        request_kb.push_back(api::encode(s).size() / 1024.0);
+        r = client.localize_segments(s);
+      } else {
+        r = client.localize(request);
+      }
       const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
       latencies_ms.push_back(ms);
       localized += r.status == api::LocalizeStatus::kLocalized;
@@ -83,6 +98,9 @@ int replay(api::Client& client, const ReplayOptions& options) {
   });
   std::printf("summary: %zu queries (%zu tracked), %zu localized, %zu errors, latency p50 %.1f ms p99 %.1f ms\n", queries,
               tracked, localized, errors, percentile(latencies_ms, 0.5), percentile(latencies_ms, 0.99));
+  if (segmenter)
+    std::printf("segments: vehicle side p50 %.1f ms per query (segmenting, describing), request p50 %.0f KB\n",
+                percentile(vehicle_ms, 0.5), percentile(request_kb, 0.5));
   return errors == 0 ? 0 : 1;
 }
 

@@ -101,13 +101,22 @@ InfoReply Client::info() {
   return expect<InfoReply>(MessageType::kInfoReply);
 }
 
+LocalizeReply Client::localize_reply(uint64_t request_id) {
+  LocalizeReply reply = expect<LocalizeReply>(MessageType::kLocalizeReply);
+  if (reply.request_id != request_id)
+    fail(ClientError::Kind::kProtocol, "reply for request " + std::to_string(reply.request_id) + ", expected " +
+                                           std::to_string(request_id));
+  return reply;
+}
+
 LocalizeReply Client::localize(const LocalizeRequest& request) {
   send_raw(encode(request));
-  LocalizeReply reply = expect<LocalizeReply>(MessageType::kLocalizeReply);
-  if (reply.request_id != request.request_id)
-    fail(ClientError::Kind::kProtocol, "reply for request " + std::to_string(reply.request_id) + ", expected " +
-                                           std::to_string(request.request_id));
-  return reply;
+  return localize_reply(request.request_id);
+}
+
+LocalizeReply Client::localize_segments(const LocalizeSegmentsRequest& request) {
+  send_raw(encode(request));
+  return localize_reply(request.request_id);
 }
 
 }  // namespace api

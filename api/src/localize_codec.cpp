@@ -7,11 +7,7 @@
 
 namespace segmatch {
 namespace api {
-namespace {
-
-// Fixed part of a LOCALIZE payload before the points.
-constexpr size_t kLocalizeFixedBytes = 8 + 4 + 3 * 8 + 4 * 8 + 4 * 8 + 3 * 8 + 8 + 4 + 4;
-static_assert(kLocalizeFixedBytes == 140, "docs/protocol.md documents 140 bytes");
+namespace detail {
 
 void put_quaternion(wire::Writer& w, const Eigen::Quaterniond& q_in) {
   const Eigen::Quaterniond q = q_in.normalized();
@@ -58,6 +54,16 @@ DecodeStatus first_error(std::initializer_list<DecodeStatus> statuses) {
     if (s != DecodeStatus::kOk) return s;
   return DecodeStatus::kOk;
 }
+
+}  // namespace detail
+
+namespace {
+
+using namespace detail;
+
+// Fixed part of a LOCALIZE payload before the points.
+constexpr size_t kLocalizeFixedBytes = 8 + 4 + 3 * 8 + 4 * 8 + 4 * 8 + 3 * 8 + 8 + 4 + 4;
+static_assert(kLocalizeFixedBytes == 140, "docs/protocol.md documents 140 bytes");
 
 // Points are 4 packed floats, the wire layout of stride 4: read in one go.
 static_assert(sizeof(Point) == 4 * sizeof(float), "Point must stay x y z intensity");

@@ -12,7 +12,7 @@ namespace api {
 bool is_known_type(uint16_t type) {
   switch (static_cast<MessageType>(type)) {
     case MessageType::kHello: case MessageType::kPing: case MessageType::kInfo:
-    case MessageType::kLocalize: case MessageType::kHelloOk: case MessageType::kPong:
+    case MessageType::kLocalize: case MessageType::kLocalizeSegments: case MessageType::kHelloOk: case MessageType::kPong:
     case MessageType::kInfoReply: case MessageType::kLocalizeReply: case MessageType::kError:
       return true;
   }
@@ -25,6 +25,7 @@ const char* to_string(MessageType type) {
     case MessageType::kPing: return "PING";
     case MessageType::kInfo: return "INFO";
     case MessageType::kLocalize: return "LOCALIZE";
+    case MessageType::kLocalizeSegments: return "LOCALIZE_SEGMENTS";
     case MessageType::kHelloOk: return "HELLO_OK";
     case MessageType::kPong: return "PONG";
     case MessageType::kInfoReply: return "INFO_REPLY";
@@ -125,6 +126,7 @@ MessageType type_of(const PongReply&) { return MessageType::kPong; }
 MessageType type_of(const InfoRequest&) { return MessageType::kInfo; }
 MessageType type_of(const InfoReply&) { return MessageType::kInfoReply; }
 MessageType type_of(const LocalizeRequest&) { return MessageType::kLocalize; }
+MessageType type_of(const LocalizeSegmentsRequest&) { return MessageType::kLocalizeSegments; }
 MessageType type_of(const LocalizeReply&) { return MessageType::kLocalizeReply; }
 MessageType type_of(const ErrorReply&) { return MessageType::kError; }
 

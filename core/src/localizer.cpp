@@ -97,15 +97,17 @@ Floors floors_of(const LocalizerConfig& c, bool prior) {
           pick(c.min_confidence_with_prior, c.min_confidence)};
 }
 
-// Points of the segments on one side of the matches, for the refinement.
-PointCloud gather(const Segments& segments, const Matches& inliers, bool query_side) {
+// Points of the segments on one side of the matches, for the refinement: every stride-th point
+// of each segment (segment_point_stride).
+PointCloud gather(const Segments& segments, const Matches& inliers, bool query_side, size_t stride = 1) {
   PointCloud out;
   std::vector<bool> taken(segments.size(), false);
   for (const Match& m : inliers) {
     const int i = query_side ? m.query : m.target;
     if (taken[i]) continue;
     taken[i] = true;
-    out.insert(out.end(), segments[i].points.begin(), segments[i].points.end());
+    const PointCloud& points = segments[i].points;
+    for (size_t k = 0; k < points.size(); k += stride) out.push_back(points[k]);
   }
   return out;
 }
@@ -118,7 +120,41 @@ float confidence_of(size_t support, int min_support, float fitness) {
   return static_cast<float>((1.0 - std::exp(-extra / 3.0)) * fitness);
 }
 
+void check_prior(const PosePrior* prior) {
+  if (prior && !(prior->radius_m > 0.0 && std::isfinite(prior->radius_m) && prior->T_map_query.matrix().allFinite() &&
+                 prior->max_rotation_deg >= 0.0 && std::isfinite(prior->max_rotation_deg)))
+    throw std::invalid_argument("PosePrior needs a finite pose, a finite radius_m > 0 and max_rotation_deg >= 0");
+}
+
 }  // namespace
+
+size_t segment_point_stride(const Segments& segments, size_t max_points) {
+  size_t total = 0;
+  for (const Segment& s : segments) total += s.points.size();
+  if (max_points == 0 || total <= max_points) return 1;
+  return (total + max_points - 1) / max_points;
+}
+
+void thin_segment_points(Segments& segments, size_t max_points) {
+  const size_t stride = segment_point_stride(segments, max_points);
+  if (stride == 1) return;
+  for (Segment& s : segments) {
+    size_t kept = 0;
+    for (size_t i = 0; i < s.points.size(); i += stride) s.points[kept++] = s.points[i];
+    s.points.resize(kept);
+  }
+}
+
+PointCloud crop_cylinder(const PointCloud& cloud, const Eigen::Vector3d& center, double radius_m) {
+  const double r2 = radius_m * radius_m;
+  PointCloud out;
+  out.reserve(cloud.size());
+  for (const Point& p : cloud) {
+    const double dx = p.x - center.x(), dy = p.y - center.y();
+    if (dx * dx + dy * dy <= r2) out.push_back(p);
+  }
+  return out;
+}
 
 const char* to_string(LocalizationStatus status) {
   return status == LocalizationStatus::kLocalized ? "localized" : "not_localized";
@@ -218,20 +254,29 @@ Localizer::Localizer(const LocalizerConfig& config, Segments targets,
 
 LocalizationResult Localizer::localize(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
                                        CloudKind kind, const PosePrior* prior) const {
-  if (prior && !(prior->radius_m > 0.0 && std::isfinite(prior->radius_m) && prior->T_map_query.matrix().allFinite() &&
-                 prior->max_rotation_deg >= 0.0 && std::isfinite(prior->max_rotation_deg)))
-    throw std::invalid_argument("PosePrior needs a finite pose, a finite radius_m > 0 and max_rotation_deg >= 0");
+  check_prior(prior);
+  ModuleTimings timings;
+  Stopwatch clock;
+  Segments query = kind == CloudKind::kVoxelized
+                       ? extract_segments_from_voxels(cloud, sensor_position, config_.segmentation, nullptr, &timings)
+                       : extract_segments(cloud, sensor_position, config_.segmentation, nullptr, &timings);
+  timings.total_ms = clock.lap();
+  return localize_segments(std::move(query), sensor_position, prior, timings);
+}
+
+LocalizationResult Localizer::localize_segments(Segments query, const Eigen::Vector3f& sensor_position,
+                                                const PosePrior* prior, const ModuleTimings& timings) const {
+  check_prior(prior);
   LocalizationResult r;
+  r.timings = timings;
   Stopwatch total, clock;
+  const double before_ms = timings.total_ms;  // the caller's segmentation, if any
   auto finish = [&](LocalizationResult res) {
-    res.timings.total_ms = total.lap();
+    res.timings.total_ms = before_ms + total.lap();
     return res;
   };
   const int min_inliers = config_.verification.min_inliers;
-  r.query = kind == CloudKind::kVoxelized
-                ? extract_segments_from_voxels(cloud, sensor_position, config_.segmentation, nullptr, &r.timings)
-                : extract_segments(cloud, sensor_position, config_.segmentation, nullptr, &r.timings);
-  clock.lap();
+  r.query = std::move(query);
   r.query_segments = r.query.size();
   if (targets_.empty()) return finish(refuse(std::move(r), Refusal::kEmptyMap, "the map has no segments"));
   if (r.query.size() < static_cast<size_t>(min_inliers))
@@ -279,7 +324,8 @@ LocalizationResult Localizer::localize(const PointCloud& cloud, const Eigen::Vec
                                            " and " + std::to_string(r.runner_up_support) + " query segments"));
   r.refine_fitness = 1.0f;
   if (config_.refine_pose) {
-    const RefineResult refined = refine_alignment(gather(r.query, ranked.support.pairs, true),
+    const size_t stride = segment_point_stride(r.query, static_cast<size_t>(config_.refine.max_segment_points));
+    const RefineResult refined = refine_alignment(gather(r.query, ranked.support.pairs, true, stride),
                                                   gather(targets_, ranked.support.pairs, false), r.T_map_query,
                                                   config_.refine);
     r.timings.refine_ms = clock.lap();

@@ -37,6 +37,7 @@ void RefineConfig::validate() const {
     throw std::invalid_argument("RefineConfig.max_correspondence_m must be finite and > 0");
   if (!(convergence_m > 0.f)) throw std::invalid_argument("RefineConfig.convergence_m must be > 0");
   if (max_query_points < 6) throw std::invalid_argument("RefineConfig.max_query_points must be >= 6");
+  if (max_segment_points < 0) throw std::invalid_argument("RefineConfig.max_segment_points must be >= 0 (0: every point)");
 }
 
 namespace {

@@ -11,6 +11,7 @@
 #include "segmatch/io/error.h"
 #include "segmatch/io/pipeline_config.h"
 #include "segmatch/server/map_service.h"
+#include "segmatch/vehicle/segment_query.h"
 #include "segmatch/sim/city.h"
 
 #include <CLI/CLI.hpp>
@@ -35,15 +36,44 @@ std::string read_token(const std::string& path) {
   return token;
 }
 
+// --segments: the vehicle segments and describes each query itself (segmatch_vehicle) and
+// sends LOCALIZE_SEGMENTS; its own time and the request sizes are reported apart.
+struct SegmentsSide {
+  std::unique_ptr<vehicle::SegmentQuery> query;
+  std::vector<double> vehicle_ms, request_bytes;
+  api::LocalizeSegmentsRequest make(const api::LocalizeRequest& r) {
+    ModuleTimings t;
+    api::LocalizeSegmentsRequest s = query->make_request(r, &t);
+    vehicle_ms.push_back(t.total_ms);
+    request_bytes.push_back(static_cast<double>(api::encode(s).size()));
+    return s;
+  }
+  void print() const {
+    if (!query || vehicle_ms.empty()) return;
+    std::printf("vehicle side (--segments): median %.1f ms segmenting and describing per query, median request %.0f bytes\n",
+                eval::distribution_of(vehicle_ms).median, eval::distribution_of(request_bytes).median);
+  }
+};
+
 int run_localize(const eval::LocalizationRunConfig& config, const std::string& server, const std::string& token_file,
-                 const std::string& out_dir) {
+                 const std::string& out_dir, bool segments) {
   eval::LocalizeFn localize;
   std::shared_ptr<const server::LoadedMap> loaded;
   std::unique_ptr<api::Client> client;
+  SegmentsSide side;
   if (server.empty()) {
     loaded = server::load_map(config.map_path);
     for (const std::string& w : loaded->warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
-    localize = [&](const api::LocalizeRequest& r) { return server::localize_request(*loaded, r); };
+    if (segments) {
+      side.query = std::make_unique<vehicle::SegmentQuery>(server::info_of(*loaded).parameters_json);
+      localize = [&](const api::LocalizeRequest& r) {
+        const api::LocalizeSegmentsRequest s = side.make(r);
+        if (const auto refused = server::refuse_segments(*loaded, s)) throw std::runtime_error(refused->message);
+        return server::localize_segments_request(*loaded, s);
+      };
+    } else {
+      localize = [&](const api::LocalizeRequest& r) { return server::localize_request(*loaded, r); };
+    }
   } else {
     const size_t colon = server.rfind(':');
     if (colon == std::string::npos) throw std::runtime_error("--server must be HOST:PORT, got '" + server + "'");
@@ -51,10 +81,16 @@ int run_localize(const eval::LocalizationRunConfig& config, const std::string& s
     options.token = read_token(token_file);
     client = std::make_unique<api::Client>(server.substr(0, colon), static_cast<uint16_t>(std::stoi(server.substr(colon + 1))),
                                            options);
-    localize = [&](const api::LocalizeRequest& r) { return client->localize(r); };
+    if (segments) {
+      side.query = std::make_unique<vehicle::SegmentQuery>(vehicle::SegmentQuery::from_info(client->info()));
+      localize = [&](const api::LocalizeRequest& r) { return client->localize_segments(side.make(r)); };
+    } else {
+      localize = [&](const api::LocalizeRequest& r) { return client->localize(r); };
+    }
   }
   const eval::LocalizationRun run = eval::run_localization(config, localize);
   eval::print_summary(run);
+  side.print();
   if (!out_dir.empty()) {
     eval::write_localization_report(run, out_dir);
     std::printf("report: %s/{localization.json, trajectory.png, px.png, errors.png}\n", out_dir.c_str());
@@ -167,6 +203,10 @@ int main(int argc, char** argv) {
   loc->add_flag("--compare-global", lc.compare_global,
                 "also send every query that has a prior without it (not scored) and report both server times");
   loc->add_option("--out", out_dir, "report folder (JSON + PNG)");
+  bool segments = false;
+  loc->add_flag("--segments", segments,
+                "query by segments (LOCALIZE_SEGMENTS): segment and describe each local cloud here, as a vehicle would, "
+                "and send the segments instead of the cloud");
   eval::LocalizationRunConfig fc;
   auto* fun = app.add_subcommand("funnel", "where true matches are lost: segments, counterparts, retrieved, classified");
   fun->add_option("--map", fc.map_path, "map database")->required();
@@ -194,7 +234,7 @@ int main(int argc, char** argv) {
       if (lc.track && !odom->count() && !lc.query_folder.empty() && fs::exists(fs::path(lc.query_folder) / "odom_poses.txt"))
         lc.odometry_path = (fs::path(lc.query_folder) / "odom_poses.txt").string();
       if (!lc.odometry_path.empty()) std::printf("vehicle odometry: %s\n", lc.odometry_path.c_str());
-      return run_localize(lc, server, token_file, out_dir);
+      return run_localize(lc, server, token_file, out_dir, segments);
     }
     if (*fun) {
       const auto loaded = server::load_map(fc.map_path);

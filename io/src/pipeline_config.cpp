@@ -101,6 +101,7 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("convergence_m", l.refine.convergence_m);
   v("point_to_plane", l.refine.point_to_plane);
   v("max_query_points", l.refine.max_query_points);
+  v("max_segment_points", l.refine.max_segment_points);
   v.section("localizer");
   v("support_radius_m", l.support_radius_m);
   v("min_support", l.min_support);
@@ -369,6 +370,14 @@ PipelineConfig parse_pipeline_config(const std::string& json_text, const std::st
   } catch (const std::invalid_argument& e) {
     throw IoError(origin + ": invalid value: " + e.what());
   }
+  return c;
+}
+
+PipelineConfig parse_map_parameters(const std::string& json_text, const std::string& origin) {
+  PipelineConfig c = parse_pipeline_config(json_text, origin);
+  const json in = json::parse(json_text);  // parsed once already: valid
+  if (!(in.contains("refine") && in["refine"].is_object() && in["refine"].contains("max_segment_points")))
+    c.localizer.refine.max_segment_points = 0;
   return c;
 }
 

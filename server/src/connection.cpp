@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cstdio>
 #include <future>
+#include <optional>
 
 #include <sys/socket.h>
 
@@ -59,23 +60,48 @@ Handled handle_hello(Server::State& s, const std::vector<uint8_t>& payload, bool
 
 using TimePoint = std::chrono::steady_clock::time_point;
 
+size_t point_count(const api::LocalizeRequest& r) { return r.points.size(); }
+size_t point_count(const api::LocalizeSegmentsRequest& r) {
+  size_t n = 0;
+  for (const Segment& seg : r.segments) n += seg.points.size();
+  return n;
+}
+
+std::optional<api::ErrorReply> refuse(const LoadedMap&, const api::LocalizeRequest&) { return std::nullopt; }
+std::optional<api::ErrorReply> refuse(const LoadedMap& map, const api::LocalizeSegmentsRequest& r) {
+  return refuse_segments(map, r);
+}
+
+api::LocalizeReply localize(const LoadedMap& map, const api::LocalizeRequest& r) { return localize_request(map, r); }
+api::LocalizeReply localize(const LoadedMap& map, const api::LocalizeSegmentsRequest& r) {
+  return localize_segments_request(map, r);
+}
+
+// LOCALIZE or LOCALIZE_SEGMENTS: decode, check, localize on the worker pool, reply.
+template <typename Request>
 Handled handle_localize(Server::State& s, const std::vector<uint8_t>& payload, TimePoint start) {
-  api::LocalizeRequest request;
+  Request request;
   const DecodeStatus d = api::decode(payload.data(), payload.size(), s.limits, request);
-  if (d != DecodeStatus::kOk) {
-    Handled h = error_reply(api::error_code_for(d), api::to_string(d), false);
+  std::optional<api::ErrorReply> refused;
+  if (d != DecodeStatus::kOk) refused = api::ErrorReply{api::error_code_for(d), api::to_string(d)};
+  if (!refused) refused = refuse(*s.map, request);
+  if (refused) {
+    Handled h = error_reply(refused->code, refused->message, false);
     h.is_localize = true;
     return h;
   }
   // The localization runs on the bounded worker pool; this connection thread waits for it.
   // The task is shared with the pool: the worker may still be inside it when get() returns.
   auto task = std::make_shared<std::packaged_task<api::LocalizeReply()>>(
-      [&s, &request] { return localize_request(*s.map, request); });
+      [&s, &request] { return localize(*s.map, request); });
   std::future<api::LocalizeReply> result = task->get_future();
   s.pool->submit([task] { (*task)(); });
   Handled h;
   h.is_localize = true;
   char detail[96];
+  std::snprintf(detail, sizeof(detail), " id=%llu points=%zu", static_cast<unsigned long long>(request.request_id),
+                point_count(request));
+  h.detail = detail;
   try {
     api::LocalizeReply reply = result.get();
     reply.timings.server_total =
@@ -83,15 +109,13 @@ Handled handle_localize(Server::State& s, const std::vector<uint8_t>& payload, T
     h.reply = api::encode(reply);
     h.status = api::to_string(reply.status);
     h.localized = reply.status == api::LocalizeStatus::kLocalized;
-    std::snprintf(detail, sizeof(detail), " id=%llu points=%zu inliers=%u", static_cast<unsigned long long>(request.request_id),
-                  request.points.size(), reply.inliers);
+    h.detail += " inliers=" + std::to_string(reply.inliers);
   } catch (const std::exception& e) {
+    const std::string keep = h.detail;
     h = error_reply(ErrorCode::kInternal, std::string("localization failed: ") + e.what(), false);
     h.is_localize = true;
-    std::snprintf(detail, sizeof(detail), " id=%llu points=%zu", static_cast<unsigned long long>(request.request_id),
-                  request.points.size());
+    h.detail = keep;
   }
-  h.detail = detail;
   return h;
 }
 
@@ -118,7 +142,9 @@ Handled handle_frame(Server::State& s, const api::Header& header, const std::vec
       return h;
     }
     case MessageType::kLocalize:
-      return handle_localize(s, payload, start);
+      return handle_localize<api::LocalizeRequest>(s, payload, start);
+    case MessageType::kLocalizeSegments:
+      return handle_localize<api::LocalizeSegmentsRequest>(s, payload, start);
     default:
       return error_reply(ErrorCode::kUnexpectedMessage, std::string(api::to_string(type)) + " is not a request", false);
   }

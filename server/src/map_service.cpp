@@ -3,6 +3,7 @@
 #include <segmatch/storage/map_reader.h>
 
 #include <chrono>
+#include <cstdio>
 #include <optional>
 #include <stdexcept>
 
@@ -43,7 +44,7 @@ std::shared_ptr<const LoadedMap> load_map(const std::string& path) {
   map->metadata = reader.metadata();
   if (map->metadata.parameters_json.empty())
     throw std::runtime_error(path + ": the map stores no parameters (parameters_json is empty)");
-  map->config = io::parse_pipeline_config(map->metadata.parameters_json, path + " (parameters_json)");
+  map->config = io::parse_map_parameters(map->metadata.parameters_json, path + " (parameters_json)");
   std::shared_ptr<const RandomForestMatcher> classifier = load_classifier(reader);
   MatcherConfig& matcher = map->config.localizer.matcher;
   if (matcher.type == MatcherType::kRandomForest && !classifier) {
@@ -57,6 +58,7 @@ std::shared_ptr<const LoadedMap> load_map(const std::string& path) {
     throw std::runtime_error(path + ": the classifier was trained with use_shapes=" +
                              (classifier->config().use_shapes ? "true" : "false") + " but the parameters say " +
                              (matcher.use_shapes ? "true" : "false"));
+  map->segments_digest = api::segments_digest(io::to_json(map->config));
   Segments segments = reader.load_segments();
   fit_extent(*map, segments);
   try {
@@ -79,17 +81,6 @@ api::InfoReply info_of(const LoadedMap& map) {
 
 namespace {
 
-PointCloud crop_cylinder(const PointCloud& points, const Eigen::Vector3d& center, double radius_m) {
-  const double r2 = radius_m * radius_m;
-  PointCloud out;
-  out.reserve(points.size());
-  for (const Point& p : points) {
-    const double dx = p.x - center.x(), dy = p.y - center.y();
-    if (dx * dx + dy * dy <= r2) out.push_back(p);
-  }
-  return out;
-}
-
 void copy_timings(const ModuleTimings& t, api::ModuleTimingsMs& out) {
   out.voxel = static_cast<float>(t.voxel_ms), out.ground = static_cast<float>(t.ground_ms);
   out.segment = static_cast<float>(t.segment_ms), out.describe = static_cast<float>(t.describe_ms);
@@ -98,40 +89,52 @@ void copy_timings(const ModuleTimings& t, api::ModuleTimingsMs& out) {
   out.total = static_cast<float>(t.total_ms);
 }
 
+// The prior fields of both request kinds.
+struct PriorFields {
+  bool given = false;
+  Pose3d T_map_local = Pose3d::Identity();
+  double radius_m = 0.0;
+  std::optional<double> heading_tolerance_deg;
+  Eigen::Vector3d sensor_local = Eigen::Vector3d::Zero();
+};
+
+PriorFields prior_fields(const api::LocalizeRequest& r) {
+  PriorFields p{(r.flags & api::kFlagHasPrior) != 0, r.T_map_local_prior, r.prior_radius_m, std::nullopt,
+                r.sensor_position_local};
+  if (r.flags & api::kFlagPriorHeading) p.heading_tolerance_deg = r.prior_heading_tolerance_deg;
+  return p;
+}
+
+PriorFields prior_fields(const api::LocalizeSegmentsRequest& r) {
+  return {(r.flags & api::kSegmentsFlagHasPrior) != 0, r.T_map_local_prior, r.prior_radius_m,
+          r.prior_heading_tolerance_deg, r.sensor_position_local};
+}
+
 // A prior with a radius narrows the search (docs/protocol.md 5.4); radius 0 keeps revision 1's
 // reject-only meaning (check_prior below).
-std::optional<PosePrior> pose_prior_of(const api::LocalizeRequest& request) {
-  if (!(request.flags & api::kFlagHasPrior) || !(request.prior_radius_m > 0.0)) return std::nullopt;
+std::optional<PosePrior> pose_prior_of(const PriorFields& f) {
+  if (!f.given || !(f.radius_m > 0.0)) return std::nullopt;
   PosePrior prior;
-  prior.T_map_query = request.T_map_local_prior;
-  prior.radius_m = request.prior_radius_m;
-  if (request.flags & api::kFlagPriorHeading) prior.max_rotation_deg = request.prior_heading_tolerance_deg;
+  prior.T_map_query = f.T_map_local;
+  prior.radius_m = f.radius_m;
+  if (f.heading_tolerance_deg) prior.max_rotation_deg = *f.heading_tolerance_deg;
   return prior;
 }
 
 // With a prior: kOutsidePrior when the localized sensor is too far from the prior's guess.
-void check_prior(const api::LocalizeRequest& request, api::LocalizeReply& reply) {
-  if (!(request.flags & api::kFlagHasPrior) || reply.status != api::LocalizeStatus::kLocalized) return;
-  const Eigen::Vector3d& p_local = request.sensor_position_local;
-  const double distance_m = (reply.T_map_local * p_local - request.T_map_local_prior * p_local).norm();
-  if (distance_m <= request.prior_radius_m) return;
+void check_prior(const PriorFields& f, api::LocalizeReply& reply) {
+  if (!f.given || reply.status != api::LocalizeStatus::kLocalized) return;
+  const double distance_m = (reply.T_map_local * f.sensor_local - f.T_map_local * f.sensor_local).norm();
+  if (distance_m <= f.radius_m) return;
   reply.status = api::LocalizeStatus::kOutsidePrior;
   reply.reason = "localized " + std::to_string(distance_m) + " m from the prior (search radius " +
-                 std::to_string(request.prior_radius_m) + " m)";
+                 std::to_string(f.radius_m) + " m)";
 }
 
-}  // namespace
-
-api::LocalizeReply localize_request(const LoadedMap& map, const api::LocalizeRequest& request) {
-  const auto start = std::chrono::steady_clock::now();
-  const PointCloud cloud =
-      crop_cylinder(request.points, request.sensor_position_local, map.config.local_cloud.radius_m);
-  const CloudKind kind = (request.flags & api::kFlagVoxelized) ? CloudKind::kVoxelized : CloudKind::kRaw;
-  const std::optional<PosePrior> prior = pose_prior_of(request);
-  const LocalizationResult r =
-      map.localizer->localize(cloud, request.sensor_position_local.cast<float>(), kind, prior ? &*prior : nullptr);
+api::LocalizeReply reply_of(const LoadedMap& map, const LocalizationResult& r, uint64_t request_id,
+                            const PriorFields& prior, std::chrono::steady_clock::time_point start) {
   api::LocalizeReply reply;
-  reply.request_id = request.request_id;
+  reply.request_id = request_id;
   reply.status = r.localized()                            ? api::LocalizeStatus::kLocalized
                  : r.refusal == Refusal::kOutsidePrior ? api::LocalizeStatus::kOutsidePrior
                                                        : api::LocalizeStatus::kNotLocalized;
@@ -144,10 +147,49 @@ api::LocalizeReply localize_request(const LoadedMap& map, const api::LocalizeReq
   for (const Match& m : r.inliers)
     if (m.target >= 0 && static_cast<size_t>(m.target) < targets.size()) reply.matched_segment_ids.push_back(targets[m.target].id);
   copy_timings(r.timings, reply.timings);
-  check_prior(request, reply);
+  check_prior(prior, reply);
   reply.timings.server_total =
       std::chrono::duration<float, std::milli>(std::chrono::steady_clock::now() - start).count();
   return reply;
+}
+
+}  // namespace
+
+api::LocalizeReply localize_request(const LoadedMap& map, const api::LocalizeRequest& request) {
+  const auto start = std::chrono::steady_clock::now();
+  const PointCloud cloud =
+      crop_cylinder(request.points, request.sensor_position_local, map.config.local_cloud.radius_m);
+  const CloudKind kind = (request.flags & api::kFlagVoxelized) ? CloudKind::kVoxelized : CloudKind::kRaw;
+  const PriorFields fields = prior_fields(request);
+  const std::optional<PosePrior> prior = pose_prior_of(fields);
+  const LocalizationResult r =
+      map.localizer->localize(cloud, request.sensor_position_local.cast<float>(), kind, prior ? &*prior : nullptr);
+  return reply_of(map, r, request.request_id, fields, start);
+}
+
+std::optional<api::ErrorReply> refuse_segments(const LoadedMap& map, const api::LocalizeSegmentsRequest& request) {
+  char why[192];
+  if (request.parameters_digest != map.segments_digest) {
+    std::snprintf(why, sizeof(why),
+                  "segments computed with parameters digest %016llx; this map's is %016llx "
+                  "(fetch INFO and segment with its parameters)",
+                  static_cast<unsigned long long>(request.parameters_digest),
+                  static_cast<unsigned long long>(map.segments_digest));
+    return api::ErrorReply{api::ErrorCode::kParametersMismatch, why};
+  }
+  if (map.config.localizer.matcher.needs_esf() && !(request.flags & api::kSegmentsFlagEsf))
+    return api::ErrorReply{api::ErrorCode::kParametersMismatch,
+                           "this map's matcher compares ESF histograms; the segments carry none (flag bit 1)"};
+  return std::nullopt;
+}
+
+api::LocalizeReply localize_segments_request(const LoadedMap& map, const api::LocalizeSegmentsRequest& request) {
+  const auto start = std::chrono::steady_clock::now();
+  const PriorFields fields = prior_fields(request);
+  const std::optional<PosePrior> prior = pose_prior_of(fields);
+  const LocalizationResult r = map.localizer->localize_segments(
+      request.segments, request.sensor_position_local.cast<float>(), prior ? &*prior : nullptr);
+  return reply_of(map, r, request.request_id, fields, start);
 }
 
 }  // namespace server

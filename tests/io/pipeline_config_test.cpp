@@ -110,3 +110,17 @@ TEST(PipelineConfig, LoopClosureRecordIsReadAndNotWrittenBack) {
   const segmatch::io::PipelineConfig c = segmatch::io::parse_pipeline_config(text, "test");
   EXPECT_EQ(segmatch::io::to_json(c).find("loop_closure"), std::string::npos);
 }
+
+// A map written before refine.max_segment_points existed keeps refining on every point (its
+// stored answers, e.g. maps/tiny-3's goldens, hold); maps written now store the cut.
+TEST(PipelineConfig, StoredMapParametersKeepTheBehaviourTheyWereBuiltWith) {
+  using segmatch::io::PipelineConfig;
+  const PipelineConfig today = segmatch::io::pipeline_preset("kitti-hdl64");
+  EXPECT_EQ(today.localizer.refine.max_segment_points, 20000);
+  EXPECT_EQ(segmatch::io::parse_map_parameters(segmatch::io::to_json(today), "new map").localizer.refine.max_segment_points,
+            20000);
+  const std::string old_map = R"({"preset": "kitti-hdl64", "refine": {"max_query_points": 2000}})";
+  EXPECT_EQ(segmatch::io::parse_map_parameters(old_map, "old map").localizer.refine.max_segment_points, 0);
+  EXPECT_EQ(segmatch::io::parse_pipeline_config(old_map, "a config file").localizer.refine.max_segment_points, 20000)
+      << "a config file that leaves it out gets today's default";
+}

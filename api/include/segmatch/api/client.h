@@ -51,6 +51,9 @@ class Client {
   uint64_t ping(uint64_t nonce = 0);
   InfoReply info();
   LocalizeReply localize(const LocalizeRequest& request);
+  // Revision 3: the vehicle's own segments (vehicle/segment_query.h makes them). A server of an
+  // earlier revision answers UNKNOWN_TYPE (ClientError kServer, code kUnknownType).
+  LocalizeReply localize_segments(const LocalizeSegmentsRequest& request);
 
   // Low level, for tools and tests: send bytes as they are; read the next frame whole.
   void send_raw(const std::vector<uint8_t>& bytes);
@@ -64,6 +67,7 @@ class Client {
  private:
   template <typename Reply>
   Reply expect(MessageType type);
+  LocalizeReply localize_reply(uint64_t request_id);
   [[noreturn]] void fail(ClientError::Kind kind, const std::string& message);
   // After a failed send: throws the server's ERROR if one is waiting; returns otherwise.
   void rethrow_pending_error();

@@ -7,6 +7,7 @@
 // the output was filled.
 #pragma once
 
+#include <segmatch/core/segment.h>
 #include <segmatch/core/types.h>
 
 #include <array>
@@ -27,6 +28,7 @@ enum class MessageType : uint16_t {
   kPing = 0x0002,
   kInfo = 0x0003,
   kLocalize = 0x0004,
+  kLocalizeSegments = 0x0005,  // revision 3: the vehicle's segments instead of its cloud
   kHelloOk = 0x8001,    // replies have the high bit set
   kPong = 0x8002,
   kInfoReply = 0x8003,
@@ -69,6 +71,9 @@ enum class ErrorCode : uint16_t {
   kInternal = 12,         // the localizer threw; the connection stays usable
   kUnexpectedMessage = 13,  // a reply type sent as a request, or a second HELLO
   kShuttingDown = 14,
+  // Revision 3: LOCALIZE_SEGMENTS computed with other parameters than the map's (digest), or
+  // without a descriptor the map's matcher needs. The connection stays usable.
+  kParametersMismatch = 15,
 };
 ErrorCode error_code_for(DecodeStatus status);
 // Whether the byte stream is still in sync after this decode failure (the whole frame could
@@ -133,6 +138,42 @@ struct LocalizeRequest {
   PointCloud points;          // local frame; intensity 0 when the stride is 3
 };
 
+// ---- LOCALIZE_SEGMENTS (revision 3, docs/protocol.md 5.5) ----------------------------------
+// The vehicle segments and describes its local cloud itself (with the map's parameters, from
+// INFO_REPLY) and sends the segments: centroids and eigenvalue features as f32, ESF histograms
+// as u16 mantissas of a power-of-two scale, points as i16 offsets from the centroid in
+// power-of-two steps (1/1024 m for segments within 32 m of their centroid: 0.5 mm at worst).
+constexpr uint32_t kSegmentsFlagHasPrior = 1u << 0;  // as LOCALIZE bit 0 (heading tolerance always sent)
+constexpr uint32_t kSegmentsFlagEsf = 1u << 1;       // every segment carries its ESF histogram
+constexpr uint32_t kKnownSegmentsFlags = kSegmentsFlagHasPrior | kSegmentsFlagEsf;
+constexpr int kPointStepExponentMin = -10;  // finest point step 2^-10 m (~1 mm)
+constexpr int kPointStepExponentMax = 10;
+constexpr int kEsfExponentMin = -64;
+constexpr int kEsfExponentMax = 0;
+
+struct LocalizeSegmentsRequest {
+  uint64_t request_id = 0;
+  uint32_t flags = 0;
+  Eigen::Vector3d sensor_position_local = Eigen::Vector3d::Zero();
+  Eigen::Quaterniond sensor_orientation_local = Eigen::Quaterniond::Identity();
+  Pose3d T_map_local_prior = Pose3d::Identity();  // used with kSegmentsFlagHasPrior
+  double prior_radius_m = 0.0;
+  double prior_heading_tolerance_deg = 10.0;
+  // segments_digest() of the parameters the segments were computed with.
+  uint64_t parameters_digest = 0;
+  // Query (local) frame. Encoding sends centroid, eigen, ESF (with kSegmentsFlagEsf) and
+  // points; ids and labels are not sent (decoded segments are numbered 0..M-1).
+  Segments segments;
+};
+
+// Names the parameters a vehicle's segments were made with: FNV-1a (64 bit) of the
+// segmentation code's version (core kSegmentCodeVersion) and INFO_REPLY's parameters JSON,
+// byte for byte. The server computes it from the JSON it sends in INFO_REPLY.
+uint64_t segments_digest(const std::string& parameters_json);
+
+// Bytes of the quantised encoding that one segment's points take (header excluded): 6 per point.
+constexpr size_t kBytesPerSegmentPoint = 6;
+
 enum class LocalizeStatus : uint16_t { kLocalized = 0, kNotLocalized = 1, kOutsidePrior = 2 };
 const char* to_string(LocalizeStatus status);
 
@@ -167,6 +208,7 @@ std::vector<uint8_t> encode(const PongReply& m);
 std::vector<uint8_t> encode(const InfoRequest& m);
 std::vector<uint8_t> encode(const InfoReply& m);
 std::vector<uint8_t> encode(const LocalizeRequest& m);
+std::vector<uint8_t> encode(const LocalizeSegmentsRequest& m);
 std::vector<uint8_t> encode(const LocalizeReply& m);
 std::vector<uint8_t> encode(const ErrorReply& m);
 
@@ -178,6 +220,7 @@ DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, P
 DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, InfoRequest& out);
 DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, InfoReply& out);
 DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, LocalizeRequest& out);
+DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, LocalizeSegmentsRequest& out);
 DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, LocalizeReply& out);
 DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, ErrorReply& out);
 
@@ -194,6 +237,7 @@ MessageType type_of(const PongReply&);
 MessageType type_of(const InfoRequest&);
 MessageType type_of(const InfoReply&);
 MessageType type_of(const LocalizeRequest&);
+MessageType type_of(const LocalizeSegmentsRequest&);
 MessageType type_of(const LocalizeReply&);
 MessageType type_of(const ErrorReply&);
 

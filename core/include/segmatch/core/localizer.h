@@ -114,6 +114,22 @@ Segments extract_segments_from_voxels(const PointCloud& voxels, const Eigen::Vec
                                       const std::vector<uint32_t>* voxel_labels = nullptr,
                                       ModuleTimings* timings = nullptr);
 
+// The stride s with which every segment keeps every s-th of its points so that at most
+// max_points remain in all (1 when they already fit or max_points is 0): RefineConfig's
+// max_segment_points cut, the same on the server and on a vehicle (docs/protocol.md 5.5).
+size_t segment_point_stride(const Segments& segments, size_t max_points);
+// Applies that cut: segment i keeps points 0, s, 2s, ... of its own.
+void thin_segment_points(Segments& segments, size_t max_points);
+
+// The points of `cloud` within radius_m horizontally of `center`: the local cylinder of the
+// paper (III-A), cut from whatever the vehicle sent.
+PointCloud crop_cylinder(const PointCloud& cloud, const Eigen::Vector3d& center, double radius_m);
+
+// Version of the segmentation and description code: part of the digest that names the
+// parameters a vehicle's segments were computed with (docs/protocol.md 5.5). Bump it whenever
+// a change makes the same cloud and parameters give other segments or descriptors.
+constexpr uint32_t kSegmentCodeVersion = 1;
+
 // What a query cloud holds: raw points, or one point per occupied voxel of the map's grid.
 enum class CloudKind { kRaw, kVoxelized };
 
@@ -146,6 +162,14 @@ class Localizer {
   // With a prior, only poses within prior->radius_m of it are considered (see PosePrior).
   LocalizationResult localize(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
                               CloudKind kind = CloudKind::kRaw, const PosePrior* prior = nullptr) const;
+
+  // The same from the query's described segments (query frame), as extract_segments gives
+  // them: everything after description (retrieval, classification, verification, ranking,
+  // refinement). localize(cloud) is extract_segments then this, so a vehicle that segments
+  // its own cloud with the map's SegmentationConfig gets the server's answer. `timings`
+  // carries the caller's voxel..describe times into the result.
+  LocalizationResult localize_segments(Segments query, const Eigen::Vector3f& sensor_position,
+                                       const PosePrior* prior = nullptr, const ModuleTimings& timings = {}) const;
 
   const Segments& targets() const { return targets_; }
   const LocalizerConfig& config() const { return config_; }

@@ -36,6 +36,8 @@ struct MatcherConfig {
   int rf_max_depth = 8;
   int rf_min_samples = 20;   // minimum samples in a node to split it further
   void validate() const;     // throws std::invalid_argument naming the field
+  // Whether query segments must carry ESF histograms (the L2 matcher reads eigen features only).
+  bool needs_esf() const { return type == MatcherType::kRandomForest && use_shapes; }
 };
 
 // Number of values in the pair vector: 21 (eigen only) or 31 (with shapes).

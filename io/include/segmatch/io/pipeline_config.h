@@ -79,6 +79,12 @@ LoopDetectorConfig loop_detector_config(const PipelineConfig& p);
 // validates the result. `origin` names the text in error messages (a file path). Throws IoError
 // on malformed JSON, an unknown key, a wrong type or an invalid value.
 PipelineConfig parse_pipeline_config(const std::string& json_text, const std::string& origin);
+
+// The parameters stored in a map (MapMetadata::parameters_json, every field written): as
+// parse_pipeline_config, except that a parameter added after the map was written takes the
+// value that keeps the map answering as it did when built, not today's default:
+//   refine.max_segment_points (added with LOCALIZE_SEGMENTS): 0, every point refined.
+PipelineConfig parse_map_parameters(const std::string& json_text, const std::string& origin);
 // Reads and parses a config file. IoError when missing or unreadable too.
 PipelineConfig read_pipeline_config(const std::string& path);
 // Every field, pretty-printed; parse_pipeline_config(to_json(c)) == c.

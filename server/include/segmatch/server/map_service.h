@@ -15,6 +15,7 @@
 #include <segmatch/storage/map_types.h>
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -29,6 +30,9 @@ struct LoadedMap {
   Eigen::Vector3d extent_max = Eigen::Vector3d::Zero();
   std::unique_ptr<const Localizer> localizer;  // targets in map order; targets()[i].id = map id
   bool fell_back_to_l2 = false;
+  // api::segments_digest of the parameters JSON that INFO_REPLY sends: LOCALIZE_SEGMENTS
+  // requests must name it.
+  uint64_t segments_digest = 0;
   std::vector<std::string> warnings;
   size_t segment_count() const { return localizer ? localizer->targets().size() : 0; }
 };
@@ -45,6 +49,14 @@ api::InfoReply info_of(const LoadedMap& map);
 // that puts the sensor farther than prior_radius_m from where T_map_local_prior puts it.
 // Throws only what the localizer throws (a bug, reported to the client as kInternal).
 api::LocalizeReply localize_request(const LoadedMap& map, const api::LocalizeRequest& request);
+
+// LOCALIZE_SEGMENTS (docs/protocol.md 5.5): why the map cannot take these segments
+// (kParametersMismatch: another digest, or no ESF where the map's matcher needs it), if so.
+std::optional<api::ErrorReply> refuse_segments(const LoadedMap& map, const api::LocalizeSegmentsRequest& request);
+
+// The same as localize_request from the vehicle's segments: the Localizer's steps after
+// description, on segments accepted by refuse_segments.
+api::LocalizeReply localize_segments_request(const LoadedMap& map, const api::LocalizeSegmentsRequest& request);
 
 }  // namespace server
 }  // namespace segmatch

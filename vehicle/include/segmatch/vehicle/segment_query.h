@@ -1,0 +1,51 @@
+// The vehicle's side of a query by segments (docs/protocol.md 5.5). A car that knows the
+// map's parameters (INFO_REPLY) cuts its local cloud to the map's cylinder, removes the
+// ground, segments and describes it with exactly the core functions the server runs for a
+// LOCALIZE (segmatch::crop_cylinder, extract_segments[_from_voxels]), and sends the segments:
+// a few hundred kilobytes instead of the whole cloud. The server then only retrieves,
+// classifies, verifies and refines (Localizer::localize_segments), so both paths give the
+// same answer up to the points' quantisation (0.5 mm).
+#pragma once
+
+#include <segmatch/api/protocol.h>
+#include <segmatch/core/localizer.h>
+#include <segmatch/io/pipeline_config.h>
+
+#include <cstdint>
+
+namespace segmatch {
+namespace vehicle {
+
+class SegmentQuery {
+ public:
+  // The map's parameters as INFO_REPLY sends them (parameters_json) and their digest. Throws
+  // std::runtime_error naming the problem when the JSON does not parse.
+  static SegmentQuery from_info(const api::InfoReply& info);
+  // parameters_json: the exact bytes the digest is computed over (api::segments_digest).
+  explicit SegmentQuery(const std::string& parameters_json);
+
+  // The LOCALIZE request's cloud (raw or voxelized, kFlagVoxelized), sensor pose and prior, as
+  // a LOCALIZE_SEGMENTS request with the same id. The segments' points are thinned as the
+  // server's refinement would thin them (thin_segment_points, the map's
+  // refine.max_segment_points): only what it reads is sent. `timings` gets voxel..describe and total
+  // (the vehicle's own work, crop included).
+  api::LocalizeSegmentsRequest make_request(const api::LocalizeRequest& cloud_request,
+                                            ModuleTimings* timings = nullptr) const;
+
+  // The described segments of a local cloud (query frame), every point kept.
+  Segments segment(const PointCloud& cloud, const Eigen::Vector3d& sensor_position, CloudKind kind,
+                   ModuleTimings* timings = nullptr) const;
+
+  const io::PipelineConfig& parameters() const { return parameters_; }
+  uint64_t digest() const { return digest_; }
+  bool sends_esf() const { return send_esf_; }
+
+ private:
+  io::PipelineConfig parameters_;
+  SegmentationConfig segmentation_;  // the map's, without ESF when its matcher does not read it
+  uint64_t digest_ = 0;
+  bool send_esf_ = true;
+};
+
+}  // namespace vehicle
+}  // namespace segmatch
