@@ -104,7 +104,7 @@ struct LevelResult {
 // What the clients of one level saw: latencies of answered queries, errors, localizations.
 struct Tally {
   std::mutex mutex;
-  std::vector<double> latencies_ms, server_ms;
+  std::vector<double> latencies_ms, server_ms, retrieve_ms, classify_ms, verify_ms, refine_ms;
   std::atomic<int> errors{0}, localized{0};
 
   // One query; its latency counts from `since` (the send, or the scheduled send time).
@@ -121,6 +121,8 @@ struct Tally {
     std::lock_guard<std::mutex> lock(mutex);
     latencies_ms.push_back(ms);
     server_ms.push_back(reply.timings.server_total);
+    retrieve_ms.push_back(reply.timings.retrieve), classify_ms.push_back(reply.timings.classify);
+    verify_ms.push_back(reply.timings.verify), refine_ms.push_back(reply.timings.refine);
   }
   LevelResult result(int clients, double seconds) const {
     LevelResult r;
@@ -130,9 +132,10 @@ struct Tally {
     r.p50_ms = percentile(latencies_ms, 0.5), r.p99_ms = percentile(latencies_ms, 0.99);
     r.server_p50_ms = percentile(server_ms, 0.5);
     r.errors = errors.load(), r.localized = localized.load();
-    std::printf("%4d queries in %6.1f s = %6.2f queries/s, latency p50 %7.1f ms p99 %7.1f ms, server p50 %6.1f ms, "
-                "%d localized, %d errors\n",
-                r.answered, seconds, r.queries_per_s, r.p50_ms, r.p99_ms, r.server_p50_ms, r.localized, r.errors);
+    std::printf("%4d queries in %6.1f s = %6.2f queries/s, latency p50 %7.1f ms p99 %7.1f ms, server p50 %6.1f ms "
+                "(retrieve %.1f classify %.1f verify %.1f refine %.1f), %d localized, %d errors\n",
+                r.answered, seconds, r.queries_per_s, r.p50_ms, r.p99_ms, r.server_p50_ms, percentile(retrieve_ms, 0.5),
+                percentile(classify_ms, 0.5), percentile(verify_ms, 0.5), percentile(refine_ms, 0.5), r.localized, r.errors);
     return r;
   }
 };

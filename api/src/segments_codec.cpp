@@ -2,10 +2,11 @@
 //
 // Quantisation, and why it is safe:
 //   * points: i16 offsets from the segment's centroid in steps of 2^e m, e the smallest in
-//     [-10, 10] that holds the segment's farthest point. Within 32 m of the centroid the step is
-//     2^-10 m, so a point moves by 0.5 mm at most: 1/200 of the 10 cm voxel the points already
-//     are, and far below the refinement's 1 cm; the offsets' rounding errors are independent,
-//     so the ICP pose they give moves by much less.
+//     [-16, 10] whose range holds the segment's farthest point: a point moves by at most
+//     1/32767 of that reach (0.07 mm for a car, 1 mm for a facade 32 m long). Refinement is
+//     an ICP that stops at 0.1 mm steps and may end in a flat direction, so a coarser step
+//     (1 mm everywhere was tried) moved a few demo poses by up to 2 cm; at this one the two
+//     paths agree as docs/protocol.md says.
 //   * ESF: u16 mantissas of a power-of-two scale 2^e per segment, e the smallest that holds the
 //     largest bin: rounding moves a bin by at most 2^-16 of the largest one.
 // Powers of two make re-encoding a decoded request give the same bytes (golden frames).

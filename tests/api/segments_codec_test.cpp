@@ -79,7 +79,7 @@ DecodeStatus decode_request(const std::vector<uint8_t>& frame) {
 
 }  // namespace
 
-TEST(SegmentsCodec, RoundTripKeepsFeaturesExactlyAndPointsWithinHalfAMillimetre) {
+TEST(SegmentsCodec, RoundTripKeepsFeaturesExactlyAndPointsWithinHalfAStep) {
   for (bool esf : {false, true}) {
     const LocalizeSegmentsRequest in = some_request(esf);
     LocalizeSegmentsRequest out;
@@ -100,8 +100,11 @@ TEST(SegmentsCodec, RoundTripKeepsFeaturesExactlyAndPointsWithinHalfAMillimetre)
       EXPECT_TRUE(b.has_eigen);
       EXPECT_EQ(b.has_esf, esf);
       ASSERT_EQ(b.points.size(), a.points.size());
+      // The step is the power of two at or above reach / 32767: half of it is < reach / 32767.
+      float reach = 0.f;
+      for (const Point& p : a.points) reach = std::max(reach, (p.xyz() - a.centroid).cwiseAbs().maxCoeff());
       for (size_t k = 0; k < a.points.size(); ++k)
-        EXPECT_LE((b.points[k].xyz() - a.points[k].xyz()).cwiseAbs().maxCoeff(), 0.5f / 1024.f + 2e-5f);
+        EXPECT_LE((b.points[k].xyz() - a.points[k].xyz()).cwiseAbs().maxCoeff(), reach / 32767.f + 8e-6f);
       if (!esf) continue;
       const float largest = *std::max_element(a.esf.begin(), a.esf.end());
       for (int k = 0; k < kEsfBins; ++k) EXPECT_LE(std::abs(b.esf[k] - a.esf[k]), largest / 65535.f * 1.001f) << k;
@@ -115,7 +118,7 @@ TEST(SegmentsCodec, LargeSegmentsUseACoarserStepAndStillRoundTrip) {
   in.segments.push_back(make_segment(rng, Eigen::Vector3f(0.f, 0.f, 0.f), 100.f, 200, false));  // a building
   LocalizeSegmentsRequest out;
   ASSERT_EQ(decode_frame(encode(in), kLimits, out), DecodeStatus::kOk);
-  // 100 m from the centroid needs 2^-8 m steps (i16 range 128 m): 2 mm at worst.
+  // ~100 m from the centroid needs 2^-8 m steps (i16 range 128 m): 2 mm at worst.
   for (size_t k = 0; k < 200; ++k)
     EXPECT_LE((out.segments[0].points[k].xyz() - in.segments[0].points[k].xyz()).cwiseAbs().maxCoeff(), 0.5f / 256.f + 1e-4f);
 }
@@ -138,7 +141,11 @@ TEST(SegmentsCodec, LayoutIsTheDocumentedOne) {
   float cx;
   std::memcpy(&cx, &f[kOffFirstSegment], 4);
   EXPECT_EQ(cx, r.segments[0].centroid.x());
-  EXPECT_EQ(static_cast<int8_t>(f[kOffFirstSegment + 44]), -10) << "a segment within 32 m: 2^-10 m steps";
+  // The smallest power of two at or above reach / 32767 m, not below 2^-16 m.
+  float reach = 0.f;
+  for (const Point& p : r.segments[0].points) reach = std::max(reach, (p.xyz() - r.segments[0].centroid).cwiseAbs().maxCoeff());
+  const int expected = std::max(-16, static_cast<int>(std::ceil(std::log2(reach / 32767.0))));
+  EXPECT_EQ(static_cast<int8_t>(f[kOffFirstSegment + 44]), expected) << "reach " << reach;
 }
 
 TEST(SegmentsCodec, StoredRevision3FrameDecodesAndReencodesByteForByte) {
@@ -217,6 +224,8 @@ TEST(SegmentsCodec, RefusesNonFiniteValuesBadFlagsAndExponents) {
   EXPECT_EQ(decode_request(f), DecodeStatus::kBadField);
   f = good;
   f[kOffFirstSegment + 44] = static_cast<uint8_t>(int8_t{11});  // point step 2^11 m
+  EXPECT_EQ(decode_request(f), DecodeStatus::kBadField);
+  f[kOffFirstSegment + 44] = static_cast<uint8_t>(int8_t{-17});  // point step 2^-17 m
   EXPECT_EQ(decode_request(f), DecodeStatus::kBadField);
   f = good;
   f[kOffFirstSegment + 45] = static_cast<uint8_t>(int8_t{3});  // ESF scale 8

@@ -232,6 +232,23 @@ TEST(RefineTest, PointToPlaneCorrectsSmallPerturbation) {
   EXPECT_EQ(again.iterations, r.iterations);
 }
 
+// The loop can end in its coarse phase (every 4th source point); the fitness reported must
+// still count every point (it once counted the coarse subset: a quarter of the truth, and
+// good poses were refused as "surfaces disagree").
+TEST(RefineTest, FitnessCountsEveryPointWhenTheLoopEndsCoarse) {
+  const Pose3d T = true_pose();
+  const PointCloud target = transformed(sample_scene(11, 40), T);
+  const PointCloud query = sample_scene(12, 40);
+  ASSERT_GE(query.size(), 2000u) << "enough points for the coarse phase";
+  RefineConfig one;
+  one.max_iterations = 1;  // ends right after the first, coarse, step
+  const RefineResult r = refine_alignment(query, target, T * perturbation(), one);
+  EXPECT_EQ(r.iterations, 1);
+  EXPECT_GT(r.fitness, 0.6f);
+  const RefineResult full = refine_alignment(query, target, T * perturbation(), {});
+  EXPECT_NEAR(r.fitness, full.fitness, 0.3f);
+}
+
 TEST(RefineTest, PointToPointOnIdenticalSamples) {
   const Pose3d T = true_pose();
   const PointCloud query = sample_scene(13, 20);

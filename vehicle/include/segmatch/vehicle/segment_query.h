@@ -4,7 +4,7 @@
 // LOCALIZE (segmatch::crop_cylinder, extract_segments[_from_voxels]), and sends the segments:
 // a few hundred kilobytes instead of the whole cloud. The server then only retrieves,
 // classifies, verifies and refines (Localizer::localize_segments), so both paths give the
-// same answer up to the points' quantisation (0.5 mm).
+// same answer up to the points' quantisation (under 1/32767 of a segment's reach).
 #pragma once
 
 #include <segmatch/api/protocol.h>
