@@ -190,6 +190,8 @@ void LocalizerConfig::validate() const {
   refine.validate();
   if (!(min_refine_fitness >= 0.0f && min_refine_fitness <= 1.0f))
     throw std::invalid_argument("min_refine_fitness must be in 0..1");
+  if (!(max_refine_rmse_voxels >= 0.0f) || !std::isfinite(max_refine_rmse_voxels))
+    throw std::invalid_argument("max_refine_rmse_voxels must be finite and >= 0 (0: off)");
   if (!(min_confidence >= 0.0f && min_confidence <= 1.0f))
     throw std::invalid_argument("min_confidence must be in 0..1");
   if (!(support_radius_m > 0.0f) || !std::isfinite(support_radius_m))
@@ -334,6 +336,11 @@ LocalizationResult Localizer::localize_segments(Segments query, const Eigen::Vec
     if (refined.fitness < floors.min_fitness)
       return finish(refuse(std::move(r), Refusal::kSurfacesDisagree, "matched segments' surfaces disagree (fitness " +
                                              std::to_string(refined.fitness) + ")"));
+    const float max_rmse_m = config_.max_refine_rmse_voxels * config_.segmentation.voxel.leaf_m;
+    if (max_rmse_m > 0.0f && refined.rmse_m > max_rmse_m)
+      return finish(refuse(std::move(r), Refusal::kSurfacesDisagree, "matched segments' surfaces are " +
+                                             std::to_string(refined.rmse_m) + " m apart (RMS, at most " +
+                                             std::to_string(max_rmse_m) + ")"));
     r.T_map_query = refined.T_target_query;
   }
   r.confidence = confidence_of(r.support, min_support, r.refine_fitness);
