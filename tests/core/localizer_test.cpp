@@ -228,6 +228,13 @@ TEST(Localizer, RejectsInvalidConfigurationAtConstruction) {
   c = config();
   c.matcher.type = MatcherType::kRandomForest;  // without a classifier
   EXPECT_THROW(Localizer(c, Segments{}), std::invalid_argument);
+  c = config();
+  c.max_refine_rmse_voxels = -1.f;
+  EXPECT_THROW(Localizer(c, Segments{}), std::invalid_argument);
+  c.max_refine_rmse_voxels = NAN;
+  EXPECT_THROW(Localizer(c, Segments{}), std::invalid_argument);
+  c.max_refine_rmse_voxels = 0.f;  // off
+  EXPECT_NO_THROW(Localizer(c, Segments{}));
 }
 
 }  // namespace
