@@ -93,12 +93,7 @@ std::vector<uint8_t> encode(const LocalizeRequest& m) {
   wire::Writer w;
   const uint32_t stride = m.point_stride == 3 ? 3 : 4;
   w.reserve(kLocalizeFixedBytes + m.points.size() * stride * 4);
-  w.u64(m.request_id);
-  w.u32(m.flags);
-  for (int i = 0; i < 3; ++i) w.f64(m.sensor_position_local[i]);
-  put_quaternion(w, m.sensor_orientation_local);
-  put_pose(w, m.T_map_local_prior);
-  w.f64(m.prior_radius_m);
+  put_request_head(w, m);
   w.u32(static_cast<uint32_t>(m.points.size()));
   w.u32(stride);
   if (stride == 4 && !m.points.empty()) {
@@ -114,12 +109,7 @@ DecodeStatus decode(const uint8_t* payload, size_t size, const Limits&, Localize
   if (size < kLocalizeFixedBytes) return DecodeStatus::kTruncated;
   wire::Reader r(payload, size);
   LocalizeRequest m;
-  m.request_id = r.u64();
-  m.flags = r.u32();
-  const DecodeStatus s_pos = get_vector(r, m.sensor_position_local);
-  const DecodeStatus s_q = get_quaternion(r, m.sensor_orientation_local);
-  const DecodeStatus s_prior = get_pose(r, m.T_map_local_prior);
-  m.prior_radius_m = r.f64();
+  const DecodeStatus s_head = get_request_head(r, m);
   const uint32_t count = r.u32();
   m.point_stride = r.u32();
   if (m.flags & ~kKnownFlags) return DecodeStatus::kBadField;
@@ -128,7 +118,7 @@ DecodeStatus decode(const uint8_t* payload, size_t size, const Limits&, Localize
   const uint64_t trailer = (m.flags & kFlagPriorHeading) ? 8 : 0;
   if (kLocalizeFixedBytes + static_cast<uint64_t>(count) * m.point_stride * 4 + trailer != size)
     return DecodeStatus::kBadPointCount;
-  DecodeStatus s = first_error({s_pos, s_q, s_prior});
+  DecodeStatus s = s_head;
   if (s != DecodeStatus::kOk) return s;
   if (!std::isfinite(m.prior_radius_m)) return DecodeStatus::kNonFinite;
   if (m.prior_radius_m < 0.0) return DecodeStatus::kBadField;

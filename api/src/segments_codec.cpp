@@ -135,12 +135,7 @@ std::vector<uint8_t> encode(const LocalizeSegmentsRequest& m) {
   for (const Segment& s : m.segments) points += s.points.size();
   w.reserve(kSegmentsFixedBytes + m.segments.size() * (kSegmentBytes + (esf ? kEsfBytes : 0)) +
             points * kBytesPerSegmentPoint);
-  w.u64(m.request_id);
-  w.u32(m.flags);
-  for (int i = 0; i < 3; ++i) w.f64(m.sensor_position_local[i]);
-  put_quaternion(w, m.sensor_orientation_local);
-  put_pose(w, m.T_map_local_prior);
-  w.f64(m.prior_radius_m);
+  put_request_head(w, m);
   w.f64(m.prior_heading_tolerance_deg);
   w.u64(m.parameters_digest);
   w.u32(static_cast<uint32_t>(m.segments.size()));
@@ -161,12 +156,7 @@ DecodeStatus decode(const uint8_t* payload, size_t size, const Limits&, Localize
   if (size < kSegmentsFixedBytes) return DecodeStatus::kTruncated;
   wire::Reader r(payload, size);
   LocalizeSegmentsRequest m;
-  m.request_id = r.u64();
-  m.flags = r.u32();
-  const DecodeStatus s_pos = get_vector(r, m.sensor_position_local);
-  const DecodeStatus s_q = get_quaternion(r, m.sensor_orientation_local);
-  const DecodeStatus s_prior = get_pose(r, m.T_map_local_prior);
-  m.prior_radius_m = r.f64();
+  const DecodeStatus s_head = get_request_head(r, m);
   m.prior_heading_tolerance_deg = r.f64();
   m.parameters_digest = r.u64();
   const uint32_t count = r.u32();
@@ -178,7 +168,7 @@ DecodeStatus decode(const uint8_t* payload, size_t size, const Limits&, Localize
           uint64_t{points} * kBytesPerSegmentPoint != size)
     return DecodeStatus::kBadPointCount;
   if (!counts_add_up(payload, size, count, points, esf)) return DecodeStatus::kBadPointCount;
-  DecodeStatus s = first_error({s_pos, s_q, s_prior});
+  DecodeStatus s = s_head;
   if (s != DecodeStatus::kOk) return s;
   if (!std::isfinite(m.prior_radius_m) || !std::isfinite(m.prior_heading_tolerance_deg)) return DecodeStatus::kNonFinite;
   if (m.prior_radius_m < 0.0 || m.prior_heading_tolerance_deg < 0.0) return DecodeStatus::kBadField;

@@ -8,15 +8,6 @@
 using namespace segmatch;
 using namespace segmatch::testing;
 
-namespace {
-
-double position_error_m(const Pose3d& a, const Pose3d& b) { return (a.translation() - b.translation()).norm(); }
-double angle_error_deg(const Pose3d& a, const Pose3d& b) {
-  return Eigen::AngleAxisd(a.linear().transpose() * b.linear()).angle() * 180.0 / M_PI;
-}
-
-}  // namespace
-
 TEST(ServerLocalization, InfoDescribesTheMap) {
   RunningServer s;
   api::Client c = s.client();

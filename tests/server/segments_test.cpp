@@ -15,11 +15,6 @@ using namespace segmatch::testing;
 
 namespace {
 
-double position_error_m(const Pose3d& a, const Pose3d& b) { return (a.translation() - b.translation()).norm(); }
-double angle_error_deg(const Pose3d& a, const Pose3d& b) {
-  return Eigen::AngleAxisd(a.linear().transpose() * b.linear()).angle() * 180.0 / M_PI;
-}
-
 const server::LoadedMap& loaded_map() {
   static std::shared_ptr<const server::LoadedMap> map = server::load_map(test_world().map_path);
   return *map;

@@ -14,6 +14,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -109,6 +110,11 @@ inline const TestWorld& test_world() {
     std::printf("[server] map %s, %zu revisit queries\n", world->map_path.c_str(), world->queries.size());
   });
   return *world;
+}
+
+inline double position_error_m(const Pose3d& a, const Pose3d& b) { return (a.translation() - b.translation()).norm(); }
+inline double angle_error_deg(const Pose3d& a, const Pose3d& b) {
+  return Eigen::AngleAxisd(a.linear().transpose() * b.linear()).angle() * 180.0 / M_PI;
 }
 
 // A server on an ephemeral loopback port, log lines kept for inspection.
