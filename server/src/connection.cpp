@@ -73,8 +73,9 @@ std::optional<api::ErrorReply> refuse(const LoadedMap& map, const api::LocalizeS
 }
 
 api::LocalizeReply localize(const LoadedMap& map, const api::LocalizeRequest& r) { return localize_request(map, r); }
-api::LocalizeReply localize(const LoadedMap& map, const api::LocalizeSegmentsRequest& r) {
-  return localize_segments_request(map, r);
+// The segments move into the localizer (the request is not read again).
+api::LocalizeReply localize(const LoadedMap& map, api::LocalizeSegmentsRequest& r) {
+  return localize_segments_request(map, std::move(r));
 }
 
 // LOCALIZE or LOCALIZE_SEGMENTS: decode, check, localize on the worker pool, reply.
@@ -90,18 +91,19 @@ Handled handle_localize(Server::State& s, const std::vector<uint8_t>& payload, T
     h.is_localize = true;
     return h;
   }
-  // The localization runs on the bounded worker pool; this connection thread waits for it.
-  // The task is shared with the pool: the worker may still be inside it when get() returns.
-  auto task = std::make_shared<std::packaged_task<api::LocalizeReply()>>(
-      [&s, &request] { return localize(*s.map, request); });
-  std::future<api::LocalizeReply> result = task->get_future();
-  s.pool->submit([task] { (*task)(); });
   Handled h;
   h.is_localize = true;
   char detail[96];
   std::snprintf(detail, sizeof(detail), " id=%llu points=%zu", static_cast<unsigned long long>(request.request_id),
                 point_count(request));
   h.detail = detail;
+  // The localization runs on the bounded worker pool; this connection thread waits for it.
+  // The task is shared with the pool: the worker may still be inside it when get() returns.
+  // From here on only the worker touches `request`.
+  auto task = std::make_shared<std::packaged_task<api::LocalizeReply()>>(
+      [&s, &request] { return localize(*s.map, request); });
+  std::future<api::LocalizeReply> result = task->get_future();
+  s.pool->submit([task] { (*task)(); });
   try {
     api::LocalizeReply reply = result.get();
     reply.timings.server_total =

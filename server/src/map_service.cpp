@@ -183,12 +183,12 @@ std::optional<api::ErrorReply> refuse_segments(const LoadedMap& map, const api::
   return std::nullopt;
 }
 
-api::LocalizeReply localize_segments_request(const LoadedMap& map, const api::LocalizeSegmentsRequest& request) {
+api::LocalizeReply localize_segments_request(const LoadedMap& map, api::LocalizeSegmentsRequest request) {
   const auto start = std::chrono::steady_clock::now();
   const PriorFields fields = prior_fields(request);
   const std::optional<PosePrior> prior = pose_prior_of(fields);
   const LocalizationResult r = map.localizer->localize_segments(
-      request.segments, request.sensor_position_local.cast<float>(), prior ? &*prior : nullptr);
+      std::move(request.segments), request.sensor_position_local.cast<float>(), prior ? &*prior : nullptr);
   return reply_of(map, r, request.request_id, fields, start);
 }
 

@@ -56,7 +56,8 @@ std::optional<api::ErrorReply> refuse_segments(const LoadedMap& map, const api::
 
 // The same as localize_request from the vehicle's segments: the Localizer's steps after
 // description, on segments accepted by refuse_segments.
-api::LocalizeReply localize_segments_request(const LoadedMap& map, const api::LocalizeSegmentsRequest& request);
+// Takes the request by value: a caller done with it moves its segments in.
+api::LocalizeReply localize_segments_request(const LoadedMap& map, api::LocalizeSegmentsRequest request);
 
 }  // namespace server
 }  // namespace segmatch
