@@ -54,6 +54,14 @@ float FeatureScaling::distance(const EigenFeatures& a, const EigenFeatures& b) c
 
 namespace {
 constexpr size_t kBruteForceRatio = 50;  // linear scan if k >= size / 50
+
+// Leaves the k smallest pairs of `v` at its front in ascending order: what std::partial_sort
+// leaves there (the pairs are distinct, their indices are), by selection then a sort of those k.
+// partial_sort keeps a heap of k and pays log k for most of the n elements.
+void smallest_first(std::vector<std::pair<float, int>>& v, size_t k) {
+  if (k < v.size()) std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  std::sort(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(std::min(k, v.size())));
+}
 }  // namespace
 
 struct FeatureIndex::Impl {
@@ -107,7 +115,7 @@ std::vector<std::pair<int, float>> FeatureIndex::knn(const EigenFeatures& f, int
       for (int d = 0; d < kEigenFeatureCount; ++d) sq += (row[d] - q[d]) * (row[d] - q[d]);
       all[i] = {sq, static_cast<int>(i)};
     }
-    std::partial_sort(all.begin(), all.begin() + kk, all.end());
+    smallest_first(all, kk);
     out.reserve(kk);
     for (size_t i = 0; i < kk; ++i) out.emplace_back(all[i].second, all[i].first);
     return out;
@@ -162,7 +170,7 @@ Matches retrieve_candidates_among(const Segments& queries, const Segments& targe
     for (int ti : allowed[qi]) near.emplace_back(scaling.distance(q.eigen, targets[static_cast<size_t>(ti)].eigen), ti);
     const size_t k = std::min(near.size(), static_cast<size_t>(config.k));
     // Nearest first, ties by target index (as the k-d tree's exact search orders them).
-    std::partial_sort(near.begin(), near.begin() + static_cast<std::ptrdiff_t>(k), near.end());
+    smallest_first(near, k);
     for (size_t i = 0; i < k; ++i) out.push_back({static_cast<int>(qi), near[i].second, -near[i].first});
   }
   return out;

@@ -76,6 +76,22 @@ TEST(RetrievalTest, KnnEqualsBruteForce) {
   }
 }
 
+// The linear scan (k >= size / 50) selects then sorts; equal distances must still come out by
+// ascending target index, as the k-d tree's exact search orders them.
+TEST(RetrievalTest, ScanOrdersTiesByTargetIndex) {
+  Segments targets = random_segments(300, 5);
+  for (size_t i = 0; i < targets.size(); i += 3) targets[i].eigen = targets[0].eigen;  // 100 copies
+  FeatureIndex index;
+  index.build(targets);
+  const auto nn = index.knn(targets[0].eigen, 150);
+  ASSERT_EQ(nn.size(), 150u);
+  for (size_t r = 0; r < 100; ++r) {
+    EXPECT_EQ(nn[r].first, static_cast<int>(3 * r)) << "rank " << r;
+    EXPECT_EQ(nn[r].second, 0.f);
+  }
+  for (size_t r = 100; r < nn.size(); ++r) EXPECT_GT(nn[r].second, 0.f);
+}
+
 TEST(RetrievalTest, NormalisationUsesTargetStatistics) {
   Segments targets(4);
   const float dim0[] = {90.f, 110.f, 90.f, 110.f};  // mean 100, sd 10
