@@ -8,7 +8,7 @@ PACKAGES=(
   libeigen3-dev libpcl-dev libopencv-dev libflann-dev libsqlite3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev
-  libceres-dev
+  libceres-dev libzstd-dev
 )
 
 missing=()

@@ -1,10 +1,12 @@
 // segmatch-mapinfo: what is in a segment map (metadata, stats, extent), an integrity check,
-// and exports for viewing (coloured PLY / PCD of the segments, a top-down PNG).
+// exports for viewing (coloured PLY / PCD of the segments, a top-down PNG), and the upgrade of
+// an older map file to this build's schema.
 #include "map_export.h"
 
 #include <segmatch/io/auto_profile.h>
 #include <segmatch/io/error.h>
 #include <segmatch/storage/map_reader.h>
+#include <segmatch/storage/map_writer.h>
 
 #include <CLI/CLI.hpp>
 
@@ -25,7 +27,19 @@ void print_metadata(const storage::MapReader& map) {
   std::printf("frame:          %s\n", m.frame.c_str());
   std::printf("created:        %s\n", m.created_utc.c_str());
   std::printf("tool version:   %s\n", m.tool_version.c_str());
-  std::printf("schema version: %d\n", map.schema_version());
+  if (map.schema_version() < storage::kSchemaVersion)
+    std::printf("schema version: %d (older than this build's %d: readable; `segmatch-mapinfo --upgrade OLD NEW` "
+                "rewrites it, smaller)\n", map.schema_version(), storage::kSchemaVersion);
+  else
+    std::printf("schema version: %d\n", map.schema_version());
+}
+
+int upgrade(const std::string& old_path, const std::string& new_path, bool overwrite) {
+  const int from = storage::upgrade_map(old_path, new_path, overwrite);
+  std::printf("upgraded %s (schema %d, %.2f MB) -> %s (schema %d, %.2f MB)\n", old_path.c_str(), from,
+              static_cast<double>(fs::file_size(old_path)) / 1e6, new_path.c_str(), storage::kSchemaVersion,
+              static_cast<double>(fs::file_size(new_path)) / 1e6);
+  return 0;
 }
 
 void print_stats(const storage::MapReader& map, const Segments& segments) {
@@ -65,8 +79,14 @@ int check(const storage::MapReader& map) {
 int main(int argc, char** argv) {
   CLI::App app{"Show what a SegMatch segment map holds; check it; export it for viewing"};
   std::string path, ply, pcd, png;
-  bool run_check = false;
-  app.add_option("map", path, "map file (.sqlite)")->required();
+  std::vector<std::string> upgrade_paths;
+  bool run_check = false, overwrite = false;
+  auto* map_opt = app.add_option("map", path, "map file (.sqlite)");
+  auto* upgrade_opt = app.add_option("--upgrade", upgrade_paths,
+                                     "OLD NEW: rewrite map OLD in this build's schema as NEW (lossless; OLD is kept)")
+                          ->expected(2)
+                          ->excludes(map_opt);
+  app.add_flag("--overwrite", overwrite, "with --upgrade: replace NEW if it exists")->needs(upgrade_opt);
   app.add_flag("--check", run_check, "full integrity check (exit 1 listing the problems)");
   auto* ply_opt = app.add_option("--export-ply", ply, "write all segments' points, coloured per segment (ASCII PLY)");
   app.add_option("--export-pcd", pcd, "same as ASCII PCD with an rgb field")->excludes(ply_opt);
@@ -79,7 +99,12 @@ int main(int argc, char** argv) {
     app.exit(e);
     return 2;
   }
+  if (upgrade_paths.empty() && path.empty()) {
+    std::fprintf(stderr, "segmatch-mapinfo: error: give a map file, or --upgrade OLD NEW\n");
+    return 2;
+  }
   try {
+    if (!upgrade_paths.empty()) return upgrade(upgrade_paths[0], upgrade_paths[1], overwrite);
     const storage::MapReader map = storage::MapReader::open(path);
     print_metadata(map);
     // Before anything else reads the file: a damaged map is reported, not half-printed.

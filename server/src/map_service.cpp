@@ -59,6 +59,10 @@ std::shared_ptr<const LoadedMap> load_map(const std::string& path) {
                              (classifier->config().use_shapes ? "true" : "false") + " but the parameters say " +
                              (matcher.use_shapes ? "true" : "false"));
   map->segments_digest = api::segments_digest(io::to_json(map->config));
+  if (reader.schema_version() < storage::kSchemaVersion)
+    map->warnings.push_back(path + ": map schema " + std::to_string(reader.schema_version()) +
+                            " (older than this build's " + std::to_string(storage::kSchemaVersion) +
+                            "): served as it is; `segmatch-mapinfo --upgrade OLD NEW` rewrites it, smaller");
   Segments segments = reader.load_segments();
   fit_extent(*map, segments);
   try {

@@ -46,6 +46,11 @@ void counts(const MapReader::Impl& impl, std::vector<std::string>* problems) {
                problems);
   expect_count("spatial index entries", count(impl, "SELECT count(*) FROM segment_rtree"),
                impl.segment_count, problems);
+  if (impl.schema_version >= 2) {
+    expect_count("point rows", count(impl, "SELECT count(*) FROM segment_points"), impl.segment_count, problems);
+    const int64_t strays = count(impl, "SELECT count(*) FROM segment_points WHERE row NOT IN (SELECT row FROM segments)");
+    if (strays) problems->push_back(std::to_string(strays) + " point rows belong to no segment");
+  }
   const int64_t unindexed = count(
       impl,
       "SELECT count(*) FROM segments s LEFT JOIN segment_rtree r ON r.row = s.row "
@@ -66,13 +71,13 @@ void counts(const MapReader::Impl& impl, std::vector<std::string>* problems) {
 }
 
 void rows(const MapReader::Impl& impl, std::vector<std::string>* problems) {
-  const std::string sql = std::string(kSelectSegmentColumns) + "FROM segments s ORDER BY s.row";
+  const std::string sql = select_segments_sql(impl.schema_version, "ORDER BY s.row");
   Statement st(impl.db.get(), sql.c_str(), impl.path);
   size_t bad = 0;
   Segment segment;
   while (st.step()) {
     StoredRow stored;
-    read_row(st, &stored);
+    read_row(st, impl.schema_version, &stored);
     try {
       decode_segment(stored, impl.path, &segment);
     } catch (const StorageError& e) {

@@ -1,6 +1,7 @@
 #include <segmatch/storage/map_reader.h>
 
 #include "reader_impl.h"
+#include "packed_blobs.h"
 #include "schema.h"
 #include "segment_rows.h"
 
@@ -44,10 +45,10 @@ void load_metadata(MapReader::Impl* impl) {
 }
 
 // Appends the segment of the statement's current row.
-void append_segment(const Statement& st, const std::string& path, Segments* segments,
+void append_segment(const Statement& st, int schema_version, const std::string& path, Segments* segments,
                     std::vector<uint32_t>* keyframes) {
   StoredRow stored;
-  read_row(st, &stored);
+  read_row(st, schema_version, &stored);
   segments->emplace_back();
   decode_segment(stored, path, &segments->back());
   if (keyframes) keyframes->push_back(stored.row.keyframe);
@@ -86,7 +87,13 @@ std::optional<ClassifierBlob> detail::read_classifier(const MapReader::Impl& imp
   ClassifierBlob blob;
   blob.format = st.column_text(0);
   const BlobView bytes = st.column_blob(1);
-  if (bytes.size) blob.bytes.assign(static_cast<const char*>(bytes.data), bytes.size);
+  if (impl.schema_version >= 2) {  // packed; the checksum is over the unpacked bytes
+    constexpr size_t kMaxClassifierBytes = size_t{1} << 30;
+    const std::string problem = unpack_bytes(bytes, kMaxClassifierBytes, &blob.bytes);
+    if (!problem.empty()) fail(impl.path, "the map file is corrupted: classifier: " + problem);
+  } else if (bytes.size) {
+    blob.bytes.assign(static_cast<const char*>(bytes.data), bytes.size);
+  }
   if (classifier_checksum(blob) != static_cast<uint64_t>(st.column_int(2))) {
     fail(impl.path, "the map file is corrupted: classifier checksum mismatch");
   }
@@ -125,7 +132,7 @@ MapReader MapReader::open(const std::string& path) {
   for (int attempt = 0; !open_connections(impl.get()); ++attempt) {
     if (attempt == 3) fail(path, "the map file keeps being replaced while opening it");
   }
-  check_tables(impl->db.get(), path);
+  check_tables(impl->db.get(), path, impl->schema_version);
   load_metadata(impl.get());
   return MapReader(std::move(impl));
 }
@@ -152,7 +159,7 @@ Segments MapReader::segments_near(const Eigen::Vector3f& center, float radius_m,
   Segments segments;
   if (radius_m < 0.f) return segments;
   const std::vector<int64_t> rows = rows_near(*impl_, center, radius_m);
-  const std::string sql = std::string(kSelectSegmentColumns) + "FROM segments s WHERE s.row = ?";
+  const std::string sql = select_segments_sql(impl_->schema_version, "WHERE s.row = ?");
   Statement st(impl_->db.get(), sql.c_str(), impl_->path);
   segments.reserve(rows.size());
   for (int64_t row : rows) {
@@ -161,7 +168,7 @@ Segments MapReader::segments_near(const Eigen::Vector3f& center, float radius_m,
       fail(impl_->path, "the map file is corrupted: the spatial index names segment row " +
                             std::to_string(row) + ", which does not exist");
     }
-    append_segment(st, impl_->path, &segments, keyframe_of_segment);
+    append_segment(st, impl_->schema_version, impl_->path, &segments, keyframe_of_segment);
     st.reset();
   }
   return segments;

@@ -1,6 +1,9 @@
 #include <segmatch/storage/map_writer.h>
 
 #include "file_util.h"
+#include "packed_blobs.h"
+#include "reader_impl.h"
+#include "segment_rows.h"
 #include "schema.h"
 #include "segment_codec.h"
 #include "sqlite_util.h"
@@ -23,8 +26,9 @@ namespace {
 
 const char* const kInsertSegment =
     "INSERT INTO segments (row, segment_id, keyframe, label, cx, cy, cz, min_x, min_y, min_z, "
-    "max_x, max_y, max_z, num_points, checksum, eigen, esf, points) "
-    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)";
+    "max_x, max_y, max_z, num_points, checksum, eigen, esf) "
+    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)";
+const char* const kInsertPoints = "INSERT INTO segment_points (row, checksum, points) VALUES (?, ?, ?)";
 const char* const kInsertRtree = "INSERT INTO segment_rtree VALUES (?, ?, ?, ?, ?, ?, ?)";
 const char* const kInsertKeyframe =
     "INSERT INTO trajectory VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)";
@@ -96,7 +100,7 @@ struct MapWriter::Impl {
   std::string path, temporary_path;
   bool overwrite = false;
   Connection db;  // declared before the statements: destroyed after them
-  std::unique_ptr<Statement> insert_segment, insert_rtree;
+  std::unique_ptr<Statement> insert_segment, insert_points, insert_rtree;
   int64_t next_row = 1;
   uint64_t point_count = 0;
   size_t keyframe_count = 0;
@@ -106,6 +110,7 @@ struct MapWriter::Impl {
   ~Impl() {
     if (finished) return;
     insert_segment.reset();
+    insert_points.reset();
     insert_rtree.reset();
     db.reset();  // uncommitted transaction => rolled back
     ::unlink(temporary_path.c_str());
@@ -129,6 +134,8 @@ struct MapWriter::Impl {
   }
 
   void insert(const Segment& segment, uint32_t keyframe);
+  // A row whose points are a schema-1 BLOB (encode_points()) and whose ESF is raw floats.
+  void insert_row(SegmentRow row);
   void publish();
 };
 
@@ -145,11 +152,21 @@ void MapWriter::Impl::insert(const Segment& segment, uint32_t keyframe) {
   row.eigen = eigen_blob(segment);
   row.esf = esf_blob(segment);
   row.points = {encoded.blob.data(), encoded.blob.size(), false};
+  insert_row(row);
+}
 
+void MapWriter::Impl::insert_row(SegmentRow row) {
+  const std::vector<uint8_t> points = pack_points(row.points);
+  std::vector<uint8_t> esf;
+  if (!row.esf.is_null) {
+    esf = pack_esf(row.esf);
+    row.esf = {esf.data(), esf.size(), false};
+  }
+  row.points = {};  // schema 2: the points have their own row and checksum
   Statement& st = *insert_segment;
   st.bind_int(1, next_row);
   st.bind_int(2, static_cast<int64_t>(row.segment_id));  // uint64 kept bit for bit
-  if (keyframe == kNoKeyframe) st.bind_null(3); else st.bind_int(3, keyframe);
+  if (row.keyframe == kNoKeyframe) st.bind_null(3); else st.bind_int(3, row.keyframe);
   st.bind_int(4, row.label);
   bind_vector(st, 5, row.centroid);
   bind_vector(st, 8, row.box_min);
@@ -158,8 +175,12 @@ void MapWriter::Impl::insert(const Segment& segment, uint32_t keyframe) {
   st.bind_int(15, static_cast<int64_t>(row_checksum(row)));
   bind_optional_blob(st, 16, row.eigen);
   bind_optional_blob(st, 17, row.esf);
-  bind_optional_blob(st, 18, row.points);
   st.run();
+  Statement& pt = *insert_points;
+  pt.bind_int(1, next_row);
+  pt.bind_int(2, static_cast<int64_t>(points_checksum(next_row, row.num_points, {points.data(), points.size(), false})));
+  pt.bind_blob(3, points.data(), points.size());
+  pt.run();
 
   // A point box per centroid: segments_near() asks which centroids lie in a query cube.
   Statement& rt = *insert_rtree;
@@ -184,6 +205,7 @@ void MapWriter::Impl::publish() {
     counts.run();
   }  // finalized: sqlite3_close() refuses while a statement lives
   insert_segment.reset();
+  insert_points.reset();
   insert_rtree.reset();
   exec(db.get(), "COMMIT", temporary_path);
   const int rc = sqlite3_close(db.release());
@@ -208,10 +230,11 @@ MapWriter MapWriter::create(const std::string& path, const MapMetadata& metadata
   ::unlink(impl->temporary_path.c_str());  // left by a killed process that had our pid
   impl->db = open_connection(impl->temporary_path, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
   sqlite3* db = impl->db.get();
-  // Large pages keep a segment row (~10 kB) in one page; the journal may live in memory and
-  // syncs may be skipped because a failed build only loses the temporary file, and commit()
-  // fsyncs the finished file itself.
-  exec(db, "PRAGMA page_size = 65536; PRAGMA journal_mode = MEMORY; PRAGMA synchronous = OFF;"
+  // Small pages: a BLOB's overflow chain wastes half a page on average, which with schema 1's
+  // 64 KiB pages was about as much as the packed data itself; 1 KiB pages cost nothing
+  // measurable when loading (README, "map size"). The journal may live in memory and syncs may be skipped because a failed
+  // build only loses the temporary file, and commit() fsyncs the finished file itself.
+  exec(db, "PRAGMA page_size = 1024; PRAGMA journal_mode = MEMORY; PRAGMA synchronous = OFF;"
            "PRAGMA cache_size = -65536; BEGIN",
        impl->temporary_path);
   create_schema(db, impl->temporary_path);
@@ -227,6 +250,7 @@ MapWriter MapWriter::create(const std::string& path, const MapMetadata& metadata
   info.bind_int(7, metadata.esf_dims);
   info.run();
   impl->insert_segment = std::make_unique<Statement>(db, kInsertSegment, impl->temporary_path);
+  impl->insert_points = std::make_unique<Statement>(db, kInsertPoints, impl->temporary_path);
   impl->insert_rtree = std::make_unique<Statement>(db, kInsertRtree, impl->temporary_path);
   return MapWriter(std::move(impl));
 }
@@ -275,7 +299,8 @@ void MapWriter::set_classifier(const ClassifierBlob& classifier) {
     Statement insert(impl_->db.get(), "INSERT OR REPLACE INTO classifier VALUES (1, ?, ?, ?)",
                      impl_->temporary_path);
     insert.bind_text(1, classifier.format);
-    insert.bind_blob(2, classifier.bytes.data(), classifier.bytes.size());
+    const std::vector<uint8_t> packed = pack_bytes(classifier.bytes);
+    insert.bind_blob(2, packed.data(), packed.size());
     insert.bind_int(3, static_cast<int64_t>(classifier_checksum(classifier)));
     insert.run();
   });
@@ -284,6 +309,29 @@ void MapWriter::set_classifier(const ClassifierBlob& classifier) {
 void MapWriter::commit() {
   impl_->write("commit", [&] { impl_->publish(); });
   impl_->finished = true;
+}
+
+int upgrade_map(const std::string& old_path, const std::string& new_path, bool overwrite) {
+  const MapReader old = MapReader::open(old_path);
+  const int from = old.schema_version();
+  if (from == kSchemaVersion)
+    fail(old_path, "the map is already at schema " + std::to_string(from) + ": nothing to upgrade");
+  MapWriter writer = MapWriter::create(new_path, old.metadata(), overwrite);
+  const MapReader::Impl& in = *old.impl_;
+  writer.impl_->write("upgrade", [&] {
+    Statement st(in.db.get(), select_segments_sql(from, "ORDER BY s.row").c_str(), in.path);
+    StoredRow stored;
+    Segment verified;
+    while (st.step()) {
+      read_row(st, from, &stored);
+      decode_segment(stored, in.path, &verified);  // checksums and BLOBs checked before re-storing
+      writer.impl_->insert_row(stored.row);       // the same bytes, packed: no re-quantisation
+    }
+  });
+  writer.set_trajectory(old.trajectory());
+  if (const std::optional<ClassifierBlob> classifier = old.classifier()) writer.set_classifier(*classifier);
+  writer.commit();
+  return from;
 }
 
 }  // namespace storage

@@ -23,17 +23,16 @@ struct Chunk {
   std::exception_ptr error;
 };
 
-void load_chunk(const std::string& path, Chunk* chunk, Segments* out,
+void load_chunk(const std::string& path, int schema_version, Chunk* chunk, Segments* out,
                 std::vector<uint32_t>* keyframes) {
   try {
-    const std::string sql = std::string(kSelectSegmentColumns) +
-                            "FROM segments s WHERE s.row BETWEEN ? AND ? ORDER BY s.row";
+    const std::string sql = select_segments_sql(schema_version, "WHERE s.row BETWEEN ? AND ? ORDER BY s.row");
     Statement st(chunk->db, sql.c_str(), path);
     st.bind_int(1, chunk->first_row);
     st.bind_int(2, chunk->last_row);
     StoredRow stored;
     while (st.step()) {
-      read_row(st, &stored);
+      read_row(st, schema_version, &stored);
       const size_t index = static_cast<size_t>(stored.row_id - 1);  // rows are 1..N
       decode_segment(stored, path, &(*out)[index]);
       if (keyframes) (*keyframes)[index] = stored.row.keyframe;
@@ -79,9 +78,9 @@ Segments load_all_segments(const MapReader::Impl& impl, std::vector<uint32_t>* k
   }
   std::vector<std::thread> workers;
   for (uint64_t c = 1; c < threads; ++c) {
-    workers.emplace_back(load_chunk, std::cref(impl.path), &chunks[c], &out, keyframes);
+    workers.emplace_back(load_chunk, std::cref(impl.path), impl.schema_version, &chunks[c], &out, keyframes);
   }
-  load_chunk(impl.path, &chunks[0], &out, keyframes);
+  load_chunk(impl.path, impl.schema_version, &chunks[0], &out, keyframes);
   for (std::thread& w : workers) w.join();
   uint64_t loaded = 0;
   for (const Chunk& chunk : chunks) {

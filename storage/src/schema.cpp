@@ -9,7 +9,9 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <iterator>
 #include <set>
+#include <vector>
 
 namespace segmatch {
 namespace storage {
@@ -21,7 +23,7 @@ namespace {
 // both back and compares them with kApplicationId / kSchemaVersion.
 const char* const kSchemaSql = R"sql(
 PRAGMA application_id = 1399278960;
-PRAGMA user_version = 1;
+PRAGMA user_version = 2;
 CREATE TABLE map_info (
   singleton INTEGER PRIMARY KEY CHECK (singleton = 1),
   name TEXT NOT NULL, frame TEXT NOT NULL, created_utc TEXT NOT NULL,
@@ -35,7 +37,9 @@ CREATE TABLE segments (
   min_x REAL NOT NULL, min_y REAL NOT NULL, min_z REAL NOT NULL,
   max_x REAL NOT NULL, max_y REAL NOT NULL, max_z REAL NOT NULL,
   num_points INTEGER NOT NULL, checksum INTEGER NOT NULL,
-  eigen BLOB, esf BLOB, points BLOB NOT NULL);
+  eigen BLOB, esf BLOB);
+CREATE TABLE segment_points (
+  row INTEGER PRIMARY KEY, checksum INTEGER NOT NULL, points BLOB NOT NULL);
 CREATE VIRTUAL TABLE segment_rtree USING rtree (row, min_x, max_x, min_y, max_y, min_z, max_z);
 CREATE TABLE trajectory (
   keyframe INTEGER PRIMARY KEY, time_s REAL NOT NULL,
@@ -50,6 +54,7 @@ CREATE TABLE classifier (
 
 const char* const kTables[] = {"map_info", "segments", "segment_rtree", "trajectory",
                                        "classifier"};
+const char* const kTablesSince2[] = {"segment_points"};
 
 int64_t pragma_value(sqlite3* db, const char* sql, const std::string& path) {
   Statement pragma(db, sql, path);
@@ -147,11 +152,13 @@ MapFileInfo check_map_file(const std::string& path) {
   return {static_cast<int32_t>(be32(header + 60)), st.st_dev, st.st_ino};
 }
 
-void check_tables(sqlite3* db, const std::string& path) {
+void check_tables(sqlite3* db, const std::string& path, int schema_version) {
   Statement tables(db, "SELECT name FROM sqlite_master WHERE type = 'table'", path);
   std::set<std::string> found;
   while (tables.step()) found.insert(tables.column_text(0));
-  for (const std::string table : kTables) {
+  std::vector<std::string> expected(std::begin(kTables), std::end(kTables));
+  if (schema_version >= 2) expected.insert(expected.end(), std::begin(kTablesSince2), std::end(kTablesSince2));
+  for (const std::string& table : expected) {
     if (!found.count(table)) fail(path, "the map file is incomplete or damaged: no table " + table);
   }
 }

@@ -11,8 +11,8 @@ namespace segmatch {
 namespace storage {
 namespace detail {
 
-// Creates every table of an empty database and stamps application_id / user_version. Run
-// inside the writer's transaction.
+// Creates every table of an empty database (schema kSchemaVersion) and stamps application_id /
+// user_version. Run inside the writer's transaction.
 void create_schema(sqlite3* db, const std::string& path);
 
 struct MapFileInfo {
@@ -25,8 +25,8 @@ struct MapFileInfo {
 // unsupported schema version, truncated.
 MapFileInfo check_map_file(const std::string& path);
 
-// After opening: every table of the schema is present and readable.
-void check_tables(sqlite3* db, const std::string& path);
+// After opening: every table of the file's schema version is present and readable.
+void check_tables(sqlite3* db, const std::string& path, int schema_version);
 
 }  // namespace detail
 }  // namespace storage

@@ -1,12 +1,20 @@
 #include "segment_rows.h"
 
+#include "packed_blobs.h"
+
 namespace segmatch {
 namespace storage {
 namespace detail {
 
-const char* const kSelectSegmentColumns =
-    "SELECT s.row, s.segment_id, s.keyframe, s.label, s.cx, s.cy, s.cz, s.min_x, s.min_y, "
-    "s.min_z, s.max_x, s.max_y, s.max_z, s.num_points, s.checksum, s.eigen, s.esf, s.points ";
+std::string select_segments_sql(int schema_version, const std::string& tail) {
+  const std::string common =
+      "SELECT s.row, s.segment_id, s.keyframe, s.label, s.cx, s.cy, s.cz, s.min_x, s.min_y, "
+      "s.min_z, s.max_x, s.max_y, s.max_z, s.num_points, s.checksum, s.eigen, s.esf, ";
+  // LEFT JOIN: a missing points row reads as a NULL BLOB and is reported, not skipped.
+  if (schema_version >= 2)
+    return common + "p.points, p.checksum FROM segments s LEFT JOIN segment_points p ON p.row = s.row " + tail;
+  return common + "s.points FROM segments s " + tail;
+}
 
 namespace {
 
@@ -17,8 +25,9 @@ Eigen::Vector3f vector_at(const Statement& st, int first) {
 
 }  // namespace
 
-void read_row(const Statement& st, StoredRow* stored) {
+void read_row(const Statement& st, int schema_version, StoredRow* stored) {
   SegmentRow& row = stored->row;
+  stored->schema_version = schema_version;
   stored->row_id = st.column_int(0);
   row.segment_id = static_cast<uint64_t>(st.column_int(1));
   row.keyframe = st.is_null(2) ? kNoKeyframe : static_cast<uint32_t>(st.column_int(2));
@@ -31,6 +40,12 @@ void read_row(const Statement& st, StoredRow* stored) {
   row.eigen = st.column_blob(15);
   row.esf = st.column_blob(16);
   row.points = st.column_blob(17);
+  stored->points_checksum = schema_version >= 2 ? static_cast<uint64_t>(st.column_int(18)) : 0;
+}
+
+uint64_t points_checksum(int64_t row_id, uint64_t num_points, BlobView points) {
+  const uint64_t h = xxh64(&num_points, sizeof(num_points), static_cast<uint64_t>(row_id));
+  return points.is_null ? h : xxh64(points.data, points.size, h);
 }
 
 void decode_segment(const StoredRow& stored, const std::string& path, Segment* segment) {
@@ -38,11 +53,27 @@ void decode_segment(const StoredRow& stored, const std::string& path, Segment* s
     fail(path, "the map file is corrupted: segment row " + std::to_string(stored.row_id) + ": " +
                    problem);
   };
-  if (row_checksum(stored.row) != stored.checksum) corrupted("checksum mismatch");
-  std::string problem = decode_descriptors(stored.row, segment);
-  if (problem.empty()) {
-    problem = decode_points(stored.row.points, stored.row.num_points, &segment->points);
+  if (stored.schema_version < 2) {
+    if (row_checksum(stored.row) != stored.checksum) corrupted("checksum mismatch");
+    std::string problem = decode_descriptors(stored.row, segment);
+    if (problem.empty()) problem = decode_points(stored.row.points, stored.row.num_points, &segment->points);
+    if (!problem.empty()) corrupted(problem);
+    return;
   }
+  SegmentRow row = stored.row;
+  row.points = {};  // schema 2: the row's checksum leaves the points to their own
+  if (row_checksum(row) != stored.checksum) corrupted("checksum mismatch");
+  if (points_checksum(stored.row_id, row.num_points, stored.row.points) != stored.points_checksum)
+    corrupted("points checksum mismatch");
+  std::vector<uint8_t> esf, points;
+  std::string problem;
+  if (!row.esf.is_null) {
+    problem = unpack_esf(row.esf, sizeof(EsfDescriptor), &esf);
+    row.esf = {esf.data(), esf.size(), false};
+  }
+  if (problem.empty()) problem = decode_descriptors(row, segment);
+  if (problem.empty()) problem = unpack_points(stored.row.points, row.num_points, &points);
+  if (problem.empty()) problem = decode_points({points.data(), points.size(), false}, row.num_points, &segment->points);
   if (!problem.empty()) corrupted(problem);
 }
 

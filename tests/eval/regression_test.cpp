@@ -4,6 +4,8 @@
 #include "segmatch/eval/localization_run.h"
 #include "segmatch/server/map_service.h"
 #include "segmatch/sim/dataset.h"
+#include "segmatch/storage/map_reader.h"
+#include "segmatch/storage/map_writer.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -30,33 +32,48 @@ Pose3d pose_of(const nlohmann::json& j) {
 
 }  // namespace
 
-TEST(RegressionMap, TodaysCodeGivesTheGoldenAnswers) {
-  std::ifstream golden_file(kMapDir + "/golden.json");
-  ASSERT_TRUE(golden_file) << "missing " << kMapDir << "/golden.json (scripts/make-regression-map.sh)";
-  const nlohmann::json golden = nlohmann::json::parse(golden_file);
+// The simulated world of the golden run, generated once for the suite.
+class RegressionMap : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    world_ = new fs::path(fs::path(::testing::TempDir()) / "segmatch-regression-tiny-3");
+    sim::DatasetConfig dataset = sim::dataset_preset("tiny", 3);
+    dataset.first_length_m = kLength00M;
+    dataset.second_length_m = kLength01M;
+    dataset.write_images = false;
+    fs::remove_all(*world_);
+    sim::generate_dataset(dataset, world_->string());
+  }
+  static void TearDownTestSuite() {
+    fs::remove_all(*world_);
+    delete world_;
+  }
+  static nlohmann::json golden() {
+    std::ifstream golden_file(kMapDir + "/golden.json");
+    if (!golden_file) throw std::runtime_error("missing " + kMapDir + "/golden.json (scripts/make-regression-map.sh)");
+    return nlohmann::json::parse(golden_file);
+  }
+  static eval::LocalizationRun replay(const std::string& map_path, const nlohmann::json& golden) {
+    eval::LocalizationRunConfig config;
+    config.map_path = map_path;
+    config.sim_dataset = world_->string();
+    config.print_each = false;
+    const auto& r = golden.at("replay");
+    config.replay.every_m = r.at("every_m");
+    config.replay.warmup_m = r.at("warmup_m");
+    config.replay.first = r.at("first");
+    config.replay.last = r.at("last");
+    config.replay.stride = r.at("stride");
+    const auto map = server::load_map(config.map_path);
+    return eval::run_localization(config, [&](const api::LocalizeRequest& q) { return server::localize_request(*map, q); });
+  }
+  static fs::path* world_;
+};
+fs::path* RegressionMap::world_ = nullptr;
 
-  const fs::path world = fs::path(::testing::TempDir()) / "segmatch-regression-tiny-3";
-  sim::DatasetConfig dataset = sim::dataset_preset("tiny", 3);
-  dataset.first_length_m = kLength00M;
-  dataset.second_length_m = kLength01M;
-  dataset.write_images = false;
-  fs::remove_all(world);
-  sim::generate_dataset(dataset, world.string());
-
-  eval::LocalizationRunConfig config;
-  config.map_path = kMapDir + "/map.sqlite";
-  config.sim_dataset = world.string();
-  config.print_each = false;
-  const auto& r = golden.at("replay");
-  config.replay.every_m = r.at("every_m");
-  config.replay.warmup_m = r.at("warmup_m");
-  config.replay.first = r.at("first");
-  config.replay.last = r.at("last");
-  config.replay.stride = r.at("stride");
-  const auto map = server::load_map(config.map_path);
-  const eval::LocalizationRun run =
-      eval::run_localization(config, [&](const api::LocalizeRequest& q) { return server::localize_request(*map, q); });
-  fs::remove_all(world);
+TEST_F(RegressionMap, TodaysCodeGivesTheGoldenAnswers) {
+  const nlohmann::json golden = RegressionMap::golden();
+  const eval::LocalizationRun run = replay(kMapDir + "/map.sqlite", golden);
 
   const auto& expected = golden.at("per_query");
   ASSERT_EQ(run.outcomes.size(), expected.size()) << "the replay no longer yields the golden queries";
@@ -81,4 +98,23 @@ TEST(RegressionMap, TodaysCodeGivesTheGoldenAnswers) {
   std::printf("[regression] %zu queries, %zu localized in the golden run, %zu still at the same pose; %zu localized now\n",
               run.outcomes.size(), golden_localized, same, run.summary.localized);
   EXPECT_GE(golden_localized, 3u) << "the golden run should localize: regenerate the map";
+}
+
+// maps/tiny-3 is a schema-1 file (kept on purpose): upgraded to this build's schema it must
+// decode to the same floats, hence give bit-identical answers, in a smaller file.
+TEST_F(RegressionMap, UpgradedMapGivesIdenticalAnswers) {
+  const nlohmann::json golden = RegressionMap::golden();
+  const std::string old_path = kMapDir + "/map.sqlite";
+  ASSERT_EQ(storage::MapReader::open(old_path).schema_version(), 1);
+  const std::string new_path = (fs::path(::testing::TempDir()) / "segmatch-regression-upgraded.sqlite").string();
+  ASSERT_EQ(storage::upgrade_map(old_path, new_path, /*overwrite=*/true), 1);
+  EXPECT_EQ(storage::MapReader::open(new_path).schema_version(), storage::kSchemaVersion);
+  EXPECT_LT(fs::file_size(new_path) * 3, fs::file_size(old_path)) << "schema 2 should be several times smaller";
+  const eval::LocalizationRun before = replay(old_path, golden), after = replay(new_path, golden);
+  fs::remove(new_path);
+  ASSERT_EQ(before.outcomes.size(), after.outcomes.size());
+  for (size_t i = 0; i < before.outcomes.size(); ++i) {
+    EXPECT_EQ(before.outcomes[i].status, after.outcomes[i].status) << "query " << i;
+    EXPECT_EQ(before.outcomes[i].T_map_sensor.matrix(), after.outcomes[i].T_map_sensor.matrix()) << "query " << i;
+  }
 }

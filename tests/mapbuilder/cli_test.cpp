@@ -205,6 +205,30 @@ TEST_F(MapBuilderCli, MapinfoCheckFailsOnADamagedMap) {
   fs::remove(damaged);
 }
 
+// An old map is read, said to be old with the command that upgrades it, and upgraded.
+TEST_F(MapBuilderCli, MapinfoUpgradesASchemaOneMap) {
+  const std::string old_map = SEGMATCH_OLD_MAP_FOR_TEST;
+  Result r = run(kBin + "/segmatch-mapinfo " + old_map);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("schema version: 1 (older"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("segmatch-mapinfo --upgrade OLD NEW"), std::string::npos) << r.output;
+  const fs::path upgraded = dir_ / "upgraded.sqlite";
+  r = run(kBin + "/segmatch-mapinfo --upgrade " + old_map + " " + upgraded.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("(schema 2,"), std::string::npos) << r.output;
+  r = run(kBin + "/segmatch-mapinfo " + upgraded.string() + " --check");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("schema version: 2\n"), std::string::npos) << r.output;
+  // An existing target is kept unless --overwrite; upgrading a current map says there is nothing to do.
+  r = run(kBin + "/segmatch-mapinfo --upgrade " + old_map + " " + upgraded.string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("already exists"), std::string::npos) << r.output;
+  r = run(kBin + "/segmatch-mapinfo --upgrade " + upgraded.string() + " " + (dir_ / "again.sqlite").string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("nothing to upgrade"), std::string::npos) << r.output;
+  fs::remove(upgraded);
+}
+
 TEST_F(MapBuilderCli, MapinfoExportsColouredPointsAndAPicture) {
   const storage::MapStats stats = storage::MapReader::open(map_path().string()).stats();
   const fs::path ply = dir_ / "segments.ply", pcd = dir_ / "segments.pcd", png = dir_ / "top.png";

@@ -3,4 +3,5 @@ segmatch_test_suite(test_mapbuilder mapbuilder segmatch_core segmatch_io segmatc
 add_dependencies(test_mapbuilder segmatch-mapbuilder segmatch-mapinfo segmatch-sim)
 # The default classifier the builder looks for, to know which behaviour to expect.
 target_compile_definitions(test_mapbuilder PRIVATE
-  SEGMATCH_DEFAULT_MODEL_FOR_TEST="${PROJECT_SOURCE_DIR}/maps/models/default-rf.yml")
+  SEGMATCH_DEFAULT_MODEL_FOR_TEST="${PROJECT_SOURCE_DIR}/maps/models/default-rf.yml"
+  SEGMATCH_OLD_MAP_FOR_TEST="${PROJECT_SOURCE_DIR}/maps/tiny-3/map.sqlite")  # schema 1

@@ -59,8 +59,8 @@ TEST_F(StorageRefusal, GoodMapOpens) {
 
 TEST_F(StorageRefusal, NewerSchemaVersion) {
   const std::string path = variant("newer.segmap", [](std::string&) {});
-  run_sql(path, "PRAGMA user_version = 2");
-  expect_storage_error([&] { MapReader::open(path); }, path, {"schema version 2", "newer"});
+  run_sql(path, "PRAGMA user_version = 3");
+  expect_storage_error([&] { MapReader::open(path); }, path, {"schema version 3", "newer"});
 }
 
 TEST_F(StorageRefusal, OlderUnsupportedSchemaVersion) {
@@ -122,13 +122,15 @@ TEST_F(StorageRefusal, CorruptedInTheMiddle) {
 
 TEST_F(StorageRefusal, CorruptedPointsOrDescriptors) {
   const Segments segments = random_segments(300, 31);
-  // Find segment 100's ESF bytes in the file and flip one bit of them.
-  const std::string esf(reinterpret_cast<const char*>(segments[100].esf.data()), 64);
-  const size_t at = bytes_.find(esf);
+  // Find segment 100's stored (packed) ESF bytes in the file and flip one bit of them.
+  const std::string esf = stored_blob(path_, "SELECT esf FROM segments WHERE row = 101");
+  ASSERT_GT(esf.size(), 16u);
+  // A BLOB longer than a page continues on overflow pages elsewhere: search for its start.
+  const size_t at = bytes_.find(esf.substr(0, 48));
   ASSERT_NE(at, std::string::npos);
   const std::string path = variant("bitflip.segmap", [&](std::string& b) { b[at + 30] ^= 0x01; });
   expect_storage_error([&] { MapReader::open(path).load_segments(); }, path,
-                       {"corrupted", "checksum mismatch"});
+                       {"corrupted", "segment row 101", "checksum mismatch"});
   const std::vector<std::string> problems = MapReader::open(path).check_integrity();
   ASSERT_EQ(problems.size(), 1u);
   EXPECT_NE(problems[0].find("segment row 101"), std::string::npos) << problems[0];
@@ -136,6 +138,46 @@ TEST_F(StorageRefusal, CorruptedPointsOrDescriptors) {
   const MapReader reader = MapReader::open(path);
   EXPECT_NO_THROW(reader.segments_near(segments[5].centroid, 0.f));
   EXPECT_THROW(reader.segments_near(segments[100].centroid, 0.f), StorageError);
+}
+
+// Schema 2 keeps points in their own rows with their own checksum: a flipped bit there is
+// named as such, and only a read of that segment fails.
+TEST_F(StorageRefusal, CorruptedPointRow) {
+  const Segments segments = random_segments(300, 31);
+  const std::string points = stored_blob(path_, "SELECT points FROM segment_points WHERE row = 201");
+  ASSERT_GT(points.size(), 64u);
+  const size_t at = bytes_.find(points.substr(0, 64));
+  ASSERT_NE(at, std::string::npos);
+  const std::string path = variant("pointflip.segmap", [&](std::string& b) { b[at + 40] ^= 0x04; });
+  expect_storage_error([&] { MapReader::open(path).load_segments(); }, path,
+                       {"corrupted", "segment row 201", "points checksum mismatch"});
+  const std::vector<std::string> problems = MapReader::open(path).check_integrity();
+  ASSERT_EQ(problems.size(), 1u);
+  EXPECT_NE(problems[0].find("segment row 201"), std::string::npos) << problems[0];
+  const MapReader reader = MapReader::open(path);
+  EXPECT_NO_THROW(reader.segments_near(segments[5].centroid, 0.f));
+  EXPECT_THROW(reader.segments_near(segments[200].centroid, 0.f), StorageError);
+}
+
+TEST_F(StorageRefusal, MissingPointRowIsNamed) {
+  const std::string path = variant("nopoints.segmap", [](std::string&) {});
+  run_sql(path, "DELETE FROM segment_points WHERE row = 7");
+  expect_storage_error([&] { MapReader::open(path).load_segments(); }, path, {"corrupted", "segment row 7"});
+  const std::vector<std::string> problems = MapReader::open(path).check_integrity();
+  ASSERT_FALSE(problems.empty());
+  EXPECT_NE(problems[0].find("point rows"), std::string::npos) << problems[0];
+}
+
+TEST_F(StorageRefusal, CorruptedClassifier) {
+  const std::string packed = stored_blob(path_, "SELECT bytes FROM classifier");
+  ASSERT_GT(packed.size(), 8u);
+  const size_t at = bytes_.find(packed);
+  ASSERT_NE(at, std::string::npos);
+  for (const size_t offset : {size_t{5}, packed.size() - 2}) {  // frame header, then content
+    const std::string path = variant("classifier" + std::to_string(offset) + ".segmap",
+                                     [&](std::string& b) { b[at + offset] ^= 0x08; });
+    expect_storage_error([&] { MapReader::open(path).classifier(); }, path, {"corrupted", "classifier"});
+  }
 }
 
 TEST_F(StorageRefusal, MissingFileOrFolder) {

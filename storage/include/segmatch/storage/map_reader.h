@@ -60,6 +60,7 @@ class MapReader {
   struct Impl;  // opaque; named here so the library's internal files can share it
 
  private:
+  friend int upgrade_map(const std::string& old_path, const std::string& new_path, bool overwrite);
   explicit MapReader(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
 };

@@ -25,7 +25,9 @@ class StorageError : public std::runtime_error {
 // belongs to some other program and is refused.
 constexpr uint32_t kApplicationId = 0x53674D70u;
 // PRAGMA user_version: the schema this build writes, and the oldest one it still reads.
-constexpr int kSchemaVersion = 1;
+// Schema 2 (2026-12-03) packs points and ESF losslessly and keeps points in their own table;
+// schema 1 maps are still read (segmatch-mapinfo --upgrade OLD NEW rewrites them as schema 2).
+constexpr int kSchemaVersion = 2;
 constexpr int kOldestReadableSchemaVersion = 1;
 
 // Keyframe index of a segment whose keyframe is unknown.

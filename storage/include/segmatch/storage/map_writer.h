@@ -7,16 +7,21 @@
 // the target path never holds a half-written map, and a map it held before stays intact.
 // A MapWriter is used from one thread at a time.
 //
-// File layout (schema version 1; application_id 'SgMp', user_version = schema version):
+// File layout (schema version 2; application_id 'SgMp', user_version = schema version; 1 KiB
+// pages):
 //   map_info       one row: metadata, the parameters JSON, descriptor sizes and row counts
-//   segments       one row per segment, in insertion order: id, keyframe, label, centroid,
-//                  axis-aligned bounding box of the points, point count and three BLOBs
-//                  (eigen: 7 float32, esf: 640 float32, both NULL when not described;
-//                  points: see below) plus an XXH64 checksum over the row
+//   segments       one row per segment (rows 1..N in insertion order): id, keyframe, label,
+//                  centroid, axis-aligned bounding box of the points, point count, two BLOBs
+//                  (eigen: 7 float32; esf: 640 float32 packed, see packed_blobs.h; both NULL
+//                  when not described) and an XXH64 checksum over the row
+//   segment_points one row per segment, same row number: the points (see below, packed) and
+//                  their own XXH64 checksum, so that the rest of a segment is read without
+//                  touching its points
 //   segment_rtree  R*Tree over the centroids (SQLite rtree module), for segments_near()
 //   trajectory     one row per keyframe: index, time, T_map_sensor as 12 doubles
 //                  (rotation row-major r00..r22, then tx ty tz), exact
-//   classifier     at most one row: format string, opaque bytes, checksum
+//   classifier     at most one row: format string, opaque bytes (zstd-packed), checksum of
+//                  the unpacked bytes
 // All numbers in BLOBs are little-endian.
 //
 // Point precision. Each segment's points are stored as four int16 per point (8 bytes):
@@ -32,6 +37,12 @@
 // 0.5 mm at 10 km.
 // Everything else (ids, centroids, eigen, ESF, labels, keyframes, poses, times, metadata,
 // classifier bytes) round-trips exactly.
+// Schema 2 stores the same x y z and descriptor bytes as schema 1 did, losslessly packed with
+// zstd (x y z delta-coded per axis and split into byte planes: ~2.9 bytes a point instead of
+// 8), and does not keep the intensity of int16 points (nothing in localization reads it; it
+// decodes to the middle of the segment's range). Schema 1 kept the points as a third BLOB of
+// the segments row, unpacked, in 64 KiB pages. Schema 1 maps are still read; upgrade_map()
+// rewrites them.
 #pragma once
 
 #include <segmatch/core/segment.h>
@@ -72,10 +83,19 @@ class MapWriter {
   const std::string& temporary_path() const;  // where the map is being built
 
  private:
+  friend int upgrade_map(const std::string& old_path, const std::string& new_path, bool overwrite);
   struct Impl;
   explicit MapWriter(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
 };
+
+// Rewrites the map at old_path (any schema this build reads) in this build's schema at
+// new_path, all or nothing like a build. Point coordinates and descriptors are the same bytes
+// repacked, not re-quantised, so they decode to the same floats (the intensity of int16 points
+// is not kept, as in every schema-2 map). Every row's checksum
+// and BLOBs are verified first (a damaged map is refused, naming the row). Returns the old
+// schema version; StorageError when the map already has this build's schema.
+int upgrade_map(const std::string& old_path, const std::string& new_path, bool overwrite);
 
 }  // namespace storage
 }  // namespace segmatch
