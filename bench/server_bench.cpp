@@ -258,6 +258,10 @@ int main(int argc, char** argv) {
   app.add_option("--fleet-rate", o.fleet_rate, "fleet level: queries/s offered in total (0: skip the level)");
   app.add_option("--fleet-vehicles", o.fleet_vehicles, "fleet level: vehicles, each on its own schedule")->check(CLI::Range(1, 256));
   app.add_option("--fleet-seconds", o.fleet_seconds, "fleet level: duration")->check(CLI::Range(1.0, 3600.0));
+  std::string map_points = "lazy";
+  app.add_option("--map-points", map_points, "the server's map points: lazy (read on demand) or memory")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"lazy", "memory"}));
   app.add_option("--json", json_path, "write the figures as JSON: {\"cloud\": {...}, \"segments\": {...}}");
   CLI11_PARSE(app, argc, argv);
   io::PipelineConfig config = io::pipeline_preset("kitti-hdl64");
@@ -289,7 +293,10 @@ int main(int argc, char** argv) {
   sc.workers = workers;
   sc.log_requests = false;
   sc.stats_interval_s = 0;
-  server::Server server(sc, server::load_map(map_path));
+  server::MapLoadOptions load;
+  load.points = map_points == "lazy" ? server::MapPoints::kLazy : server::MapPoints::kMemory;
+  server::Server server(sc, server::load_map(map_path, load));
+  std::printf("map points: %s\n", map_points.c_str());
   server.start();
   std::printf("server on %s, %u cores\n", server.address().c_str(), std::thread::hardware_concurrency());
 

@@ -99,13 +99,19 @@ Floors floors_of(const LocalizerConfig& c, bool prior) {
 
 // Points of the segments on one side of the matches, for the refinement: every stride-th point
 // of each segment (segment_point_stride).
-PointCloud gather(const Segments& segments, const Matches& inliers, bool query_side, size_t stride = 1) {
+// With `source`, a target's points come from there (the same points, in the same order).
+PointCloud gather(const Segments& segments, const Matches& inliers, bool query_side, size_t stride = 1,
+                  const TargetPoints* source = nullptr) {
   PointCloud out;
   std::vector<bool> taken(segments.size(), false);
   for (const Match& m : inliers) {
     const int i = query_side ? m.query : m.target;
     if (taken[i]) continue;
     taken[i] = true;
+    if (source) {
+      source->append(static_cast<size_t>(i), &out);
+      continue;
+    }
     const PointCloud& points = segments[i].points;
     for (size_t k = 0; k < points.size(); k += stride) out.push_back(points[k]);
   }
@@ -240,8 +246,8 @@ Segments extract_segments_from_voxels(const PointCloud& voxels, const Eigen::Vec
 }
 
 Localizer::Localizer(const LocalizerConfig& config, Segments targets,
-                     std::shared_ptr<const RandomForestMatcher> classifier)
-    : config_(config), targets_(std::move(targets)), classifier_(std::move(classifier)) {
+                     std::shared_ptr<const RandomForestMatcher> classifier, std::shared_ptr<const TargetPoints> points)
+    : config_(config), targets_(std::move(targets)), classifier_(std::move(classifier)), points_(std::move(points)) {
   config_.validate();
   centroids_ = CentroidIndex(targets_, config_.support_radius_m);
   if (config_.matcher.type == MatcherType::kRandomForest && !(classifier_ && classifier_->trained()))
@@ -328,7 +334,7 @@ LocalizationResult Localizer::localize_segments(Segments query, const Eigen::Vec
   if (config_.refine_pose) {
     const size_t stride = segment_point_stride(r.query, static_cast<size_t>(config_.refine.max_segment_points));
     const RefineResult refined = refine_alignment(gather(r.query, ranked.support.pairs, true, stride),
-                                                  gather(targets_, ranked.support.pairs, false), r.T_map_query,
+                                                  gather(targets_, ranked.support.pairs, false, 1, points_.get()), r.T_map_query,
                                                   config_.refine);
     r.timings.refine_ms = clock.lap();
     r.refine_fitness = refined.fitness;

@@ -5,6 +5,7 @@
 
 #include <sys/stat.h>
 
+#include <chrono>
 #include <csignal>
 #include <cstdio>
 #include <fstream>
@@ -60,17 +61,33 @@ int main(int argc, char** argv) {
   app.add_option("--read-timeout-s", config.read_timeout_s, "drop a connection idle or stalled this long")->capture_default_str()->check(CLI::PositiveNumber);
   app.add_option("--max-connections", config.max_connections, "connections served at once")->capture_default_str()->check(CLI::PositiveNumber);
   app.add_option("--stats-interval-s", config.stats_interval_s, "counters line period (0 = none)")->capture_default_str();
+  std::string map_points = "lazy";
+  double point_cache_mb = 32.0;
+  app.add_option("--map-points", map_points,
+                 "lazy: segment points stay in the map file, read when a query refines against them (a bounded "
+                 "cache); memory: all loaded at start")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"lazy", "memory"}));
+  app.add_option("--point-cache-mb", point_cache_mb, "with --map-points lazy: points kept cached (MiB)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1e6));
   CLI11_PARSE(app, argc, argv);
+  server::MapLoadOptions load;
+  load.points = map_points == "lazy" ? server::MapPoints::kLazy : server::MapPoints::kMemory;
+  load.cache_points = static_cast<size_t>(point_cache_mb * 1024 * 1024 / sizeof(Point));
   config.max_frame_bytes = static_cast<size_t>(max_frame_mb * 1024 * 1024);
   const sigset_t stop_signals = block_stop_signals();
   try {
     if (!token_file.empty()) config.token = read_token(token_file);
     std::cerr << "loading " << map_path << " ...\n";
-    std::shared_ptr<const server::LoadedMap> map = server::load_map(map_path);
+    const auto load_start = std::chrono::steady_clock::now();
+    std::shared_ptr<const server::LoadedMap> map = server::load_map(map_path, load);
+    const double load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - load_start).count();
     for (const std::string& w : map->warnings) std::cerr << "warning: " << w << '\n';
     std::cerr << "map '" << map->metadata.name << "': " << map->segment_count() << " segments, matcher "
               << (map->config.localizer.matcher.type == MatcherType::kL2 ? "l2" : "random_forest") << ", local cloud radius "
-              << map->config.local_cloud.radius_m << " m" << (config.token.empty() ? "" : ", token required") << '\n';
+              << map->config.local_cloud.radius_m << " m" << (config.token.empty() ? "" : ", token required")
+              << ", points " << map_points << ", ready in " << load_s << " s\n";
     server::Server server(config, map);
     server.start();
     std::cout << "listening on " << server.address() << std::endl;

@@ -37,8 +37,9 @@ void fit_extent(LoadedMap& map, const Segments& segments) {
 
 }  // namespace
 
-std::shared_ptr<const LoadedMap> load_map(const std::string& path) {
-  const storage::MapReader reader = storage::MapReader::open(path);
+std::shared_ptr<const LoadedMap> load_map(const std::string& path, const MapLoadOptions& options) {
+  const auto shared_reader = std::make_shared<const storage::MapReader>(storage::MapReader::open(path));
+  const storage::MapReader& reader = *shared_reader;
   auto map = std::make_shared<LoadedMap>();
   map->path = path;
   map->metadata = reader.metadata();
@@ -63,10 +64,13 @@ std::shared_ptr<const LoadedMap> load_map(const std::string& path) {
     map->warnings.push_back(path + ": map schema " + std::to_string(reader.schema_version()) +
                             " (older than this build's " + std::to_string(storage::kSchemaVersion) +
                             "): served as it is; `segmatch-mapinfo --upgrade OLD NEW` rewrites it, smaller");
-  Segments segments = reader.load_segments();
+  const bool lazy = options.points == MapPoints::kLazy;
+  Segments segments = lazy ? reader.load_segments_without_points() : reader.load_segments();
+  if (lazy) map->lazy_points = std::make_shared<const storage::LazyPoints>(shared_reader, options.cache_points);
   fit_extent(*map, segments);
   try {
-    map->localizer = std::make_unique<const Localizer>(map->config.localizer, std::move(segments), classifier);
+    map->localizer =
+        std::make_unique<const Localizer>(map->config.localizer, std::move(segments), classifier, map->lazy_points);
   } catch (const std::invalid_argument& e) {
     throw std::runtime_error(path + ": cannot build the localizer: " + e.what());
   }

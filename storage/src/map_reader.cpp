@@ -147,7 +147,31 @@ const MapMetadata& MapReader::metadata() const { return impl_->metadata; }
 int MapReader::schema_version() const { return impl_->schema_version; }
 
 Segments MapReader::load_segments(std::vector<uint32_t>* keyframe_of_segment) const {
-  return load_all_segments(*impl_, keyframe_of_segment);
+  return load_all_segments(*impl_, keyframe_of_segment, true);
+}
+
+Segments MapReader::load_segments_without_points(std::vector<uint32_t>* keyframe_of_segment) const {
+  return load_all_segments(*impl_, keyframe_of_segment, false);
+}
+
+PointCloud MapReader::read_points(size_t index) const {
+  const int64_t row = static_cast<int64_t>(index) + 1;  // rows are 1..N in load order
+  PointCloud points;
+  if (impl_->schema_version < 2) {  // the points live in the row, under its one checksum
+    Statement st(impl_->db.get(), select_segments_sql(1, "WHERE s.row = ?").c_str(), impl_->path);
+    st.bind_int(1, row);
+    if (!st.step()) fail(impl_->path, "no segment row " + std::to_string(row));
+    StoredRow stored;
+    read_row(st, 1, &stored);
+    Segment segment;
+    decode_segment(stored, impl_->path, &segment);
+    return std::move(segment.points);
+  }
+  Statement st(impl_->db.get(), kSelectPointsSql, impl_->path);
+  st.bind_int(1, row);
+  if (!st.step()) fail(impl_->path, "no segment row " + std::to_string(row));
+  decode_points_row(st, row, impl_->path, &points);
+  return points;
 }
 
 Segments MapReader::segments_near(const Eigen::Vector3f& center, float radius_m,

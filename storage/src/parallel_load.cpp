@@ -23,10 +23,11 @@ struct Chunk {
   std::exception_ptr error;
 };
 
-void load_chunk(const std::string& path, int schema_version, Chunk* chunk, Segments* out,
+void load_chunk(const std::string& path, int schema_version, bool with_points, Chunk* chunk, Segments* out,
                 std::vector<uint32_t>* keyframes) {
   try {
-    const std::string sql = select_segments_sql(schema_version, "WHERE s.row BETWEEN ? AND ? ORDER BY s.row");
+    const std::string sql =
+        select_segments_sql(schema_version, "WHERE s.row BETWEEN ? AND ? ORDER BY s.row", with_points);
     Statement st(chunk->db, sql.c_str(), path);
     st.bind_int(1, chunk->first_row);
     st.bind_int(2, chunk->last_row);
@@ -34,7 +35,7 @@ void load_chunk(const std::string& path, int schema_version, Chunk* chunk, Segme
     while (st.step()) {
       read_row(st, schema_version, &stored);
       const size_t index = static_cast<size_t>(stored.row_id - 1);  // rows are 1..N
-      decode_segment(stored, path, &(*out)[index]);
+      decode_segment(stored, path, &(*out)[index], with_points);
       if (keyframes) (*keyframes)[index] = stored.row.keyframe;
       ++chunk->loaded;
     }
@@ -63,7 +64,7 @@ void check_row_span(const MapReader::Impl& impl) {
 
 }  // namespace
 
-Segments load_all_segments(const MapReader::Impl& impl, std::vector<uint32_t>* keyframes) {
+Segments load_all_segments(const MapReader::Impl& impl, std::vector<uint32_t>* keyframes, bool with_points) {
   check_row_span(impl);
   const uint64_t n = impl.segment_count;
   Segments out(n);
@@ -78,9 +79,10 @@ Segments load_all_segments(const MapReader::Impl& impl, std::vector<uint32_t>* k
   }
   std::vector<std::thread> workers;
   for (uint64_t c = 1; c < threads; ++c) {
-    workers.emplace_back(load_chunk, std::cref(impl.path), impl.schema_version, &chunks[c], &out, keyframes);
+    workers.emplace_back(load_chunk, std::cref(impl.path), impl.schema_version, with_points, &chunks[c], &out,
+                         keyframes);
   }
-  load_chunk(impl.path, impl.schema_version, &chunks[0], &out, keyframes);
+  load_chunk(impl.path, impl.schema_version, with_points, &chunks[0], &out, keyframes);
   for (std::thread& w : workers) w.join();
   uint64_t loaded = 0;
   for (const Chunk& chunk : chunks) {

@@ -26,8 +26,9 @@ struct MapReader::Impl {
 
 namespace detail {
 std::vector<std::string> check_integrity(const MapReader::Impl& impl);
-// All segments, decoded in parallel over impl.db and impl.loaders.
-Segments load_all_segments(const MapReader::Impl& impl, std::vector<uint32_t>* keyframes);
+// All segments, decoded in parallel over impl.db and impl.loaders; without their points when
+// with_points is false.
+Segments load_all_segments(const MapReader::Impl& impl, std::vector<uint32_t>* keyframes, bool with_points);
 // The classifier row, checksum verified (StorageError when it does not match).
 std::optional<ClassifierBlob> read_classifier(const MapReader::Impl& impl);
 }  // namespace detail

@@ -6,11 +6,12 @@ namespace segmatch {
 namespace storage {
 namespace detail {
 
-std::string select_segments_sql(int schema_version, const std::string& tail) {
+std::string select_segments_sql(int schema_version, const std::string& tail, bool with_points) {
   const std::string common =
       "SELECT s.row, s.segment_id, s.keyframe, s.label, s.cx, s.cy, s.cz, s.min_x, s.min_y, "
       "s.min_z, s.max_x, s.max_y, s.max_z, s.num_points, s.checksum, s.eigen, s.esf, ";
   // LEFT JOIN: a missing points row reads as a NULL BLOB and is reported, not skipped.
+  if (schema_version >= 2 && !with_points) return common + "NULL, 0 FROM segments s " + tail;
   if (schema_version >= 2)
     return common + "p.points, p.checksum FROM segments s LEFT JOIN segment_points p ON p.row = s.row " + tail;
   return common + "s.points FROM segments s " + tail;
@@ -48,7 +49,7 @@ uint64_t points_checksum(int64_t row_id, uint64_t num_points, BlobView points) {
   return points.is_null ? h : xxh64(points.data, points.size, h);
 }
 
-void decode_segment(const StoredRow& stored, const std::string& path, Segment* segment) {
+void decode_segment(const StoredRow& stored, const std::string& path, Segment* segment, bool with_points) {
   const auto corrupted = [&](const std::string& problem) {
     fail(path, "the map file is corrupted: segment row " + std::to_string(stored.row_id) + ": " +
                    problem);
@@ -58,12 +59,13 @@ void decode_segment(const StoredRow& stored, const std::string& path, Segment* s
     std::string problem = decode_descriptors(stored.row, segment);
     if (problem.empty()) problem = decode_points(stored.row.points, stored.row.num_points, &segment->points);
     if (!problem.empty()) corrupted(problem);
+    if (!with_points) PointCloud().swap(segment->points);
     return;
   }
   SegmentRow row = stored.row;
   row.points = {};  // schema 2: the row's checksum leaves the points to their own
   if (row_checksum(row) != stored.checksum) corrupted("checksum mismatch");
-  if (points_checksum(stored.row_id, row.num_points, stored.row.points) != stored.points_checksum)
+  if (with_points && points_checksum(stored.row_id, row.num_points, stored.row.points) != stored.points_checksum)
     corrupted("points checksum mismatch");
   std::vector<uint8_t> esf, points;
   std::string problem;
@@ -72,9 +74,30 @@ void decode_segment(const StoredRow& stored, const std::string& path, Segment* s
     row.esf = {esf.data(), esf.size(), false};
   }
   if (problem.empty()) problem = decode_descriptors(row, segment);
-  if (problem.empty()) problem = unpack_points(stored.row.points, row.num_points, &points);
-  if (problem.empty()) problem = decode_points({points.data(), points.size(), false}, row.num_points, &segment->points);
+  if (!with_points) {
+    segment->points.clear();
+  } else {
+    if (problem.empty()) problem = unpack_points(stored.row.points, row.num_points, &points);
+    if (problem.empty()) problem = decode_points({points.data(), points.size(), false}, row.num_points, &segment->points);
+  }
   if (!problem.empty()) corrupted(problem);
+}
+
+const char* const kSelectPointsSql =
+    "SELECT s.num_points, p.points, p.checksum FROM segments s LEFT JOIN segment_points p ON p.row = s.row "
+    "WHERE s.row = ?";
+
+void decode_points_row(const Statement& st, int64_t row_id, const std::string& path, PointCloud* out) {
+  const uint64_t num_points = static_cast<uint64_t>(st.column_int(0));
+  const BlobView blob = st.column_blob(1);
+  std::string problem;
+  std::vector<uint8_t> plain;
+  if (points_checksum(row_id, num_points, blob) != static_cast<uint64_t>(st.column_int(2)))
+    problem = "points checksum mismatch";
+  if (problem.empty()) problem = unpack_points(blob, num_points, &plain);
+  if (problem.empty()) problem = decode_points({plain.data(), plain.size(), false}, num_points, out);
+  if (!problem.empty())
+    fail(path, "the map file is corrupted: segment row " + std::to_string(row_id) + ": " + problem);
 }
 
 }  // namespace detail

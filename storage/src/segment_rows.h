@@ -16,8 +16,9 @@ namespace storage {
 namespace detail {
 
 // "SELECT <the columns read_row() reads> FROM segments s ... " + tail, where tail may use the
-// alias s (e.g. "WHERE s.row = ?").
-std::string select_segments_sql(int schema_version, const std::string& tail);
+// alias s (e.g. "WHERE s.row = ?"). Without points, schema 2 reads no page of segment_points
+// (the points column reads as NULL); schema 1 keeps them in the row and reads them anyway.
+std::string select_segments_sql(int schema_version, const std::string& tail, bool with_points = true);
 
 struct StoredRow {
   int schema_version = 1;
@@ -32,8 +33,13 @@ void read_row(const Statement& st, int schema_version, StoredRow* stored);
 uint64_t points_checksum(int64_t row_id, uint64_t num_points, BlobView points);
 
 // Verifies the checksums and decodes; throws StorageError ("... is corrupted: segment row N:
-// ...") on any mismatch.
-void decode_segment(const StoredRow& stored, const std::string& path, Segment* segment);
+// ...") on any mismatch. Without points, schema 2's points (not read) are neither checked nor
+// decoded, and segment->points is left empty.
+void decode_segment(const StoredRow& stored, const std::string& path, Segment* segment, bool with_points = true);
+
+// Schema 2: checks and decodes the points of one row (as read by select_points_sql()).
+extern const char* const kSelectPointsSql;  // binds the row; columns: num_points, points, checksum
+void decode_points_row(const Statement& st, int64_t row_id, const std::string& path, PointCloud* points);
 
 }  // namespace detail
 }  // namespace storage

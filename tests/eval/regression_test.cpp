@@ -53,7 +53,8 @@ class RegressionMap : public ::testing::Test {
     if (!golden_file) throw std::runtime_error("missing " + kMapDir + "/golden.json (scripts/make-regression-map.sh)");
     return nlohmann::json::parse(golden_file);
   }
-  static eval::LocalizationRun replay(const std::string& map_path, const nlohmann::json& golden) {
+  static eval::LocalizationRun replay(const std::string& map_path, const nlohmann::json& golden,
+                                      server::MapPoints points = server::MapPoints::kLazy) {
     eval::LocalizationRunConfig config;
     config.map_path = map_path;
     config.sim_dataset = world_->string();
@@ -64,7 +65,9 @@ class RegressionMap : public ::testing::Test {
     config.replay.first = r.at("first");
     config.replay.last = r.at("last");
     config.replay.stride = r.at("stride");
-    const auto map = server::load_map(config.map_path);
+    server::MapLoadOptions load;
+    load.points = points;
+    const auto map = server::load_map(config.map_path, load);
     return eval::run_localization(config, [&](const api::LocalizeRequest& q) { return server::localize_request(*map, q); });
   }
   static fs::path* world_;
@@ -101,7 +104,8 @@ TEST_F(RegressionMap, TodaysCodeGivesTheGoldenAnswers) {
 }
 
 // maps/tiny-3 is a schema-1 file (kept on purpose): upgraded to this build's schema it must
-// decode to the same floats, hence give bit-identical answers, in a smaller file.
+// decode to the same floats, hence give bit-identical answers, in a smaller file; and a server
+// reading points lazily must answer as one holding them all in memory.
 TEST_F(RegressionMap, UpgradedMapGivesIdenticalAnswers) {
   const nlohmann::json golden = RegressionMap::golden();
   const std::string old_path = kMapDir + "/map.sqlite";
@@ -110,11 +114,14 @@ TEST_F(RegressionMap, UpgradedMapGivesIdenticalAnswers) {
   ASSERT_EQ(storage::upgrade_map(old_path, new_path, /*overwrite=*/true), 1);
   EXPECT_EQ(storage::MapReader::open(new_path).schema_version(), storage::kSchemaVersion);
   EXPECT_LT(fs::file_size(new_path) * 3, fs::file_size(old_path)) << "schema 2 should be several times smaller";
-  const eval::LocalizationRun before = replay(old_path, golden), after = replay(new_path, golden);
-  fs::remove(new_path);
-  ASSERT_EQ(before.outcomes.size(), after.outcomes.size());
-  for (size_t i = 0; i < before.outcomes.size(); ++i) {
-    EXPECT_EQ(before.outcomes[i].status, after.outcomes[i].status) << "query " << i;
-    EXPECT_EQ(before.outcomes[i].T_map_sensor.matrix(), after.outcomes[i].T_map_sensor.matrix()) << "query " << i;
+  const eval::LocalizationRun before = replay(old_path, golden, server::MapPoints::kMemory);
+  for (const server::MapPoints points : {server::MapPoints::kLazy, server::MapPoints::kMemory}) {
+    const eval::LocalizationRun after = replay(new_path, golden, points);
+    ASSERT_EQ(before.outcomes.size(), after.outcomes.size());
+    for (size_t i = 0; i < before.outcomes.size(); ++i) {
+      EXPECT_EQ(before.outcomes[i].status, after.outcomes[i].status) << "query " << i;
+      EXPECT_EQ(before.outcomes[i].T_map_sensor.matrix(), after.outcomes[i].T_map_sensor.matrix()) << "query " << i;
+    }
   }
+  fs::remove(new_path);
 }

@@ -2,6 +2,9 @@
 // mid-frame, authentication, malformed frames, and a graceful stop with requests in flight.
 #include "server_test_util.h"
 
+#include <segmatch/storage/map_types.h>
+#include <sqlite3.h>
+
 #include <atomic>
 #include <chrono>
 #include <cstring>
@@ -205,4 +208,51 @@ TEST(ServerRobustness, StopFinishesRequestsInFlight) {
   EXPECT_EQ(r.request_id, request.request_id);
   EXPECT_THROW(api::Client("127.0.0.1", port), api::ClientError) << "no longer accepting";
   EXPECT_THROW(idle.ping(), api::ClientError) << "idle connections are closed";
+}
+
+// A map whose point rows are damaged (each one's bytes no longer match its checksum, as after a
+// flipped bit on disk): with every point in memory the server refuses to start, naming a row;
+// with lazy points it serves, a query whose refinement reads a damaged row gets an ERROR naming
+// it, and the connection and the server go on serving.
+TEST(ServerRobustness, DamagedPointRowsFailOnlyTheQueriesThatReadThem) {
+  const std::string damaged = test_world().folder + "/damaged-points.sqlite";
+  std::filesystem::copy_file(test_world().map_path, damaged, std::filesystem::copy_options::overwrite_existing);
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(damaged.c_str(), &db), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(db, "UPDATE segment_points SET points = points || x'00'", nullptr, nullptr, nullptr), SQLITE_OK);
+  sqlite3_close(db);
+
+  server::MapLoadOptions memory;
+  memory.points = server::MapPoints::kMemory;
+  try {
+    server::load_map(damaged, memory);
+    ADD_FAILURE() << "a map with damaged points loaded into memory";
+  } catch (const storage::StorageError& e) {
+    EXPECT_NE(std::string(e.what()).find("segment row"), std::string::npos) << e.what();
+  }
+
+  server::ServerConfig config;
+  config.listen_address = "127.0.0.1";
+  config.port = 0;
+  config.workers = 2;
+  config.log_requests = false;
+  server::Server server(config, server::load_map(damaged));
+  server.start();
+  api::ClientOptions options;
+  options.reply_timeout_s = 60;
+  api::Client client("127.0.0.1", server.port(), options);
+  int errors = 0;
+  for (const Query& q : test_world().queries) {
+    try {
+      client.localize(q.request);  // refused before refinement: no point read
+    } catch (const api::ClientError& e) {
+      ++errors;
+      EXPECT_NE(std::string(e.what()).find("segment row"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("points checksum mismatch"), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(client.ping(7), 7u) << "the connection goes on after an ERROR";
+  }
+  EXPECT_GE(errors, 3) << "the queries that localize on the healthy map reach refinement";
+  server.stop();
+  std::filesystem::remove(damaged);
 }

@@ -155,12 +155,25 @@ struct PosePrior {
   double max_rotation_deg = 10.0; // heading error the prior may have (finite, >= 0)
 };
 
+// The map segments' points, for a localizer whose targets are held without them (a server
+// keeping a city map's points on disk). Only refinement reads points: those of the few dozen
+// matched segments of a query; retrieval, classification and verification need the rest.
+class TargetPoints {
+ public:
+  virtual ~TargetPoints() = default;
+  // Appends the points of targets[index] to `out`. Called from many queries at once; throws
+  // (with a message naming the segment) when they cannot be read.
+  virtual void append(size_t index, PointCloud* out) const = 0;
+};
+
 class Localizer {
  public:
   // targets: the map's described segments (map frame). classifier: required for the random
-  // forest matcher, ignored for L2.
+  // forest matcher, ignored for L2. points: where refinement reads the targets' points; null
+  // when the targets hold them (given, the targets' own points are not read).
   Localizer(const LocalizerConfig& config, Segments targets,
-            std::shared_ptr<const RandomForestMatcher> classifier = nullptr);
+            std::shared_ptr<const RandomForestMatcher> classifier = nullptr,
+            std::shared_ptr<const TargetPoints> points = nullptr);
 
   // cloud: local cloud in the query (vehicle odometry) frame; sensor_position: the sensor in
   // that frame. Thread-safe: many queries may run at once.
@@ -189,6 +202,7 @@ class Localizer {
   FeatureIndex index_;
   CentroidIndex centroids_;
   std::shared_ptr<const RandomForestMatcher> classifier_;
+  std::shared_ptr<const TargetPoints> points_;
 };
 
 }  // namespace segmatch

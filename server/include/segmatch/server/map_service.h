@@ -12,6 +12,7 @@
 #include <segmatch/api/protocol.h>
 #include <segmatch/core/localizer.h>
 #include <segmatch/io/pipeline_config.h>
+#include <segmatch/storage/lazy_points.h>
 #include <segmatch/storage/map_types.h>
 
 #include <memory>
@@ -34,13 +35,24 @@ struct LoadedMap {
   // requests must name it.
   uint64_t segments_digest = 0;
   std::vector<std::string> warnings;
+  std::shared_ptr<const storage::LazyPoints> lazy_points;  // kLazy: the localizer's point source
   size_t segment_count() const { return localizer ? localizer->targets().size() : 0; }
+};
+
+// Where a served map's segment points live. kLazy (the default): in the map file, read when a
+// query's refinement needs them (storage::LazyPoints, a bounded cache); the server holds only
+// what retrieval, classification and verification read, and opens a city map in a fraction of
+// the time. kMemory: every point loaded at start, as before. Both give the same answers.
+enum class MapPoints { kLazy, kMemory };
+struct MapLoadOptions {
+  MapPoints points = MapPoints::kLazy;
+  size_t cache_points = 2'000'000;  // kLazy: points kept cached (16 bytes each)
 };
 
 // Throws (storage::StorageError, io::IoError or std::runtime_error, each naming the file) when
 // the map cannot be read, has no parameters, a classifier of an unknown format or one that
 // disagrees with the parameters (use_shapes).
-std::shared_ptr<const LoadedMap> load_map(const std::string& path);
+std::shared_ptr<const LoadedMap> load_map(const std::string& path, const MapLoadOptions& options = {});
 
 api::InfoReply info_of(const LoadedMap& map);
 

@@ -44,6 +44,12 @@ class MapReader {
   // All segments in the order they were added. When keyframe_of_segment is given it receives
   // one keyframe index per segment (kNoKeyframe when unknown).
   Segments load_segments(std::vector<uint32_t>* keyframe_of_segment = nullptr) const;
+  // The same without their points: what retrieval, classification and verification need. A
+  // schema-2 map reads no page of its points for it (schema 1 keeps them in the same rows).
+  Segments load_segments_without_points(std::vector<uint32_t>* keyframe_of_segment = nullptr) const;
+  // The points of the segment at `index` in load order, checked against their checksum
+  // (StorageError naming the row otherwise).
+  PointCloud read_points(size_t index) const;
   // The segments whose centroid c satisfies (c - center).squaredNorm() <= radius_m^2 (float
   // arithmetic), in the order they were added; reads only those rows (R*Tree lookup).
   Segments segments_near(const Eigen::Vector3f& center, float radius_m,
