@@ -10,9 +10,11 @@
 #include <segmatch/storage/map_reader.h>
 #include <segmatch/storage/map_writer.h>
 
+#include <malloc.h>
 #include <sys/wait.h>
 
 #include <fstream>
+#include <optional>
 #include <iterator>
 
 #include <CLI/CLI.hpp>
@@ -74,6 +76,34 @@ Segment synthetic_segment(std::mt19937& rng, uint64_t id, float area_m, size_t p
   return s;
 }
 
+// Real segments to tile a city with: a map's segments (e.g. the demo's), copied side by side,
+// each copy shifted east by the map's width plus 100 m, with its trajectory length.
+struct Tiles {
+  Segments segments;
+  float width_m = 0;
+  double km = 0;  // trajectory length of one copy
+};
+
+Tiles read_tiles(const std::string& path) {
+  const storage::MapReader reader = storage::MapReader::open(path);
+  Tiles t;
+  t.segments = reader.load_segments();
+  float lo = 1e30f, hi = -1e30f;
+  for (const Segment& s : t.segments) lo = std::min(lo, s.centroid.x()), hi = std::max(hi, s.centroid.x());
+  t.width_m = hi - lo + 100.f;
+  t.km = reader.stats().trajectory_length_m / 1000.0;
+  return t;
+}
+
+Segment tile_segment(const Tiles& tiles, size_t i) {
+  Segment s = tiles.segments[i % tiles.segments.size()];
+  const float dx = tiles.width_m * float(i / tiles.segments.size());
+  s.id = i;
+  s.centroid.x() += dx;
+  for (Point& p : s.points) p.x += dx;
+  return s;
+}
+
 struct WriteResult {
   double seconds = 0;
   double commit_seconds = 0;  // COMMIT + fsync + rename, part of seconds
@@ -81,7 +111,7 @@ struct WriteResult {
   std::vector<Eigen::Vector3f> centroids;
 };
 
-WriteResult write_map(const std::string& path, int segments, float area_m) {
+WriteResult write_map(const std::string& path, int segments, float area_m, const Tiles* tiles) {
   storage::MapMetadata metadata;
   metadata.name = "storage bench";
   metadata.tool_version = "segmatch-bench-storage";
@@ -94,7 +124,7 @@ WriteResult write_map(const std::string& path, int segments, float area_m) {
     Segments batch;
     std::vector<uint32_t> keyframes;
     for (int i = first; i < std::min(segments, first + 1000); ++i) {
-      batch.push_back(synthetic_segment(rng, uint64_t(i), area_m, point_count(rng)));
+      batch.push_back(tiles ? tile_segment(*tiles, size_t(i)) : synthetic_segment(rng, uint64_t(i), area_m, point_count(rng)));
       keyframes.push_back(uint32_t(i / 50));
       result.points += batch.back().points.size();
       result.centroids.push_back(batch.back().centroid);
@@ -120,12 +150,21 @@ WriteResult write_map(const std::string& path, int segments, float area_m) {
   return result;
 }
 
-// Resident memory of this process (MB), from /proc/self/statm.
-double resident_mb() {
-  std::ifstream statm("/proc/self/statm");
-  size_t pages = 0, resident = 0;
-  statm >> pages >> resident;
-  return double(resident) * double(::sysconf(_SC_PAGESIZE)) / 1e6;
+// Resident memory of this process (MB) from /proc/self/status: `field` RssAnon (the heap) or
+// RssFile (file pages mapped, here the map file that SQLite memory-maps; shared with the page
+// cache and reclaimable).
+double resident_mb(const char* field) {
+  std::ifstream status("/proc/self/status");
+  std::string key;
+  double kb = 0;
+  while (status >> key) {
+    if (key == std::string(field) + ":") {
+      status >> kb;
+      return kb / 1e3;
+    }
+    status.ignore(1 << 10, '\n');
+  }
+  return 0;
 }
 
 // In a child process (so that each mode starts from an empty heap): server::load_map, its
@@ -134,6 +173,7 @@ double resident_mb() {
 // mostly miss the cache, the worst case), their median time per query and the memory after.
 void open_for_serving(const std::string& path, server::MapPoints mode, const char* name) {
   std::fflush(stdout);
+  ::malloc_trim(0);  // the parent's freed loads would otherwise count in the child's memory
   const pid_t child = ::fork();
   if (child != 0) {
     int status = 0;
@@ -142,10 +182,12 @@ void open_for_serving(const std::string& path, server::MapPoints mode, const cha
   }
   server::MapLoadOptions options;
   options.points = mode;
+  const double anon0 = resident_mb("RssAnon"), file0 = resident_mb("RssFile");
   const auto t = Clock::now();
   const auto map = server::load_map(path, options);
   const double open_s = seconds_since(t);
-  std::printf("open for serving, points %-6s: %.3f s, resident %.0f MB", name, open_s, resident_mb());
+  std::printf("open for serving, points %-6s: %.3f s, resident +%.0f MB heap, +%.0f MB map file pages", name, open_s,
+              resident_mb("RssAnon") - anon0, resident_mb("RssFile") - file0);
   if (map->lazy_points) {
     std::mt19937 rng(11);
     std::vector<double> per_query;
@@ -155,8 +197,8 @@ void open_for_serving(const std::string& path, server::MapPoints mode, const cha
       for (int k = 0; k < 40; ++k) map->lazy_points->append(rng() % map->segment_count(), &out);
       per_query.push_back(seconds_since(s));
     }
-    std::printf("; point reads of 40 segments per query: median %.2f ms; resident after 100 queries %.0f MB",
-                median(per_query) * 1e3, resident_mb());
+    std::printf("; point reads of 40 segments per query: median %.2f ms; after 100 queries +%.0f MB heap, +%.0f MB "
+                "file pages", median(per_query) * 1e3, resident_mb("RssAnon") - anon0, resident_mb("RssFile") - file0);
   }
   std::printf("\n");
   std::fflush(stdout);
@@ -174,17 +216,29 @@ int main(int argc, char** argv) {
   app.add_option("--runs", runs, "timed runs (median reported)")->check(CLI::Range(1, 100));
   app.add_option("--area", area_m, "side of the square city in metres");
   app.add_option("--radius", radius_m, "segments_near() radius in metres");
-  app.add_option("--dir", folder, "scratch folder (removed afterwards)");
+  app.add_option("--dir", folder, "scratch folder (removed afterwards unless --keep)");
+  bool keep = false;
+  std::string from;
+  app.add_option("--from", from, "tile the city with this map's real segments (e.g. the demo's) instead of "
+                                 "synthetic ones (random points and descriptors: incompressible, the worst case)");
+  app.add_flag("--keep", keep, "keep the map (DIR/bench.segmap)");
   CLI11_PARSE(app, argc, argv);
 
   fs::create_directories(folder);
   const std::string path = (fs::path(folder) / "bench.segmap").string();
-  const WriteResult written = write_map(path, segments, area_m);
+  std::optional<Tiles> tiles;
+  if (!from.empty()) tiles = read_tiles(from);
+  const WriteResult written = write_map(path, segments, area_m, tiles ? &*tiles : nullptr);
   const double size_mb = double(fs::file_size(path)) / 1e6;
   std::printf("map: %d segments, %zu points (%.0f per segment), %.0f x %.0f m\n", segments,
               written.points, double(written.points) / segments, area_m, area_m);
   std::printf("file size: %.1f MB (%.1f MB per 100k segments, %.2f bytes per point all-in)\n",
               size_mb, size_mb * 1e5 / segments, size_mb * 1e6 / double(written.points));
+  if (tiles) {
+    const double km = tiles->km * double(segments) / double(tiles->segments.size());
+    std::printf("tiled from %s: %zu segments and %.3f km a copy: %.1f MB per km\n", from.c_str(),
+                tiles->segments.size(), tiles->km, size_mb / km);
+  }
   std::printf("write (add_segments + trajectory + classifier + commit): %.2f s, of which commit "
               "(COMMIT + fsync + rename) %.2f s\n",
               written.seconds, written.commit_seconds);
@@ -217,6 +271,6 @@ int main(int argc, char** argv) {
   open_for_serving(path, server::MapPoints::kLazy, "lazy");
   open_for_serving(path, server::MapPoints::kMemory, "memory");
   std::error_code ec;
-  fs::remove_all(folder, ec);
+  if (!keep) fs::remove_all(folder, ec);
   return 0;
 }

@@ -66,7 +66,10 @@ std::shared_ptr<const LoadedMap> load_map(const std::string& path, const MapLoad
                             "): served as it is; `segmatch-mapinfo --upgrade OLD NEW` rewrites it, smaller");
   const bool lazy = options.points == MapPoints::kLazy;
   Segments segments = lazy ? reader.load_segments_without_points() : reader.load_segments();
-  if (lazy) map->lazy_points = std::make_shared<const storage::LazyPoints>(shared_reader, options.cache_points);
+  if (lazy) {
+    reader.stop_mapping();  // from here on it reads a few segments' points per query
+    map->lazy_points = std::make_shared<const storage::LazyPoints>(shared_reader, options.cache_points);
+  }
   fit_extent(*map, segments);
   try {
     map->localizer =

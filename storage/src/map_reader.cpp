@@ -154,6 +154,11 @@ Segments MapReader::load_segments_without_points(std::vector<uint32_t>* keyframe
   return load_all_segments(*impl_, keyframe_of_segment, false);
 }
 
+void MapReader::stop_mapping() const {
+  exec(impl_->db.get(), "PRAGMA mmap_size = 0", impl_->path);
+  for (const Connection& c : impl_->loaders) exec(c.get(), "PRAGMA mmap_size = 0", impl_->path);
+}
+
 PointCloud MapReader::read_points(size_t index) const {
   const int64_t row = static_cast<int64_t>(index) + 1;  // rows are 1..N in load order
   PointCloud points;
@@ -167,10 +172,24 @@ PointCloud MapReader::read_points(size_t index) const {
     decode_segment(stored, impl_->path, &segment);
     return std::move(segment.points);
   }
-  Statement st(impl_->db.get(), kSelectPointsSql, impl_->path);
-  st.bind_int(1, row);
-  if (!st.step()) fail(impl_->path, "no segment row " + std::to_string(row));
-  decode_points_row(st, row, impl_->path, &points);
+  std::unique_ptr<Statement> st;
+  {
+    std::lock_guard<std::mutex> lock(impl_->point_reads_mutex);
+    if (!impl_->idle_point_reads.empty()) {
+      st = std::move(impl_->idle_point_reads.back());
+      impl_->idle_point_reads.pop_back();
+    } else {
+      const size_t k = impl_->point_reads_made++ % (1 + impl_->loaders.size());
+      sqlite3* db = k == 0 ? impl_->db.get() : impl_->loaders[k - 1].get();
+      st = std::make_unique<Statement>(db, kSelectPointsSql, impl_->path);
+    }
+  }
+  st->bind_int(1, row);
+  if (!st->step()) fail(impl_->path, "no segment row " + std::to_string(row));
+  decode_points_row(*st, row, impl_->path, &points);  // throws: the statement is dropped
+  st->reset();
+  std::lock_guard<std::mutex> lock(impl_->point_reads_mutex);
+  impl_->idle_point_reads.push_back(std::move(st));
   return points;
 }
 

@@ -98,6 +98,7 @@ void bind_optional_blob(Statement& st, int i, BlobView blob) {
 
 struct MapWriter::Impl {
   std::string path, temporary_path;
+  std::string compact_path;  // temporary_path + ".compact": the table-by-table copy commit() publishes
   bool overwrite = false;
   Connection db;  // declared before the statements: destroyed after them
   std::unique_ptr<Statement> insert_segment, insert_points, insert_rtree;
@@ -114,6 +115,7 @@ struct MapWriter::Impl {
     insert_rtree.reset();
     db.reset();  // uncommitted transaction => rolled back
     ::unlink(temporary_path.c_str());
+    ::unlink(compact_path.c_str());
   }
 
   void require_writable(const char* operation) const {
@@ -208,11 +210,21 @@ void MapWriter::Impl::publish() {
   insert_points.reset();
   insert_rtree.reset();
   exec(db.get(), "COMMIT", temporary_path);
+  // Segments and their points were inserted in turn, so each table's pages are spread over the
+  // whole file; a copy written table by table keeps the segments (what a server loads) in one
+  // stretch, and opening a city map reads that stretch instead of faulting in pages from
+  // everywhere (README, "map size").
+  {
+    Statement vacuum(db.get(), "VACUUM INTO ?", temporary_path);
+    vacuum.bind_text(1, compact_path);
+    vacuum.run();
+  }  // finalized before the close
   const int rc = sqlite3_close(db.release());
   if (rc != SQLITE_OK) fail_sqlite(nullptr, rc, temporary_path, "closing");
+  ::unlink(temporary_path.c_str());
   // Data on disk before the name points at it: a crash never exposes a half-written file.
-  fsync_path(temporary_path, false);
-  move_into_place(temporary_path, path, overwrite);
+  fsync_path(compact_path, false);
+  move_into_place(compact_path, path, overwrite);
   fsync_path(parent_folder(path), true);
 }
 
@@ -227,6 +239,8 @@ MapWriter MapWriter::create(const std::string& path, const MapMetadata& metadata
   static std::atomic<uint64_t> writers{0};
   impl->temporary_path =
       path + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(writers++);
+  impl->compact_path = impl->temporary_path + ".compact";
+  ::unlink(impl->compact_path.c_str());
   ::unlink(impl->temporary_path.c_str());  // left by a killed process that had our pid
   impl->db = open_connection(impl->temporary_path, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
   sqlite3* db = impl->db.get();

@@ -3,6 +3,7 @@
 #include <zstd.h>
 
 #include <cstring>
+#include <new>
 #include <stdexcept>
 #include <string>
 
@@ -53,10 +54,27 @@ void delta_decode(uint8_t* body, size_t n, size_t channels) {
   }
 }
 
+// One zstd context per thread, kept: ZSTD_compress / ZSTD_decompress set up a new one per call,
+// which cost more than packing or unpacking a segment (a level-12 context is megabytes).
+struct Contexts {
+  ZSTD_CCtx* compress = ZSTD_createCCtx();
+  ZSTD_DCtx* decompress = ZSTD_createDCtx();
+  ~Contexts() {
+    ZSTD_freeCCtx(compress);
+    ZSTD_freeDCtx(decompress);
+  }
+};
+Contexts& contexts() {
+  thread_local Contexts c;
+  if (!c.compress || !c.decompress) throw std::bad_alloc();
+  return c;
+}
+
 void compress_into(const std::vector<uint8_t>& in, std::vector<uint8_t>* out) {
   const size_t at = out->size();
   out->resize(at + ZSTD_compressBound(in.size()));
-  const size_t n = ZSTD_compress(out->data() + at, out->size() - at, in.data(), in.size(), kLevel);
+  const size_t n =
+      ZSTD_compressCCtx(contexts().compress, out->data() + at, out->size() - at, in.data(), in.size(), kLevel);
   if (ZSTD_isError(n)) throw std::runtime_error(std::string("zstd: ") + ZSTD_getErrorName(n));
   out->resize(at + n);
 }
@@ -67,7 +85,7 @@ std::string decompress(const uint8_t* in, size_t in_size, size_t size, std::vect
   if (content == ZSTD_CONTENTSIZE_ERROR) return "not a zstd frame";
   if (content != size) return "packed data holds " + std::to_string(content) + " bytes, expected " + std::to_string(size);
   out->resize(size);
-  const size_t n = ZSTD_decompress(out->data(), size, in, in_size);
+  const size_t n = ZSTD_decompressDCtx(contexts().decompress, out->data(), size, in, in_size);
   if (ZSTD_isError(n)) return std::string("cannot decompress: ") + ZSTD_getErrorName(n);
   if (n != size) return "packed data decompressed to " + std::to_string(n) + " bytes, expected " + std::to_string(size);
   return {};

@@ -6,6 +6,8 @@
 #include "sqlite_util.h"
 
 #include <cstdint>
+#include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
@@ -22,6 +24,11 @@ struct MapReader::Impl {
   int schema_version = 0;
   // Row counts recorded by the writer at commit.
   uint64_t segment_count = 0, point_count = 0, keyframe_count = 0;
+  // Prepared point reads (read_points), kept for reuse: preparing the statement costs more than
+  // reading a segment's points. Declared after the connections: finalized before they close.
+  mutable std::mutex point_reads_mutex;
+  mutable std::vector<std::unique_ptr<detail::Statement>> idle_point_reads;
+  mutable size_t point_reads_made = 0;  // spreads new statements over db and loaders
 };
 
 namespace detail {

@@ -50,6 +50,10 @@ class MapReader {
   // The points of the segment at `index` in load order, checked against their checksum
   // (StorageError naming the row otherwise).
   PointCloud read_points(size_t index) const;
+  // Stops memory-mapping the file (open() maps it, which makes full loads fast): later reads go
+  // through SQLite's small page cache, so a reader kept open to read a few segments per query
+  // does not keep the pages of everything read so far resident.
+  void stop_mapping() const;
   // The segments whose centroid c satisfies (c - center).squaredNorm() <= radius_m^2 (float
   // arithmetic), in the order they were added; reads only those rows (R*Tree lookup).
   Segments segments_near(const Eigen::Vector3f& center, float radius_m,
