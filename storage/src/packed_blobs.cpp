@@ -29,27 +29,17 @@ void join_planes(const uint8_t* in, size_t n, size_t width, uint8_t* out) {
     for (size_t i = 0; i < n; ++i) out[i * width + b] = in[b * n + i];
 }
 
-// Each of the `channels` uint16 columns of `n` rows replaced by its differences (mod 2^16).
-void delta_encode(uint8_t* body, size_t n, size_t channels) {
+// Each of the `channels` uint16 columns of `n` rows replaced by its differences (mod 2^16), or
+// with `undo` by its running sums (the inverse).
+void delta_code(uint8_t* body, size_t n, size_t channels, bool undo) {
   for (size_t c = 0; c < channels; ++c) {
     uint16_t previous = 0;
     for (size_t i = 0; i < n; ++i) {
       uint16_t v;
       std::memcpy(&v, body + (i * channels + c) * 2, 2);
-      const uint16_t d = static_cast<uint16_t>(v - previous);
-      previous = v;
-      std::memcpy(body + (i * channels + c) * 2, &d, 2);
-    }
-  }
-}
-void delta_decode(uint8_t* body, size_t n, size_t channels) {
-  for (size_t c = 0; c < channels; ++c) {
-    uint16_t sum = 0;
-    for (size_t i = 0; i < n; ++i) {
-      uint16_t d;
-      std::memcpy(&d, body + (i * channels + c) * 2, 2);
-      sum = static_cast<uint16_t>(sum + d);
-      std::memcpy(body + (i * channels + c) * 2, &sum, 2);
+      const uint16_t out = undo ? static_cast<uint16_t>(previous + v) : static_cast<uint16_t>(v - previous);
+      previous = undo ? out : v;
+      std::memcpy(body + (i * channels + c) * 2, &out, 2);
     }
   }
 }
@@ -102,7 +92,7 @@ constexpr size_t kPackedInt16 = 6;
 void pack_int16(const uint8_t* body, size_t n, std::vector<uint8_t>* planes) {
   std::vector<uint8_t> xyz(6 * n);
   for (size_t i = 0; i < n; ++i) std::memcpy(&xyz[6 * i], body + 8 * i, 6);
-  delta_encode(xyz.data(), n, 3);
+  delta_code(xyz.data(), n, 3, false);
   planes->resize(kPackedInt16 * n);
   split_planes(xyz.data(), n, 6, planes->data());
 }
@@ -110,7 +100,7 @@ void pack_int16(const uint8_t* body, size_t n, std::vector<uint8_t>* planes) {
 void unpack_int16(const uint8_t* planes, size_t n, uint8_t* body) {
   std::vector<uint8_t> xyz(6 * n);
   join_planes(planes, n, 6, xyz.data());
-  delta_decode(xyz.data(), n, 3);
+  delta_code(xyz.data(), n, 3, true);
   for (size_t i = 0; i < n; ++i) {
     std::memcpy(body + 8 * i, &xyz[6 * i], 6);
     std::memset(body + 8 * i + 6, 0, 2);  // q = 0: the header's offset

@@ -33,7 +33,7 @@ void read_everything(const std::string& path) {
 }
 
 class StorageRefusal : public ::testing::Test {
- protected:
+ public:  // expect_bit_flip_named reads the map's bytes
   void SetUp() override {
     path_ = dir_.file("good.segmap");
     write_test_map(path_, random_segments(300, 31));
@@ -120,43 +120,37 @@ TEST_F(StorageRefusal, CorruptedInTheMiddle) {
   }
 }
 
-TEST_F(StorageRefusal, CorruptedPointsOrDescriptors) {
+// Flips one bit in the stored bytes of segment row `row`'s BLOB that `sql` selects (searched by
+// its first 48 bytes: a BLOB longer than a page continues on overflow pages elsewhere), then
+// expects a full load to fail with `words`, the integrity check to name only that row, and
+// only a read of that segment to fail.
+void expect_bit_flip_named(StorageRefusal& t, const char* sql, int row, const std::vector<std::string>& words) {
   const Segments segments = random_segments(300, 31);
-  // Find segment 100's stored (packed) ESF bytes in the file and flip one bit of them.
-  const std::string esf = stored_blob(path_, "SELECT esf FROM segments WHERE row = 101");
-  ASSERT_GT(esf.size(), 16u);
-  // A BLOB longer than a page continues on overflow pages elsewhere: search for its start.
-  const size_t at = bytes_.find(esf.substr(0, 48));
+  const std::string blob = stored_blob(t.path_, sql);
+  ASSERT_GT(blob.size(), 48u);
+  const size_t at = t.bytes_.find(blob.substr(0, 48));
   ASSERT_NE(at, std::string::npos);
-  const std::string path = variant("bitflip.segmap", [&](std::string& b) { b[at + 30] ^= 0x01; });
-  expect_storage_error([&] { MapReader::open(path).load_segments(); }, path,
-                       {"corrupted", "segment row 101", "checksum mismatch"});
+  const std::string path = t.variant("bitflip" + std::to_string(row) + ".segmap", [&](std::string& b) { b[at + 40] ^= 0x04; });
+  std::vector<std::string> expected = words;
+  expected.push_back("segment row " + std::to_string(row));
+  expect_storage_error([&] { MapReader::open(path).load_segments(); }, path, expected);
   const std::vector<std::string> problems = MapReader::open(path).check_integrity();
   ASSERT_EQ(problems.size(), 1u);
-  EXPECT_NE(problems[0].find("segment row 101"), std::string::npos) << problems[0];
-  // A query that does not touch the damaged row still works.
+  EXPECT_NE(problems[0].find("segment row " + std::to_string(row)), std::string::npos) << problems[0];
   const MapReader reader = MapReader::open(path);
   EXPECT_NO_THROW(reader.segments_near(segments[5].centroid, 0.f));
-  EXPECT_THROW(reader.segments_near(segments[100].centroid, 0.f), StorageError);
+  EXPECT_THROW(reader.segments_near(segments[row - 1].centroid, 0.f), StorageError);
+}
+
+TEST_F(StorageRefusal, CorruptedDescriptors) {
+  expect_bit_flip_named(*this, "SELECT esf FROM segments WHERE row = 101", 101, {"corrupted", "checksum mismatch"});
 }
 
 // Schema 2 keeps points in their own rows with their own checksum: a flipped bit there is
-// named as such, and only a read of that segment fails.
+// named as such.
 TEST_F(StorageRefusal, CorruptedPointRow) {
-  const Segments segments = random_segments(300, 31);
-  const std::string points = stored_blob(path_, "SELECT points FROM segment_points WHERE row = 201");
-  ASSERT_GT(points.size(), 64u);
-  const size_t at = bytes_.find(points.substr(0, 64));
-  ASSERT_NE(at, std::string::npos);
-  const std::string path = variant("pointflip.segmap", [&](std::string& b) { b[at + 40] ^= 0x04; });
-  expect_storage_error([&] { MapReader::open(path).load_segments(); }, path,
-                       {"corrupted", "segment row 201", "points checksum mismatch"});
-  const std::vector<std::string> problems = MapReader::open(path).check_integrity();
-  ASSERT_EQ(problems.size(), 1u);
-  EXPECT_NE(problems[0].find("segment row 201"), std::string::npos) << problems[0];
-  const MapReader reader = MapReader::open(path);
-  EXPECT_NO_THROW(reader.segments_near(segments[5].centroid, 0.f));
-  EXPECT_THROW(reader.segments_near(segments[200].centroid, 0.f), StorageError);
+  expect_bit_flip_named(*this, "SELECT points FROM segment_points WHERE row = 201", 201,
+                        {"corrupted", "points checksum mismatch"});
 }
 
 TEST_F(StorageRefusal, MissingPointRowIsNamed) {
