@@ -1,7 +1,7 @@
 #include <segmatch/storage/map_reader.h>
 
-#include "reader_impl.h"
 #include "packed_blobs.h"
+#include "reader_impl.h"
 #include "schema.h"
 #include "segment_rows.h"
 

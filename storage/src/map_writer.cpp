@@ -246,8 +246,9 @@ MapWriter MapWriter::create(const std::string& path, const MapMetadata& metadata
   sqlite3* db = impl->db.get();
   // Small pages: a BLOB's overflow chain wastes half a page on average, which with schema 1's
   // 64 KiB pages was about as much as the packed data itself; 1 KiB pages cost nothing
-  // measurable when loading (README, "map size"). The journal may live in memory and syncs may be skipped because a failed
-  // build only loses the temporary file, and commit() fsyncs the finished file itself.
+  // measurable when loading (README, "map size"). The journal may live in memory and syncs may
+  // be skipped because a failed build only loses the temporary file, and commit() fsyncs the
+  // finished file itself.
   exec(db, "PRAGMA page_size = 1024; PRAGMA journal_mode = MEMORY; PRAGMA synchronous = OFF;"
            "PRAGMA cache_size = -65536; BEGIN",
        impl->temporary_path);

@@ -49,37 +49,48 @@ uint64_t points_checksum(int64_t row_id, uint64_t num_points, BlobView points) {
   return points.is_null ? h : xxh64(points.data, points.size, h);
 }
 
+namespace {
+
+// Schema 2's points of one row: checked against their checksum, unpacked, decoded. Empty
+// string on success, else the problem.
+std::string decode_packed_points(int64_t row_id, uint64_t num_points, BlobView blob, uint64_t checksum,
+                                 PointCloud* out) {
+  if (points_checksum(row_id, num_points, blob) != checksum) return "points checksum mismatch";
+  std::vector<uint8_t> plain;
+  std::string problem = unpack_points(blob, num_points, &plain);
+  if (problem.empty()) problem = decode_points({plain.data(), plain.size(), false}, num_points, out);
+  return problem;
+}
+
+}  // namespace
+
 void decode_segment(const StoredRow& stored, const std::string& path, Segment* segment, bool with_points) {
   const auto corrupted = [&](const std::string& problem) {
     fail(path, "the map file is corrupted: segment row " + std::to_string(stored.row_id) + ": " +
                    problem);
   };
-  if (stored.schema_version < 2) {
+  segment->points.clear();
+  if (stored.schema_version < 2) {  // one checksum over the whole row, points included
     if (row_checksum(stored.row) != stored.checksum) corrupted("checksum mismatch");
     std::string problem = decode_descriptors(stored.row, segment);
-    if (problem.empty()) problem = decode_points(stored.row.points, stored.row.num_points, &segment->points);
+    if (problem.empty() && with_points)
+      problem = decode_points(stored.row.points, stored.row.num_points, &segment->points);
     if (!problem.empty()) corrupted(problem);
-    if (!with_points) PointCloud().swap(segment->points);
     return;
   }
   SegmentRow row = stored.row;
   row.points = {};  // schema 2: the row's checksum leaves the points to their own
   if (row_checksum(row) != stored.checksum) corrupted("checksum mismatch");
-  if (with_points && points_checksum(stored.row_id, row.num_points, stored.row.points) != stored.points_checksum)
-    corrupted("points checksum mismatch");
-  std::vector<uint8_t> esf, points;
+  std::vector<uint8_t> esf;
   std::string problem;
   if (!row.esf.is_null) {
     problem = unpack_esf(row.esf, sizeof(EsfDescriptor), &esf);
     row.esf = {esf.data(), esf.size(), false};
   }
   if (problem.empty()) problem = decode_descriptors(row, segment);
-  if (!with_points) {
-    segment->points.clear();
-  } else {
-    if (problem.empty()) problem = unpack_points(stored.row.points, row.num_points, &points);
-    if (problem.empty()) problem = decode_points({points.data(), points.size(), false}, row.num_points, &segment->points);
-  }
+  if (problem.empty() && with_points)
+    problem = decode_packed_points(stored.row_id, row.num_points, stored.row.points, stored.points_checksum,
+                                   &segment->points);
   if (!problem.empty()) corrupted(problem);
 }
 
@@ -88,14 +99,8 @@ const char* const kSelectPointsSql =
     "WHERE s.row = ?";
 
 void decode_points_row(const Statement& st, int64_t row_id, const std::string& path, PointCloud* out) {
-  const uint64_t num_points = static_cast<uint64_t>(st.column_int(0));
-  const BlobView blob = st.column_blob(1);
-  std::string problem;
-  std::vector<uint8_t> plain;
-  if (points_checksum(row_id, num_points, blob) != static_cast<uint64_t>(st.column_int(2)))
-    problem = "points checksum mismatch";
-  if (problem.empty()) problem = unpack_points(blob, num_points, &plain);
-  if (problem.empty()) problem = decode_points({plain.data(), plain.size(), false}, num_points, out);
+  const std::string problem = decode_packed_points(row_id, static_cast<uint64_t>(st.column_int(0)), st.column_blob(1),
+                                                   static_cast<uint64_t>(st.column_int(2)), out);
   if (!problem.empty())
     fail(path, "the map file is corrupted: segment row " + std::to_string(row_id) + ": " + problem);
 }

@@ -37,7 +37,7 @@ uint64_t points_checksum(int64_t row_id, uint64_t num_points, BlobView points);
 // decoded, and segment->points is left empty.
 void decode_segment(const StoredRow& stored, const std::string& path, Segment* segment, bool with_points = true);
 
-// Schema 2: checks and decodes the points of one row (as read by select_points_sql()).
+// Schema 2: checks and decodes the points of one row, as kSelectPointsSql reads them.
 extern const char* const kSelectPointsSql;  // binds the row; columns: num_points, points, checksum
 void decode_points_row(const Statement& st, int64_t row_id, const std::string& path, PointCloud* points);
 
