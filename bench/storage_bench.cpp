@@ -2,16 +2,15 @@
 // Writes a synthetic city map (default 100k segments of 300-1500 points, full eigen + ESF
 // descriptors) to a temporary folder, then times a full load and a segments_near() query,
 // median over several runs with the file in the page cache; then opens it for serving
-// (server::load_map: segments, indexes, classifier) with the points read lazily and with every
-// point in memory, each in its own process, with its resident memory, and times the lazy
-// point reads a query's refinement adds.
+// (storage_serving.h) with the points read lazily and with every point in memory, and answers
+// the same queries in both modes.
+#include "storage_serving.h"
+
 #include <segmatch/io/pipeline_config.h>
 #include <segmatch/server/map_service.h>
 #include <segmatch/storage/map_reader.h>
 #include <segmatch/storage/map_writer.h>
 
-#include <malloc.h>
-#include <sys/wait.h>
 
 #include <fstream>
 #include <optional>
@@ -80,6 +79,9 @@ Segment synthetic_segment(std::mt19937& rng, uint64_t id, float area_m, size_t p
 // each copy shifted east by the map's width plus 100 m, with its trajectory length.
 struct Tiles {
   Segments segments;
+  std::vector<uint32_t> keyframe_of_segment;
+  std::vector<storage::Keyframe> trajectory;
+  uint32_t keyframes_per_copy = 1;
   float width_m = 0;
   double km = 0;  // trajectory length of one copy
 };
@@ -87,7 +89,9 @@ struct Tiles {
 Tiles read_tiles(const std::string& path) {
   const storage::MapReader reader = storage::MapReader::open(path);
   Tiles t;
-  t.segments = reader.load_segments();
+  t.segments = reader.load_segments(&t.keyframe_of_segment);
+  t.trajectory = reader.trajectory();
+  for (const storage::Keyframe& k : t.trajectory) t.keyframes_per_copy = std::max(t.keyframes_per_copy, k.index + 1);
   float lo = 1e30f, hi = -1e30f;
   for (const Segment& s : t.segments) lo = std::min(lo, s.centroid.x()), hi = std::max(hi, s.centroid.x());
   t.width_m = hi - lo + 100.f;
@@ -95,13 +99,30 @@ Tiles read_tiles(const std::string& path) {
   return t;
 }
 
-Segment tile_segment(const Tiles& tiles, size_t i) {
+Segment tile_segment(const Tiles& tiles, size_t i, uint32_t* keyframe) {
+  const size_t copy = i / tiles.segments.size();
   Segment s = tiles.segments[i % tiles.segments.size()];
-  const float dx = tiles.width_m * float(i / tiles.segments.size());
+  const float dx = tiles.width_m * float(copy);
   s.id = i;
   s.centroid.x() += dx;
   for (Point& p : s.points) p.x += dx;
+  const uint32_t k = tiles.keyframe_of_segment[i % tiles.segments.size()];
+  *keyframe = k == storage::kNoKeyframe ? k : k + uint32_t(copy) * tiles.keyframes_per_copy;
   return s;
+}
+
+// The source map's trajectory once per copy, shifted with it: the route of the tiled city.
+std::vector<storage::Keyframe> tiled_trajectory(const Tiles& tiles, int segments) {
+  std::vector<storage::Keyframe> out;
+  const size_t copies = (size_t(segments) + tiles.segments.size() - 1) / tiles.segments.size();
+  for (size_t copy = 0; copy < copies; ++copy) {
+    for (storage::Keyframe k : tiles.trajectory) {
+      k.index += uint32_t(copy) * tiles.keyframes_per_copy;
+      k.T_map_sensor.translation().x() += double(tiles.width_m) * double(copy);
+      out.push_back(k);
+    }
+  }
+  return out;
 }
 
 struct WriteResult {
@@ -124,8 +145,10 @@ WriteResult write_map(const std::string& path, int segments, float area_m, const
     Segments batch;
     std::vector<uint32_t> keyframes;
     for (int i = first; i < std::min(segments, first + 1000); ++i) {
-      batch.push_back(tiles ? tile_segment(*tiles, size_t(i)) : synthetic_segment(rng, uint64_t(i), area_m, point_count(rng)));
-      keyframes.push_back(uint32_t(i / 50));
+      uint32_t keyframe = uint32_t(i / 50);
+      batch.push_back(tiles ? tile_segment(*tiles, size_t(i), &keyframe)
+                            : synthetic_segment(rng, uint64_t(i), area_m, point_count(rng)));
+      keyframes.push_back(keyframe);
       result.points += batch.back().points.size();
       result.centroids.push_back(batch.back().centroid);
     }
@@ -139,6 +162,7 @@ WriteResult write_map(const std::string& path, int segments, float area_m, const
     trajectory[k].time_s = 0.1 * double(k);
     trajectory[k].T_map_sensor.translation() = Eigen::Vector3d(double(k), 0.0, 0.0);
   }
+  if (tiles) trajectory = tiled_trajectory(*tiles, segments);
   const auto t = Clock::now();
   writer.set_trajectory(trajectory);
   std::ifstream model(SEGMATCH_SOURCE_DIR "/maps/models/default-rf.yml", std::ios::binary);
@@ -150,59 +174,54 @@ WriteResult write_map(const std::string& path, int segments, float area_m, const
   return result;
 }
 
-// Resident memory of this process (MB) from /proc/self/status: `field` RssAnon (the heap) or
-// RssFile (file pages mapped, here the map file that SQLite memory-maps; shared with the page
-// cache and reclaimable).
-double resident_mb(const char* field) {
-  std::ifstream status("/proc/self/status");
-  std::string key;
-  double kb = 0;
-  while (status >> key) {
-    if (key == std::string(field) + ":") {
-      status >> kb;
-      return kb / 1e3;
-    }
-    status.ignore(1 << 10, '\n');
-  }
-  return 0;
+void print(const char* set, const bench::QueryFigures& q) {
+  std::printf("; %d %s queries: median %.1f ms, p90 %.1f ms, %d localized (%d within 5 cm)", q.queries, set, q.median_ms,
+              q.p90_ms, q.localized, q.correct);
+  if (q.point_reads + q.cache_hits)
+    std::printf(", %llu segments' points read, %llu from the cache", q.point_reads, q.cache_hits);
 }
 
-// In a child process (so that each mode starts from an empty heap): server::load_map, its
-// time and the resident memory after it; in lazy mode, then 100 "queries" each reading the
-// points of 40 random segments (a refinement's matched segments; random picks over the city
-// mostly miss the cache, the worst case), their median time per query and the memory after.
-void open_for_serving(const std::string& path, server::MapPoints mode, const char* name) {
-  std::fflush(stdout);
-  ::malloc_trim(0);  // the parent's freed loads would otherwise count in the child's memory
-  const pid_t child = ::fork();
-  if (child != 0) {
-    int status = 0;
-    ::waitpid(child, &status, 0);
+void print(const char* mode, const char* cache, const bench::ServingFigures& f) {
+  if (!f.ok) {
+    std::printf("open for serving, points %-6s, %s cache: FAILED\n", mode, cache);
     return;
   }
-  server::MapLoadOptions options;
-  options.points = mode;
-  const double anon0 = resident_mb("RssAnon"), file0 = resident_mb("RssFile");
-  const auto t = Clock::now();
-  const auto map = server::load_map(path, options);
-  const double open_s = seconds_since(t);
-  std::printf("open for serving, points %-6s: %.3f s, resident +%.0f MB heap, +%.0f MB map file pages", name, open_s,
-              resident_mb("RssAnon") - anon0, resident_mb("RssFile") - file0);
-  if (map->lazy_points) {
-    std::mt19937 rng(11);
-    std::vector<double> per_query;
-    for (int q = 0; q < 100; ++q) {
-      PointCloud out;
-      const auto s = Clock::now();
-      for (int k = 0; k < 40; ++k) map->lazy_points->append(rng() % map->segment_count(), &out);
-      per_query.push_back(seconds_since(s));
+  std::printf("open for serving, points %-6s, %s cache: %.3f s, resident +%.0f MB heap, +%.0f MB file pages", mode,
+              cache, f.open_s, f.heap_mb, f.file_mb);
+  print("route", f.route);
+  print("random-place", f.random);
+  std::printf("; after them +%.0f MB heap, +%.0f MB file pages\n", f.heap_after_mb, f.file_after_mb);
+}
+
+// Three fresh processes per mode (warm page cache), lazy and in memory in turn, then the same
+// with a cold page cache if asked; the medians, and the time lazy reads add to a query.
+void report_serving(const std::string& path, bool drop_caches) {
+  for (const bool cold : {false, true}) {
+    if (cold && !drop_caches) break;
+    const char* cache = cold ? "cold" : "warm";
+    std::vector<double> lazy_open, memory_open, lazy_route, memory_route, lazy_random, memory_random;
+    bool same_answers = true;
+    for (int run = 0; run < 3; ++run) {
+      const bench::ServingFigures lazy = bench::open_for_serving(path, server::MapPoints::kLazy, cold);
+      print("lazy", cache, lazy);
+      const bench::ServingFigures memory = bench::open_for_serving(path, server::MapPoints::kMemory, cold);
+      print("memory", cache, memory);
+      if (!lazy.ok || !memory.ok) continue;
+      same_answers = same_answers && lazy.route.pose_sum == memory.route.pose_sum &&
+                     lazy.random.pose_sum == memory.random.pose_sum && lazy.route.localized == memory.route.localized &&
+                     lazy.random.localized == memory.random.localized;
+      lazy_open.push_back(lazy.open_s), memory_open.push_back(memory.open_s);
+      lazy_route.push_back(lazy.route.median_ms), memory_route.push_back(memory.route.median_ms);
+      lazy_random.push_back(lazy.random.median_ms), memory_random.push_back(memory.random.median_ms);
     }
-    std::printf("; point reads of 40 segments per query: median %.2f ms; after 100 queries +%.0f MB heap, +%.0f MB "
-                "file pages", median(per_query) * 1e3, resident_mb("RssAnon") - anon0, resident_mb("RssFile") - file0);
+    if (lazy_open.empty()) continue;
+    std::printf("open for serving, %s cache, median of %zu: lazy %.3f s, memory %.3f s; lazy point reads add %+.1f ms "
+                "a route query (%.1f vs %.1f ms), %+.1f ms a random-place query (%.1f vs %.1f ms); answers %s\n",
+                cache, lazy_open.size(), median(lazy_open), median(memory_open),
+                median(lazy_route) - median(memory_route), median(lazy_route), median(memory_route),
+                median(lazy_random) - median(memory_random), median(lazy_random), median(memory_random),
+                same_answers ? "identical" : "DIFFER");
   }
-  std::printf("\n");
-  std::fflush(stdout);
-  ::_exit(0);
 }
 
 }  // namespace
@@ -222,7 +241,24 @@ int main(int argc, char** argv) {
   app.add_option("--from", from, "tile the city with this map's real segments (e.g. the demo's) instead of "
                                  "synthetic ones (random points and descriptors: incompressible, the worst case)");
   app.add_flag("--keep", keep, "keep the map (DIR/bench.segmap)");
+  std::string existing;
+  app.add_option("--map", existing, "measure this map instead of writing one (no write, no segments_near timing)")
+      ->check(CLI::ExistingFile);
+  bool drop_caches = false;
+  app.add_flag("--drop-caches", drop_caches,
+               "also open for serving with a cold page cache (needs root: writes /proc/sys/vm/drop_caches, which "
+               "empties the whole machine's cache)");
   CLI11_PARSE(app, argc, argv);
+  std::string why;
+  if (drop_caches && !bench::can_drop_caches(&why)) {
+    std::fprintf(stderr, "--drop-caches: %s\n", why.c_str());
+    return 2;
+  }
+  if (!existing.empty()) {
+    std::printf("map: %s, %.1f MB\n", existing.c_str(), double(fs::file_size(existing)) / 1e6);
+    report_serving(existing, drop_caches);
+    return 0;
+  }
 
   fs::create_directories(folder);
   const std::string path = (fs::path(folder) / "bench.segmap").string();
@@ -268,10 +304,7 @@ int main(int argc, char** argv) {
   std::printf("full load CPU time (all threads): median %.3f s\n", median(load_cpu_s));
   std::printf("segments_near(r = %.0f m): median %.2f ms, %zu segments on median\n", radius_m,
               median(near_s) * 1e3, size_t(median(std::vector<double>(near_counts.begin(), near_counts.end()))));
-  for (int run = 0; run < std::min(runs, 3); ++run) {  // a line per run: each is a fresh process
-    open_for_serving(path, server::MapPoints::kLazy, "lazy");
-    open_for_serving(path, server::MapPoints::kMemory, "memory");
-  }
+  report_serving(path, drop_caches);
   std::error_code ec;
   if (!keep) fs::remove_all(folder, ec);
   return 0;

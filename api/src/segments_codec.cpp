@@ -7,13 +7,14 @@
 //     an ICP that stops at 0.1 mm steps and may end in a flat direction, so a coarser step
 //     (1 mm everywhere was tried) moved a few demo poses by up to 2 cm; at this one the two
 //     paths agree as docs/protocol.md says.
-//   * ESF: u16 mantissas of a power-of-two scale 2^e per segment, e the smallest that holds the
-//     largest bin: rounding moves a bin by at most 2^-16 of the largest one.
+//   * ESF: u16 mantissas of a power-of-two scale per segment (core/esf_quantization.h): rounding
+//     moves a bin by at most 2^-16 of the largest one.
 // Powers of two make re-encoding a decoded request give the same bytes (golden frames).
 #include "segmatch/api/protocol.h"
 
 #include "codec_util.h"
 
+#include <segmatch/core/esf_quantization.h>
 #include <segmatch/core/localizer.h>
 
 #include <algorithm>
@@ -31,7 +32,6 @@ constexpr size_t kSegmentBytes = 3 * 4 + kEigenFeatureCount * 4 + 4 + 1;  // cen
 static_assert(kSegmentBytes == 45, "docs/protocol.md documents 45 bytes");
 constexpr size_t kEsfBytes = 1 + kEsfBins * 2;  // exponent, mantissas
 constexpr int kI16Max = 32767;
-constexpr int kU16Max = 65535;
 
 // The smallest exponent e in [lo, hi] with max_abs / 2^e <= limit (hi if none is enough).
 int exponent_for(double max_abs, double limit, int lo, int hi) {
@@ -58,12 +58,9 @@ void put_points(wire::Writer& w, const Segment& s, int e) {
 }
 
 void put_esf(wire::Writer& w, const Segment& s) {
-  float max_bin = 0.f;
-  for (float v : s.esf) max_bin = std::max(max_bin, v);
-  const int e = exponent_for(max_bin, kU16Max, kEsfExponentMin, kEsfExponentMax);
-  w.u8(static_cast<uint8_t>(static_cast<int8_t>(e)));
-  const double inv = std::ldexp(1.0, -e);
-  for (float v : s.esf) w.u16(static_cast<uint16_t>(std::clamp(std::nearbyint(std::max(0.f, v) * inv), 0.0, double(kU16Max))));
+  const QuantizedEsf q = quantize_esf(s.esf, kEsfExponentMin, kEsfExponentMax);
+  w.u8(static_cast<uint8_t>(static_cast<int8_t>(q.exponent)));
+  for (uint16_t m : q.mantissas) w.u16(m);
 }
 
 bool all_finite(const float* v, size_t n) {
@@ -85,8 +82,8 @@ DecodeStatus get_segment(wire::Reader& r, bool esf, uint64_t index, Segment& s) 
   if (esf) {
     const int esf_e = static_cast<int8_t>(r.u8());
     if (esf_e < kEsfExponentMin || esf_e > kEsfExponentMax) return DecodeStatus::kBadField;
-    const float scale = static_cast<float>(std::ldexp(1.0, esf_e));
-    for (float& v : s.esf) v = static_cast<float>(r.u16()) * scale;
+    const float scale = esf_scale(esf_e);
+    for (float& v : s.esf) v = dequantize_esf_bin(r.u16(), scale);
     s.has_esf = true;
   }
   if (static_cast<uint64_t>(n) * kBytesPerSegmentPoint > r.remaining()) return DecodeStatus::kTruncated;

@@ -136,7 +136,8 @@ struct MapWriter::Impl {
   }
 
   void insert(const Segment& segment, uint32_t keyframe);
-  // A row whose points are a schema-1 BLOB (encode_points()) and whose ESF is raw floats.
+  // A row whose points are a schema-1 BLOB (encode_points()) and whose ESF is raw floats
+  // (quantised here).
   void insert_row(SegmentRow row);
   void publish();
 };
@@ -161,10 +162,13 @@ void MapWriter::Impl::insert_row(SegmentRow row) {
   const std::vector<uint8_t> points = pack_points(row.points);
   std::vector<uint8_t> esf;
   if (!row.esf.is_null) {
-    esf = pack_esf(row.esf);
+    if (row.esf.size != sizeof(EsfDescriptor)) throw std::logic_error("insert_row: the ESF is not 640 floats");
+    EsfDescriptor plain;
+    std::memcpy(plain.data(), row.esf.data, sizeof(plain));
+    esf = pack_esf_sparse(plain);
     row.esf = {esf.data(), esf.size(), false};
   }
-  row.points = {};  // schema 2: the points have their own row and checksum
+  row.points = {};  // the points have their own row and checksum
   Statement& st = *insert_segment;
   st.bind_int(1, next_row);
   st.bind_int(2, static_cast<int64_t>(row.segment_id));  // uint64 kept bit for bit
@@ -337,10 +341,12 @@ int upgrade_map(const std::string& old_path, const std::string& new_path, bool o
     Statement st(in.db.get(), select_segments_sql(from, "ORDER BY s.row").c_str(), in.path);
     StoredRow stored;
     Segment verified;
+    PlainBlobs plain;
     while (st.step()) {
       read_row(st, from, &stored);
       decode_segment(stored, in.path, &verified);  // checksums and BLOBs checked before re-storing
-      writer.impl_->insert_row(stored.row);       // the same bytes, packed: no re-quantisation
+      // The same point bytes, packed: no re-quantisation; the ESF is quantised.
+      writer.impl_->insert_row(plain_row(stored, in.path, &plain));
     }
   });
   writer.set_trajectory(old.trajectory());

@@ -1,7 +1,13 @@
 #include "packed_blobs.h"
 
+#include <segmatch/core/esf_quantization.h>
+#include <segmatch/storage/map_types.h>
+
+#include "segment_codec.h"
+
 #include <zstd.h>
 
+#include <bitset>
 #include <cstring>
 #include <new>
 #include <stdexcept>
@@ -152,21 +158,77 @@ std::string unpack_points(BlobView packed, uint64_t num_points, std::vector<uint
   return {};
 }
 
-std::vector<uint8_t> pack_esf(BlobView plain) {
-  const auto* bytes = static_cast<const uint8_t*>(plain.data);
-  std::vector<uint8_t> planes(plain.size), out;
-  split_planes(bytes, plain.size / 4, 4, planes.data());
-  compress_into(planes, &out);
+std::string unpack_points(BlobView packed, uint64_t num_points, PointCloud* points) {
+  if (packed.is_null || packed.size < kPointHeader) return "point blob missing or too short";
+  const auto* bytes = static_cast<const uint8_t*>(packed.data);
+  uint32_t encoding = 0;
+  std::memcpy(&encoding, bytes, 4);
+  if (encoding != kInt16) {  // float32 points: through schema 1's BLOB, as rare as they are
+    std::vector<uint8_t> plain;
+    std::string problem = unpack_points(packed, num_points, &plain);
+    return problem.empty() ? decode_points({plain.data(), plain.size(), false}, num_points, points) : problem;
+  }
+  if (num_points > (uint64_t{1} << 40) / kPackedInt16) return "implausible point count " + std::to_string(num_points);
+  thread_local std::vector<uint8_t> planes;  // kept: a server reads a few dozen segments a query
+  const size_t n = static_cast<size_t>(num_points);
+  const std::string problem = decompress(bytes + kPointHeader, packed.size - kPointHeader, n * kPackedInt16, &planes);
+  if (!problem.empty()) return "points: " + problem;
+  return decode_int16_planes(bytes, planes.data(), num_points, points);
+}
+
+std::string unpack_esf(BlobView packed, EsfDescriptor* esf) {
+  constexpr size_t kSize = sizeof(EsfDescriptor);
+  std::vector<uint8_t> planes;
+  const std::string problem = decompress(static_cast<const uint8_t*>(packed.data), packed.size, kSize, &planes);
+  if (!problem.empty()) return "ESF: " + problem;
+  join_planes(planes.data(), kSize / 4, 4, reinterpret_cast<uint8_t*>(esf->data()));
+  return {};
+}
+
+namespace {
+constexpr size_t kEsfMaskBytes = kEsfBins / 8;
+static_assert(kEsfBins % 8 == 0, "the mask has no spare bits");
+}  // namespace
+
+std::vector<uint8_t> pack_esf_sparse(const EsfDescriptor& esf) {
+  const QuantizedEsf q = quantize_esf(esf, kMapEsfMinExponent, kMapEsfMaxExponent);
+  std::vector<uint8_t> out(1 + kEsfMaskBytes, 0);
+  out[0] = static_cast<uint8_t>(static_cast<int8_t>(q.exponent));
+  for (int i = 0; i < kEsfBins; ++i) {
+    if (q.mantissas[i] == 0) continue;
+    out[1 + i / 8] |= static_cast<uint8_t>(1u << (i % 8));
+    out.push_back(static_cast<uint8_t>(q.mantissas[i] & 0xff));
+    out.push_back(static_cast<uint8_t>(q.mantissas[i] >> 8));
+  }
   return out;
 }
 
-std::string unpack_esf(BlobView packed, size_t plain_size, std::vector<uint8_t>* plain) {
-  std::vector<uint8_t> planes;
-  const std::string problem =
-      decompress(static_cast<const uint8_t*>(packed.data), packed.size, plain_size, &planes);
-  if (!problem.empty()) return "ESF: " + problem;
-  plain->resize(plain_size);
-  join_planes(planes.data(), plain_size / 4, 4, plain->data());
+std::string unpack_esf_sparse(BlobView packed, EsfDescriptor* esf) {
+  const auto* bytes = static_cast<const uint8_t*>(packed.data);
+  if (packed.is_null || packed.size < 1 + kEsfMaskBytes) return "ESF blob missing or too short";
+  const int exponent = static_cast<int8_t>(bytes[0]);
+  if (exponent < kMapEsfMinExponent || exponent > kMapEsfMaxExponent)
+    return "ESF exponent " + std::to_string(exponent) + " out of range";
+  const uint8_t* mask = bytes + 1;
+  size_t nonzero = 0;
+  for (size_t b = 0; b < kEsfMaskBytes; ++b) nonzero += std::bitset<8>(mask[b]).count();
+  if (packed.size != 1 + kEsfMaskBytes + 2 * nonzero)
+    return "ESF blob has " + std::to_string(packed.size) + " bytes, its mask says " + std::to_string(1 + kEsfMaskBytes + 2 * nonzero);
+  // Without a branch per bin (the mask is a coin toss where a histogram thins out): a zero bin
+  // reads the next mantissa and keeps 0; the copy gives that read a place past the last one.
+  uint8_t mantissas[2 * kEsfBins + 2] = {};
+  std::memcpy(mantissas, mask + kEsfMaskBytes, 2 * nonzero);
+  const float scale = esf_scale(exponent);
+  size_t k = 0;
+  bool zero_marked = false;
+  for (int i = 0; i < kEsfBins; ++i) {
+    const unsigned bit = mask[i / 8] >> (i % 8) & 1u;
+    const unsigned m = mantissas[2 * k] | unsigned{mantissas[2 * k + 1]} << 8;
+    zero_marked |= bit && m == 0;
+    (*esf)[i] = dequantize_esf_bin(static_cast<uint16_t>(m * bit), scale);
+    k += bit;
+  }
+  if (zero_marked) return "ESF bin marked non-zero holds 0";
   return {};
 }
 

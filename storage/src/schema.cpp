@@ -23,7 +23,7 @@ namespace {
 // both back and compares them with kApplicationId / kSchemaVersion.
 const char* const kSchemaSql = R"sql(
 PRAGMA application_id = 1399278960;
-PRAGMA user_version = 2;
+PRAGMA user_version = 3;
 CREATE TABLE map_info (
   singleton INTEGER PRIMARY KEY CHECK (singleton = 1),
   name TEXT NOT NULL, frame TEXT NOT NULL, created_utc TEXT NOT NULL,

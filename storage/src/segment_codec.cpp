@@ -224,6 +224,28 @@ std::string decode_points(BlobView blob, uint64_t num_points, PointCloud* points
   return {};
 }
 
+std::string decode_int16_planes(const uint8_t* header, const uint8_t* planes, uint64_t num_points,
+                                PointCloud* points) {
+  Header h;
+  std::memcpy(&h, header, sizeof(h));
+  if (h.encoding != kInt16) return "unknown point encoding " + std::to_string(h.encoding);
+  const size_t n = static_cast<size_t>(num_points);
+  points->resize(n);
+  // Running sums of the x y z deltas (mod 2^16), then the same expression as Int16Points with
+  // the intensity's q = 0, so that the floats are those of the schema-1 decode bit for bit.
+  uint16_t running[3] = {0, 0, 0};
+  for (size_t i = 0; i < n; ++i) {
+    float xyz[3];
+    for (int a = 0; a < 3; ++a) {
+      const uint16_t delta = static_cast<uint16_t>(planes[(2 * a) * n + i] | planes[(2 * a + 1) * n + i] << 8);
+      running[a] = static_cast<uint16_t>(running[a] + delta);
+      xyz[a] = h.offset[a] + static_cast<int16_t>(running[a]) * h.scale[a];
+    }
+    (*points)[i] = {xyz[0], xyz[1], xyz[2], h.offset[3] + 0 * h.scale[3]};
+  }
+  return {};
+}
+
 // ------------------------------------------------------------------------ rows, checksums
 uint64_t row_checksum(const SegmentRow& row) {
   // The scalars in a fixed byte layout, then the blobs: a changed byte anywhere in the row

@@ -53,13 +53,15 @@ namespace {
 
 // Schema 2's points of one row: checked against their checksum, unpacked, decoded. Empty
 // string on success, else the problem.
+// A packed ESF: zstd byte planes in schema 2, u16 sparse from schema 3 (packed_blobs.h).
+std::string unpack_stored_esf(int schema_version, BlobView packed, EsfDescriptor* esf) {
+  return schema_version >= 3 ? unpack_esf_sparse(packed, esf) : unpack_esf(packed, esf);
+}
+
 std::string decode_packed_points(int64_t row_id, uint64_t num_points, BlobView blob, uint64_t checksum,
                                  PointCloud* out) {
   if (points_checksum(row_id, num_points, blob) != checksum) return "points checksum mismatch";
-  std::vector<uint8_t> plain;
-  std::string problem = unpack_points(blob, num_points, &plain);
-  if (problem.empty()) problem = decode_points({plain.data(), plain.size(), false}, num_points, out);
-  return problem;
+  return unpack_points(blob, num_points, out);
 }
 
 }  // namespace
@@ -79,15 +81,15 @@ void decode_segment(const StoredRow& stored, const std::string& path, Segment* s
     return;
   }
   SegmentRow row = stored.row;
-  row.points = {};  // schema 2: the row's checksum leaves the points to their own
+  row.points = {};  // schemas 2 and 3: the row's checksum leaves the points to their own
   if (row_checksum(row) != stored.checksum) corrupted("checksum mismatch");
-  std::vector<uint8_t> esf;
-  std::string problem;
-  if (!row.esf.is_null) {
-    problem = unpack_esf(row.esf, sizeof(EsfDescriptor), &esf);
-    row.esf = {esf.data(), esf.size(), false};
+  const BlobView esf = row.esf;
+  row.esf = {};  // packed: decoded below, straight into the segment
+  std::string problem = decode_descriptors(row, segment);
+  if (problem.empty() && !esf.is_null) {
+    problem = unpack_stored_esf(stored.schema_version, esf, &segment->esf);
+    segment->has_esf = true;
   }
-  if (problem.empty()) problem = decode_descriptors(row, segment);
   if (problem.empty() && with_points)
     problem = decode_packed_points(stored.row_id, row.num_points, stored.row.points, stored.points_checksum,
                                    &segment->points);
@@ -103,6 +105,20 @@ void decode_points_row(const Statement& st, int64_t row_id, const std::string& p
                                                    static_cast<uint64_t>(st.column_int(2)), out);
   if (!problem.empty())
     fail(path, "the map file is corrupted: segment row " + std::to_string(row_id) + ": " + problem);
+}
+
+SegmentRow plain_row(const StoredRow& stored, const std::string& path, PlainBlobs* buffers) {
+  SegmentRow row = stored.row;
+  if (stored.schema_version < 2) return row;
+  std::string problem = unpack_points(row.points, row.num_points, &buffers->points);
+  row.points = {buffers->points.data(), buffers->points.size(), false};
+  if (problem.empty() && !row.esf.is_null) {
+    problem = unpack_stored_esf(stored.schema_version, row.esf, &buffers->esf);
+    row.esf = {buffers->esf.data(), sizeof(buffers->esf), false};
+  }
+  if (!problem.empty())
+    fail(path, "the map file is corrupted: segment row " + std::to_string(stored.row_id) + ": " + problem);
+  return row;
 }
 
 }  // namespace detail

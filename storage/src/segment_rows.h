@@ -1,6 +1,6 @@
 // Reading `segments` rows back into Segments, shared by the reader, the integrity check and
-// the upgrade. Schema 1 keeps each segment's points in its row; schema 2 keeps them, packed,
-// in segment_points (one row per segment, same row number) with their own checksum.
+// the upgrade. Schema 1 keeps each segment's points in its row; schemas 2 and 3 keep them,
+// packed, in segment_points (one row per segment, same row number) with their own checksum.
 #pragma once
 
 #include <segmatch/core/segment.h>
@@ -10,6 +10,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace segmatch {
 namespace storage {
@@ -40,6 +41,15 @@ void decode_segment(const StoredRow& stored, const std::string& path, Segment* s
 // Schema 2: checks and decodes the points of one row, as kSelectPointsSql reads them.
 extern const char* const kSelectPointsSql;  // binds the row; columns: num_points, points, checksum
 void decode_points_row(const Statement& st, int64_t row_id, const std::string& path, PointCloud* points);
+
+// A stored row with schema 1's BLOBs (a plain point BLOB, ESF as 640 floats), unpacked into
+// `buffers` where the schema packs them: what MapWriter stores again. Checksums are the caller's
+// (decode_segment first); a BLOB that does not unpack throws StorageError.
+struct PlainBlobs {
+  std::vector<uint8_t> points;
+  EsfDescriptor esf{};
+};
+SegmentRow plain_row(const StoredRow& stored, const std::string& path, PlainBlobs* buffers);
 
 }  // namespace detail
 }  // namespace storage

@@ -215,10 +215,11 @@ TEST_F(MapBuilderCli, MapinfoUpgradesASchemaOneMap) {
   const fs::path upgraded = dir_ / "upgraded.sqlite";
   r = run(kBin + "/segmatch-mapinfo --upgrade " + old_map + " " + upgraded.string());
   ASSERT_EQ(r.code, 0) << r.output;
-  EXPECT_NE(r.output.find("(schema 2,"), std::string::npos) << r.output;
+  const std::string schema = std::to_string(storage::kSchemaVersion);
+  EXPECT_NE(r.output.find("(schema " + schema + ","), std::string::npos) << r.output;
   r = run(kBin + "/segmatch-mapinfo " + upgraded.string() + " --check");
   ASSERT_EQ(r.code, 0) << r.output;
-  EXPECT_NE(r.output.find("schema version: 2\n"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("schema version: " + schema + "\n"), std::string::npos) << r.output;
   // An existing target is kept unless --overwrite; upgrading a current map says there is nothing to do.
   r = run(kBin + "/segmatch-mapinfo --upgrade " + old_map + " " + upgraded.string());
   EXPECT_EQ(r.code, 1) << r.output;

@@ -59,8 +59,9 @@ TEST_F(StorageRefusal, GoodMapOpens) {
 
 TEST_F(StorageRefusal, NewerSchemaVersion) {
   const std::string path = variant("newer.segmap", [](std::string&) {});
-  run_sql(path, "PRAGMA user_version = 3");
-  expect_storage_error([&] { MapReader::open(path); }, path, {"schema version 3", "newer"});
+  const std::string newer = std::to_string(kSchemaVersion + 1);
+  run_sql(path, ("PRAGMA user_version = " + newer).c_str());
+  expect_storage_error([&] { MapReader::open(path); }, path, {"schema version " + newer, "newer"});
 }
 
 TEST_F(StorageRefusal, OlderUnsupportedSchemaVersion) {
@@ -120,16 +121,15 @@ TEST_F(StorageRefusal, CorruptedInTheMiddle) {
   }
 }
 
-// Flips one bit in the stored bytes of segment row `row`'s BLOB that `sql` selects (searched by
-// its first 48 bytes: a BLOB longer than a page continues on overflow pages elsewhere), then
-// expects a full load to fail with `words`, the integrity check to name only that row, and
+// Flips one bit in the stored bytes of segment row `row`'s BLOB that `sql` selects (in a stretch
+// found by unique_stretch()), then expects a full load to fail with `words`, the integrity check to name only that row, and
 // only a read of that segment to fail.
 void expect_bit_flip_named(StorageRefusal& t, const char* sql, int row, const std::vector<std::string>& words) {
   const Segments segments = random_segments(300, 31);
   const std::string blob = stored_blob(t.path_, sql);
   ASSERT_GT(blob.size(), 48u);
-  const size_t at = t.bytes_.find(blob.substr(0, 48));
-  ASSERT_NE(at, std::string::npos);
+  const size_t at = unique_stretch(t.bytes_, blob);
+  ASSERT_NE(at, std::string::npos) << "no stretch of the BLOB occurs once in the file";
   const std::string path = t.variant("bitflip" + std::to_string(row) + ".segmap", [&](std::string& b) { b[at + 40] ^= 0x04; });
   std::vector<std::string> expected = words;
   expected.push_back("segment row " + std::to_string(row));

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 #include <sqlite3.h>
+#include <segmatch/core/esf_quantization.h>
 #include <segmatch/storage/map_reader.h>
 #include <segmatch/storage/map_writer.h>
 
@@ -157,6 +158,26 @@ inline void write_test_map(const std::string& path, const Segments& segments,
   writer.set_trajectory(random_trajectory(10, 7));
   writer.set_classifier({"test-format", std::string("\0model\xff bytes", 13)});
   writer.commit();
+}
+
+// An ESF as a schema-3 map stores it: quantised (core/esf_quantization.h).
+inline EsfDescriptor as_stored_esf(const EsfDescriptor& esf) {
+  const QuantizedEsf q = quantize_esf(esf, kMapEsfMinExponent, kMapEsfMaxExponent);
+  EsfDescriptor out;
+  for (int i = 0; i < kEsfBins; ++i) out[i] = dequantize_esf_bin(q.mantissas[i], esf_scale(q.exponent));
+  return out;
+}
+
+// Offset in `file` of a 48-byte stretch of `blob` that occurs there exactly once, npos if none:
+// a BLOB longer than a page continues on overflow pages elsewhere, and rows may begin alike
+// (ESF masks).
+inline size_t unique_stretch(const std::string& file, const std::string& blob) {
+  for (size_t from = 0; from + 48 <= blob.size(); from += 8) {
+    const std::string stretch = blob.substr(from, 48);
+    const size_t first = file.find(stretch);
+    if (first != std::string::npos && file.rfind(stretch) == first) return first;
+  }
+  return std::string::npos;
 }
 
 inline std::string lower(std::string text) {

@@ -1,6 +1,7 @@
-// upgrade_map(): a schema-1 map (maps/tiny-3, kept in the repository on purpose) rewritten in
-// this build's schema decodes to the same coordinates and descriptors bit for bit (intensity is
-// not kept), and a damaged old map is refused untouched.
+// upgrade_map(): the stored schema-1 and schema-2 maps (maps/tiny-3, kept in the repository on
+// purpose) rewritten in this build's schema decode to the same coordinates and eigen features
+// bit for bit, ESF quantised as schema 3 stores it (intensity is not kept), and a damaged old
+// map is refused untouched.
 #include "storage_test_util.h"
 
 #include <algorithm>
@@ -13,15 +14,20 @@ namespace test {
 namespace {
 
 const std::string kOldMap = SEGMATCH_SOURCE_DIR "/maps/tiny-3/map.sqlite";
+// The same map upgraded to schema 2 by the schema-2 build (2026-12-03): lossless.
+const std::string kSchemaTwoMap = SEGMATCH_SOURCE_DIR "/maps/tiny-3/map-schema2.sqlite";
 
-void expect_bit_identical(const Segment& a, const Segment& b) {
+enum class Esf { kExact, kQuantised };
+
+void expect_bit_identical(const Segment& a, const Segment& b, Esf esf = Esf::kQuantised) {
   ASSERT_EQ(a.id, b.id);
   EXPECT_EQ(a.label, b.label);
   EXPECT_EQ(0, std::memcmp(a.centroid.data(), b.centroid.data(), sizeof(float) * 3)) << a.id;
   EXPECT_EQ(a.has_eigen, b.has_eigen);
   EXPECT_EQ(a.has_esf, b.has_esf);
   EXPECT_EQ(0, std::memcmp(a.eigen.data(), b.eigen.data(), sizeof(a.eigen))) << a.id;
-  EXPECT_EQ(0, std::memcmp(a.esf.data(), b.esf.data(), sizeof(a.esf))) << a.id;
+  const EsfDescriptor expected_esf = esf == Esf::kExact ? a.esf : as_stored_esf(a.esf);
+  EXPECT_EQ(0, std::memcmp(expected_esf.data(), b.esf.data(), sizeof(a.esf))) << a.id;
   ASSERT_EQ(a.points.size(), b.points.size()) << a.id;
   float lo = 0.f, hi = 0.f;
   for (size_t i = 0; i < a.points.size(); ++i) {
@@ -65,6 +71,34 @@ TEST(StorageUpgrade, SchemaOneMapComesBackBitForBit) {
   for (size_t i = 0; i < near0.size(); ++i) expect_bit_identical(near0[i], near1[i]);
   std::printf("[upgrade] %zu segments: %.2f MB -> %.2f MB\n", before.size(),
               std::filesystem::file_size(kOldMap) / 1e6, std::filesystem::file_size(upgraded) / 1e6);
+}
+
+TEST(StorageUpgrade, SchemaTwoMapReadsAsItsOriginalAndUpgrades) {
+  const MapReader v1 = MapReader::open(kOldMap), v2 = MapReader::open(kSchemaTwoMap);
+  ASSERT_EQ(v2.schema_version(), 2) << "maps/tiny-3/map-schema2.sqlite is the stored schema-2 map";
+  EXPECT_TRUE(v2.check_integrity().empty());
+  const Segments original = v1.load_segments(), stored = v2.load_segments();
+  ASSERT_EQ(original.size(), stored.size());
+  for (size_t i = 0; i < original.size(); ++i) expect_bit_identical(original[i], stored[i], Esf::kExact);
+  // Its points read one segment at a time, as a lazy server reads them.
+  for (size_t i = 0; i < stored.size(); i += 17) {
+    const PointCloud points = v2.read_points(i);
+    ASSERT_EQ(points.size(), stored[i].points.size());
+    EXPECT_EQ(0, std::memcmp(points.data(), stored[i].points.data(), points.size() * sizeof(Point)));
+  }
+
+  TempDir dir;
+  const std::string upgraded = dir.file("upgraded.segmap");
+  EXPECT_EQ(upgrade_map(kSchemaTwoMap, upgraded, false), 2);
+  const MapReader now = MapReader::open(upgraded);
+  EXPECT_EQ(now.schema_version(), kSchemaVersion);
+  EXPECT_TRUE(now.check_integrity().empty());
+  const Segments after = now.load_segments();
+  ASSERT_EQ(original.size(), after.size());
+  for (size_t i = 0; i < original.size(); ++i) expect_bit_identical(original[i], after[i]);
+  EXPECT_EQ(v1.classifier()->bytes, now.classifier()->bytes);
+  std::printf("[upgrade] schema 2 -> %d: %.2f MB -> %.2f MB\n", kSchemaVersion,
+              std::filesystem::file_size(kSchemaTwoMap) / 1e6, std::filesystem::file_size(upgraded) / 1e6);
 }
 
 TEST(StorageUpgrade, RefusesAMapAlreadyAtThisSchema) {

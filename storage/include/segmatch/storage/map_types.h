@@ -26,9 +26,15 @@ class StorageError : public std::runtime_error {
 constexpr uint32_t kApplicationId = 0x53674D70u;
 // PRAGMA user_version: the schema this build writes, and the oldest one it still reads.
 // Schema 2 (2026-12-03) packs points and ESF losslessly and keeps points in their own table;
-// schema 1 maps are still read (segmatch-mapinfo --upgrade OLD NEW rewrites them as schema 2).
-constexpr int kSchemaVersion = 2;
+// schema 3 (2026-12-03) stores ESF as u16 integers, sparse (storage/src/packed_blobs.h), the
+// rest as schema 2. Schema 1 and 2 maps are still read; segmatch-mapinfo --upgrade OLD NEW
+// rewrites them as schema 3.
+constexpr int kSchemaVersion = 3;
 constexpr int kOldestReadableSchemaVersion = 1;
+// Schema 3 stores each ESF bin as a u16 times 2^e, e in this range (core/esf_quantization.h; the
+// range of LOCALIZE_SEGMENTS, docs/protocol.md 5.5: an ESF sums to 1, so 2^0 holds any bin).
+constexpr int kMapEsfMinExponent = -64;
+constexpr int kMapEsfMaxExponent = 0;
 
 // Keyframe index of a segment whose keyframe is unknown.
 constexpr uint32_t kNoKeyframe = 0xFFFFFFFFu;

@@ -7,12 +7,13 @@
 // the target path never holds a half-written map, and a map it held before stays intact.
 // A MapWriter is used from one thread at a time.
 //
-// File layout (schema version 2; application_id 'SgMp', user_version = schema version; 1 KiB
+// File layout (schema version 3; application_id 'SgMp', user_version = schema version; 1 KiB
 // pages):
 //   map_info       one row: metadata, the parameters JSON, descriptor sizes and row counts
 //   segments       one row per segment (rows 1..N in insertion order): id, keyframe, label,
 //                  centroid, axis-aligned bounding box of the points, point count, two BLOBs
-//                  (eigen: 7 float32; esf: 640 float32 packed, see packed_blobs.h; both NULL
+//                  (eigen: 7 float32; esf: 640 u16 of one power-of-two scale, sparse, see
+//                  packed_blobs.h; both NULL
 //                  when not described) and an XXH64 checksum over the row
 //   segment_points one row per segment, same row number: the points (see below, packed) and
 //                  their own XXH64 checksum, so that the rest of a segment is read without
@@ -35,14 +36,16 @@
 //     non-finite value.
 // Decoding runs in float, so add float rounding: about 0.01 mm for coordinates below 100 m,
 // 0.5 mm at 10 km.
-// Everything else (ids, centroids, eigen, ESF, labels, keyframes, poses, times, metadata,
-// classifier bytes) round-trips exactly.
+// ESF bins move by at most 2^-16 of the segment's largest bin (u16 at a power-of-two scale,
+// as LOCALIZE_SEGMENTS sends them; schema 3). Everything else (ids, centroids, eigen, labels,
+// keyframes, poses, times, metadata, classifier bytes) round-trips exactly.
 // Schema 2 stores the same x y z and descriptor bytes as schema 1 did, losslessly packed with
 // zstd (x y z delta-coded per axis and split into byte planes: ~2.9 bytes a point instead of
 // 8), and does not keep the intensity of int16 points (nothing in localization reads it; it
 // decodes to the middle of the segment's range). Schema 1 kept the points as a third BLOB of
-// the segments row, unpacked, in 64 KiB pages. Schema 1 maps are still read; upgrade_map()
-// rewrites them.
+// the segments row, unpacked, in 64 KiB pages. Schema 3 stores the ESF quantised instead of
+// packed: decoding zstd frames was most of opening a city map. Schema 1 and 2 maps are still
+// read; upgrade_map() rewrites them.
 #pragma once
 
 #include <segmatch/core/segment.h>
@@ -90,9 +93,10 @@ class MapWriter {
 };
 
 // Rewrites the map at old_path (any schema this build reads) in this build's schema at
-// new_path, all or nothing like a build. Point coordinates and descriptors are the same bytes
-// repacked, not re-quantised, so they decode to the same floats (the intensity of int16 points
-// is not kept, as in every schema-2 map). Every row's checksum
+// new_path, all or nothing like a build. Point coordinates and eigen features are the same
+// bytes repacked, not re-quantised, so they decode to the same floats (the intensity of int16
+// points is not kept, as from schema 2 on); ESF is quantised as a schema-3 build stores it
+// (a schema-3 ESF quantises to itself). Every row's checksum
 // and BLOBs are verified first (a damaged map is refused, naming the row). Returns the old
 // schema version; StorageError when the map already has this build's schema.
 int upgrade_map(const std::string& old_path, const std::string& new_path, bool overwrite);
