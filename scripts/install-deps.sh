@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Installs every Debian package the project needs. Idempotent: packages already present are
+# Installs every Debian package the project needs (`fuzz`: also what scripts/fuzz.sh needs). Idempotent: packages already present are
 # skipped, so a second run costs only the dpkg query.
 set -euo pipefail
 
@@ -10,6 +10,8 @@ PACKAGES=(
   libcli11-dev nlohmann-json3-dev
   libceres-dev libzstd-dev
 )
+# `install-deps.sh fuzz`: also clang and its libFuzzer runtime (scripts/fuzz.sh).
+if [ "${1:-}" = "fuzz" ]; then PACKAGES+=(clang libclang-rt-14-dev); fi
 
 missing=()
 for p in "${PACKAGES[@]}"; do

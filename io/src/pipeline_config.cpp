@@ -342,7 +342,7 @@ PipelineConfig parse_pipeline_config(const std::string& json_text, const std::st
   json in;
   try {
     in = json::parse(json_text);
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // also out_of_range: a number too large for a double
     throw IoError(origin + ": not valid JSON: " + e.what());
   }
   if (!in.is_object()) throw IoError(origin + ": the config must be a JSON object");

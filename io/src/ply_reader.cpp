@@ -180,7 +180,10 @@ CloudData read_ascii(const std::string& path, const PlyHeader& h, std::string_vi
   for (const PlyElement& e : h.elements) {
     values.assign(e.properties.size(), 0.0);
     if (e.name != "vertex") {
-      for (size_t i = 0; i < e.count; ++i) ascii_item(path, e, i, &in, &values);
+      // An element without properties has no tokens to read, whatever its count (found by
+      // fuzzing: a count of 4e12 spun here).
+      if (!e.properties.empty())
+        for (size_t i = 0; i < e.count; ++i) ascii_item(path, e, i, &in, &values);
       continue;
     }
     const VertexFields f = vertex_fields(path, e);

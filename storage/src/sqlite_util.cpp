@@ -12,6 +12,10 @@ namespace {
 
 // What a result code means for someone holding a map file; SQLite's own text follows it.
 std::string meaning(int rc) {
+  // A failed write is a full disk, a file-size limit or a failing disk (SQLite reports ENOSPC as
+  // SQLITE_FULL, EFBIG and the rest as these).
+  if (rc == SQLITE_IOERR_WRITE || rc == SQLITE_IOERR_FSYNC || rc == SQLITE_IOERR_TRUNCATE)
+    return "cannot write the file (disk full, file-size limit or failing disk)";
   switch (rc & 0xFF) {
     case SQLITE_CORRUPT: return "the map file is corrupted";
     case SQLITE_NOTADB: return "not an SQLite database (or its header is corrupted)";
@@ -32,7 +36,9 @@ std::string meaning(int rc) {
 
 std::string describe(sqlite3* db, int rc, const std::string& doing) {
   const char* detail = db ? sqlite3_errmsg(db) : sqlite3_errstr(rc);
-  return meaning(rc) + " (while " + doing + "; SQLite: " + detail + ")";
+  // The extended code tells a failed write from a failed read (result codes are primary).
+  const int code = db && (sqlite3_errcode(db) & 0xFF) == (rc & 0xFF) ? sqlite3_extended_errcode(db) : rc;
+  return meaning(code) + " (while " + doing + "; SQLite: " + detail + ")";
 }
 
 void fail_sqlite(sqlite3* db, int rc, const std::string& path, const std::string& doing) {

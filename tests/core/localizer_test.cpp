@@ -3,6 +3,7 @@
 // ambiguous (any shift by the spacing explains it as well); bad input is refused, not thrown.
 #include "segmatch/core/localizer.h"
 #include "segmatch/core/random.h"
+#include "support/street_scene.h"
 
 #include <gtest/gtest.h>
 
@@ -11,52 +12,10 @@
 namespace segmatch {
 namespace {
 
-// Dense surface samples (spacing 3 cm, so 0.1 m voxels get their >= 2 points).
-void add_cylinder(PointCloud& cloud, float x, float y, float radius, float height) {
-  const int around = static_cast<int>(2 * M_PI * radius / 0.03f);
-  for (float z = 0.f; z < height; z += 0.03f)
-    for (int k = 0; k < around; ++k) {
-      const float a = 2.f * static_cast<float>(M_PI) * k / around;
-      cloud.push_back(Point{x + radius * std::cos(a), y + radius * std::sin(a), z, 0.f});
-    }
-}
-
-void add_box(PointCloud& cloud, float x, float y, float sx, float sy, float sz) {
-  for (float u = 0.f; u <= sx; u += 0.03f)
-    for (float w = 0.f; w <= sz; w += 0.03f) {
-      cloud.push_back(Point{x + u, y, w, 0.f});
-      cloud.push_back(Point{x + u, y + sy, w, 0.f});
-    }
-  for (float v = 0.f; v <= sy; v += 0.03f)
-    for (float w = 0.f; w <= sz; w += 0.03f) {
-      cloud.push_back(Point{x, y + v, w, 0.f});
-      cloud.push_back(Point{x + sx, y + v, w, 0.f});
-    }
-}
-
-PointCloud pole_street(bool with_distinct_objects) {
-  PointCloud cloud;
-  for (int i = 0; i < 10; ++i) add_cylinder(cloud, 6.f * i, 4.f, 0.15f, 4.f);
-  if (with_distinct_objects) {
-    add_box(cloud, 3.f, -6.f, 4.2f, 1.8f, 1.5f);   // a car
-    add_box(cloud, 15.f, -7.f, 2.f, 2.f, 2.5f);    // a kiosk
-    add_box(cloud, 26.f, -5.f, 1.f, 3.f, 1.f);     // a bench
-    add_box(cloud, 35.f, 8.f, 6.f, 0.4f, 2.f);     // a wall
-    add_cylinder(cloud, 47.f, -6.f, 0.6f, 1.2f);   // a bin
-    add_cylinder(cloud, 20.f, 9.f, 1.2f, 0.9f);    // a planter
-    add_box(cloud, 52.f, 9.f, 1.5f, 1.5f, 3.2f);   // a cabinet
-  }
-  return cloud;
-}
-
-PointCloud transformed(const PointCloud& cloud, const Pose3d& T) {
-  PointCloud out = cloud;
-  for (Point& p : out) {
-    const Eigen::Vector3f q = T.cast<float>() * p.xyz();
-    p.x = q.x(), p.y = q.y(), p.z = q.z();
-  }
-  return out;
-}
+using test::add_box;
+using test::add_cylinder;
+using test::pole_street;
+using test::transformed;
 
 LocalizerConfig config() {
   LocalizerConfig c;

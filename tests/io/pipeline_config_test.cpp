@@ -89,6 +89,14 @@ TEST(PipelineConfig, MistakesAreNamed) {
   EXPECT_EQ(error_of(R"({"voxel": {"leaf_m": 0.2}})"), "");
 }
 
+// Found by fuzzing (scripts/fuzz.sh config): a number too large for a double made nlohmann-json
+// throw out_of_range, which escaped without naming the file.
+TEST(PipelineConfig, NumberTooLargeForADoubleIsNamed) {
+  const std::string error = error_of(R"({"voxel": {"leaf_m": 2.2e2222222222}})");
+  EXPECT_NE(error.find("cfg.json: not valid JSON"), std::string::npos) << error;
+  EXPECT_NE(error_of("2e99999").find("cfg.json"), std::string::npos);
+}
+
 TEST(PipelineConfig, FileErrorsNameThePath) {
   try {
     read_pipeline_config("/nonexistent/dir/cfg.json");

@@ -146,6 +146,18 @@ TEST(Ply, TruncatedAscii) {
       ThrowsIoError([&] { read_ply(dir.file("a.ply")); }, {"a.ply", "truncated", "item 2 of 3"}));
 }
 
+// Found by fuzzing (scripts/fuzz.sh ply): an ascii element with no properties and a count of
+// trillions made the reader loop over nothing for hours.
+TEST(Ply, AsciiElementWithoutPropertiesTakesNoTokensWhateverItsCount) {
+  test::TempDir dir;
+  test::write_bytes(dir.file("a.ply"),
+                    "ply\nformat ascii 1.0\nelement tex 4129138213020\nelement vertex 2\nproperty float x\n"
+                    "property float y\nproperty float z\nend_header\n1 2 3\n4 5 6\n");
+  const CloudData cloud = read_ply(dir.file("a.ply"));
+  ASSERT_EQ(cloud.points.size(), 2u);
+  EXPECT_EQ(cloud.points[1].x, 4.f);
+}
+
 TEST(Ply, BadFiles) {
   test::TempDir dir;
   const std::string vertex =

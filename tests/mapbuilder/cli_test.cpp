@@ -23,6 +23,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <iomanip>
 #include <random>
 #include <sstream>
 #include <thread>
@@ -179,6 +180,30 @@ TEST_F(MapBuilderCli, PrintConfigWritesTheChosenProfileAsAReusableConfig) {
   EXPECT_EQ(printed.measured->sensor_class(), "dense-spinning");
   const storage::MapReader map = storage::MapReader::open(map_path().string());
   EXPECT_EQ(io::to_json(printed), io::to_json(io::parse_pipeline_config(map.metadata().parameters_json, "map")));
+}
+
+// Points are 32-bit floats: poses 2000 km from the origin (UTM-like) would quantise them to
+// 12.5 cm, so the builder says to subtract a local origin.
+TEST_F(MapBuilderCli, WarnsWhenPosesAreFarFromTheOrigin) {
+  const fs::path far = dir_ / "far";
+  fs::create_directories(far);
+  for (const auto& e : fs::directory_iterator(sequence()))
+    if (e.path().filename() != "poses.txt" && e.path().filename() != "odom_poses.txt")
+      fs::create_symlink(e.path(), far / e.path().filename());
+  std::ifstream in(sequence() / "poses.txt");
+  std::ofstream out(far / "poses.txt");
+  for (std::string line; std::getline(in, line);) {
+    std::istringstream fields(line);
+    double v[12];
+    for (double& x : v) fields >> x;
+    v[3] += 2e6;
+    for (int i = 0; i < 12; ++i) out << std::setprecision(17) << v[i] << (i < 11 ? ' ' : '\n');
+  }
+  out.close();
+  const Result r = run(kBin + "/segmatch-mapbuilder --input " + far.string() + " --last 2 --output " +
+                       (dir_ / "far.sqlite").string());
+  EXPECT_NE(r.output.find("warning: the poses reach 2000 km from the origin"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("subtract a local origin"), std::string::npos) << r.output;
 }
 
 TEST_F(MapBuilderCli, MapinfoPrintsTheCountsAndCheckPasses) {
