@@ -12,16 +12,7 @@
 namespace segmatch {
 namespace {
 
-LocalizerConfig street_config() {
-  LocalizerConfig c;
-  c.segmentation.ground.method = GroundRemoval::kNone;  // no ground in the street scene
-  c.segmentation.descriptors.compute_esf = false;
-  c.matcher.type = MatcherType::kL2;
-  c.matcher.use_shapes = false;
-  c.matcher.l2_threshold = 0.6f;
-  c.min_support = 6;
-  return c;
-}
+LocalizerConfig street_config() { return test::street_localizer_config(); }
 
 PointCloud shifted(PointCloud cloud, const Eigen::Vector3f& by) {
   for (Point& p : cloud) p.x += by.x(), p.y += by.y(), p.z += by.z();

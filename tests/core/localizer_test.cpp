@@ -17,16 +17,7 @@ using test::add_cylinder;
 using test::pole_street;
 using test::transformed;
 
-LocalizerConfig config() {
-  LocalizerConfig c;
-  c.segmentation.ground.method = GroundRemoval::kNone;  // no ground in these scenes
-  c.segmentation.descriptors.compute_esf = false;
-  c.matcher.type = MatcherType::kL2;
-  c.matcher.use_shapes = false;
-  c.matcher.l2_threshold = 0.6f;
-  c.min_support = 6;
-  return c;
-}
+LocalizerConfig config() { return test::street_localizer_config(); }
 
 Pose3d T_query_map() {
   Pose3d T = Pose3d::Identity();

@@ -71,6 +71,12 @@ void cloud_seeds() {
   io::write_pcd(seed("pcd", "compressed.pcd"), cloud, io::PcdEncoding::kBinaryCompressed);
   io::write_pcd(seed("pcd", "labels.pcd"), cloud, io::PcdEncoding::kBinaryCompressed, &labels);
   io::write_pcd(seed("pcd", "empty.pcd"), PointCloud{}, io::PcdEncoding::kAscii);
+  // Valid but extreme (issue 18): one point, and coordinates 10,000 km from the origin.
+  io::write_pcd(seed("pcd", "one_point.pcd"), small_cloud(1), io::PcdEncoding::kBinary);
+  PointCloud far = cloud;
+  for (Point& p : far) p.x += 1e7f, p.y -= 1e7f;
+  io::write_pcd(seed("pcd", "far.pcd"), far, io::PcdEncoding::kBinaryCompressed);
+  io::write_ply(seed("ply", "far.ply"), far, io::PlyEncoding::kAscii);
   io::write_ply(seed("ply", "ascii.ply"), cloud, io::PlyEncoding::kAscii);
   io::write_ply(seed("ply", "binary.ply"), cloud, io::PlyEncoding::kBinaryLittleEndian);
   io::write_kitti_bin(seed("kitti", "scan.bin"), cloud);

@@ -3,6 +3,7 @@
 // street with objects localizes at the true pose, the poles alone are ambiguous.
 #pragma once
 
+#include <segmatch/core/localizer.h>
 #include <segmatch/core/segment.h>
 #include <segmatch/core/types.h>
 
@@ -56,6 +57,18 @@ inline PointCloud transformed(const PointCloud& cloud, const Pose3d& T) {
     p.x = q.x(), p.y = q.y(), p.z = q.z();
   }
   return out;
+}
+
+// L2 matching on eigen features (the scene is too small to train a forest on), no ground.
+inline LocalizerConfig street_localizer_config() {
+  LocalizerConfig c;
+  c.segmentation.ground.method = GroundRemoval::kNone;  // no ground in these scenes
+  c.segmentation.descriptors.compute_esf = false;
+  c.matcher.type = MatcherType::kL2;
+  c.matcher.use_shapes = false;
+  c.matcher.l2_threshold = 0.6f;
+  c.min_support = 6;
+  return c;
 }
 
 }  // namespace test
