@@ -95,6 +95,9 @@ inline float to_float(double v) {
 // their low 32 bits (so an I4 -1 reads as 0xFFFFFFFF, as PCL would).
 inline bool to_label(double v, ScalarType t, uint32_t* label) {
   if (t.kind != ScalarKind::kFloat) {
+    // An ascii body may hold any number in an integer field; beyond int64 the cast is undefined
+    // (found by fuzzing: 9.2e18 in a U field).
+    if (!(v >= -9223372036854775808.0 && v < 9223372036854775808.0)) return false;
     *label = static_cast<uint32_t>(static_cast<int64_t>(v));
     return true;
   }

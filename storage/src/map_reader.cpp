@@ -107,9 +107,9 @@ Connection open_read_only(const std::string& path) {
   // Memory-mapped reads hand out BLOBs without copying pages into SQLite's cache (up to the
   // 2 GB limit Debian's build allows; larger files fall back to reads beyond it).
   // locking_mode EXCLUSIVE: the shared lock taken at the first read is kept, so a lazy point
-  // read makes no lock, unlock and change-counter check of its own (a third of its time on this
-  // VM, README "map size"). Nothing ever writes a published map in place (writers rename a new
-  // file over it), so the lock holds nobody up.
+  // read makes no lock, unlock and change-counter check of its own (system calls that were much
+  // of a read's time; README, "map size"). Nothing ever writes a published map in place (writers
+  // rename a new file over it), so the lock holds nobody up.
   exec(db.get(), "PRAGMA mmap_size = 2147418112; PRAGMA locking_mode = EXCLUSIVE", path);
   return db;
 }

@@ -225,6 +225,18 @@ TEST(Pcd, HandWrittenAscii) {
   EXPECT_EQ(data.points[3].intensity, 15.0f);
 }
 
+// Found by fuzzing (scripts/fuzz.sh pcd): 9.2e18 in an ascii integer label field was cast to
+// int64 (undefined behaviour); it is now refused like any other invalid label.
+TEST(Pcd, AsciiIntegerLabelBeyondInt64IsRefused) {
+  test::TempDir dir;
+  test::write_bytes(dir.file("a.pcd"), pcd_header("x y z label", "4 4 4 4", "F F F U", "1 1 1 1", 2, "ascii") +
+                                           "1 2 3 7\n4 5 6 9.3e18\n");
+  EXPECT_TRUE(ThrowsIoError([&] { read_pcd(dir.file("a.pcd")); }, {"a.pcd", "line 13", "9.3e+18 is not a valid uint32 label"}));
+  test::write_bytes(dir.file("b.pcd"), pcd_header("x y z label", "4 4 4 4", "F F F I", "1 1 1 1", 1, "ascii") +
+                                           "1 2 3 -1\n");
+  EXPECT_EQ(read_pcd(dir.file("b.pcd")).labels, std::vector<uint32_t>{0xFFFFFFFFu});  // low 32 bits, as PCL
+}
+
 TEST(Pcd, TruncatedBinaryNamesTheSizes) {
   test::TempDir dir;
   std::string file = pcd_header("x y z intensity", "4 4 4 4", "F F F F", "1 1 1 1", 9000, "binary");
