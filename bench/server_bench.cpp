@@ -6,6 +6,9 @@
 // apart as the client's own work). Each query encodes its request inside the timed loop.
 // Closed loop (clients back to back) and open loop (a fleet on fixed schedules at an offered
 // rate). Prints figures (and --json FILE), asserts nothing.
+// --soak: instead, segmatch-server as its own process, 16 clients x 1000 queries (cloud and
+// segments alternately), its resident memory after the first 100 and at the end
+// (server_soak.h); exits 1 when the soak fails (errors, RSS growth over 5 %, unclean exit).
 #include <segmatch/api/client.h>
 #include <segmatch/core/preprocess.h>
 #include <segmatch/io/pipeline_config.h>
@@ -13,6 +16,8 @@
 #include <segmatch/sim/city.h>
 #include <segmatch/storage/map_writer.h>
 #include <segmatch/vehicle/segment_query.h>
+
+#include "server_soak.h"
 
 #include <nlohmann/json.hpp>
 
@@ -262,6 +267,14 @@ int main(int argc, char** argv) {
   app.add_option("--map-points", map_points, "the server's map points: lazy (read on demand) or memory")
       ->capture_default_str()
       ->check(CLI::IsMember({"lazy", "memory"}));
+  bool soak = false;
+  bench::SoakConfig soak_config;
+  app.add_flag("--soak", soak, "soak run: segmatch-server as its own process, clients x queries, its RSS watched");
+  app.add_option("--soak-clients", soak_config.clients, "soak: concurrent clients")->capture_default_str()->check(CLI::Range(1, 64));
+  app.add_option("--soak-queries", soak_config.queries_per_client, "soak: queries per client")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1000000));
+  app.add_option("--server-binary", soak_config.server_binary, "soak: segmatch-server to run (default: next to this program)");
   app.add_option("--json", json_path, "write the figures as JSON: {\"cloud\": {...}, \"segments\": {...}}");
   CLI11_PARSE(app, argc, argv);
   io::PipelineConfig config = io::pipeline_preset("kitti-hdl64");
@@ -303,6 +316,22 @@ int main(int argc, char** argv) {
   std::vector<double> client_ms;
   const std::vector<api::LocalizeSegmentsRequest> segment_requests = segment_like_a_vehicle(server.port(), requests, client_ms);
   const double client_ms_median = percentile(client_ms, 0.5);
+  if (soak) {
+    server.stop();
+    if (soak_config.server_binary.empty())
+      soak_config.server_binary = (std::filesystem::read_symlink("/proc/self/exe").parent_path() / "segmatch-server").string();
+    soak_config.map_path = map_path;
+    soak_config.workers = workers;
+    // Cloud and segments requests alternately, each client through the revisit in its own order.
+    const bench::SoakResult r = bench::run_soak(soak_config, [&](api::Client& c, size_t client, size_t i) {
+      const size_t q = client * 7 + i / 2;
+      return i % 2 == 0 ? c.localize(requests[q % requests.size()])
+                        : c.localize_segments(segment_requests[q % segment_requests.size()]);
+    });
+    std::filesystem::remove(map_path);
+    if (!json_path.empty()) std::ofstream(json_path) << nlohmann::json{{"soak", r.to_json()}}.dump(2) << "\n";
+    return r.passed(soak_config) ? 0 : 1;
+  }
 
   std::printf("closed loop: each client sends its next query as soon as it has the answer\n");
   const Kind cloud{"cloud (LOCALIZE)", [&](api::Client& c, size_t i) { return c.localize(requests[i]); }, requests.size()};

@@ -86,9 +86,10 @@ EigenFeatures eigen_features(const PointCloud& points) {
   return f;
 }
 
-void describe_segments(Segments& segments, const DescriptorConfig& config) {
+void describe_segments(Segments& segments, const DescriptorConfig& config, const Deadline& deadline) {
   config.validate();
   for (Segment& segment : segments) {
+    if (deadline.passed()) return;
     if (!segment.points.empty() && segment.centroid.isZero(0.0f)) {
       segment.centroid = mean_of(segment.points);
     }

@@ -126,6 +126,10 @@ float confidence_of(size_t support, int min_support, float fitness) {
   return static_cast<float>((1.0 - std::exp(-extra / 3.0)) * fitness);
 }
 
+LocalizationResult stopped(LocalizationResult r, const char* when) {
+  return refuse(std::move(r), Refusal::kDeadlinePassed, std::string("the query's deadline passed ") + when);
+}
+
 void check_prior(const PosePrior* prior) {
   if (prior && !(prior->radius_m > 0.0 && std::isfinite(prior->radius_m) && prior->T_map_query.matrix().allFinite() &&
                  prior->max_rotation_deg >= 0.0 && std::isfinite(prior->max_rotation_deg)))
@@ -177,6 +181,7 @@ const char* to_string(Refusal refusal) {
     case Refusal::kAmbiguous: return "ambiguous";
     case Refusal::kSurfacesDisagree: return "surfaces_disagree";
     case Refusal::kLowConfidence: return "low_confidence";
+    case Refusal::kDeadlinePassed: return "deadline_passed";
   }
   return "unknown";
 }
@@ -217,7 +222,7 @@ void LocalizerConfig::validate() const {
 
 Segments extract_segments(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
                           const SegmentationConfig& config, const std::vector<uint32_t>* labels,
-                          ModuleTimings* timings) {
+                          ModuleTimings* timings, const Deadline& deadline) {
   ModuleTimings local;
   ModuleTimings& t = timings ? *timings : local;
   Stopwatch clock;
@@ -225,12 +230,13 @@ Segments extract_segments(const PointCloud& cloud, const Eigen::Vector3f& sensor
   const PointCloud voxels =
       voxel_filter(cloud, config.voxel, labels, labels ? &voxel_labels : nullptr);
   t.voxel_ms = clock.lap();
-  return extract_segments_from_voxels(voxels, sensor_position, config, labels ? &voxel_labels : nullptr, &t);
+  if (deadline.passed()) return {};
+  return extract_segments_from_voxels(voxels, sensor_position, config, labels ? &voxel_labels : nullptr, &t, deadline);
 }
 
 Segments extract_segments_from_voxels(const PointCloud& voxels, const Eigen::Vector3f& sensor_position,
                                       const SegmentationConfig& config, const std::vector<uint32_t>* voxel_labels,
-                                      ModuleTimings* timings) {
+                                      ModuleTimings* timings, const Deadline& deadline) {
   ModuleTimings local;
   ModuleTimings& t = timings ? *timings : local;
   Stopwatch clock;
@@ -238,9 +244,11 @@ Segments extract_segments_from_voxels(const PointCloud& voxels, const Eigen::Vec
   const PointCloud foreground = remove_ground(voxels, config.ground, sensor_position, voxel_labels,
                                               voxel_labels ? &foreground_labels : nullptr);
   t.ground_ms = clock.lap();
+  if (deadline.passed()) return {};
   Segments segments = segment_cloud(foreground, config.segmenter, voxel_labels ? &foreground_labels : nullptr);
   t.segment_ms = clock.lap();
-  describe_segments(segments, config.descriptors);
+  if (deadline.passed()) return {};
+  describe_segments(segments, config.descriptors, deadline);
   t.describe_ms = clock.lap();
   return segments;
 }
@@ -261,19 +269,26 @@ Localizer::Localizer(const LocalizerConfig& config, Segments targets,
 }
 
 LocalizationResult Localizer::localize(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
-                                       CloudKind kind, const PosePrior* prior) const {
+                                       CloudKind kind, const PosePrior* prior, const Deadline& deadline) const {
   check_prior(prior);
+  if (deadline.passed()) return stopped({}, "before segmentation");  // it waited past it
   ModuleTimings timings;
   Stopwatch clock;
   Segments query = kind == CloudKind::kVoxelized
-                       ? extract_segments_from_voxels(cloud, sensor_position, config_.segmentation, nullptr, &timings)
-                       : extract_segments(cloud, sensor_position, config_.segmentation, nullptr, &timings);
+                       ? extract_segments_from_voxels(cloud, sensor_position, config_.segmentation, nullptr, &timings, deadline)
+                       : extract_segments(cloud, sensor_position, config_.segmentation, nullptr, &timings, deadline);
   timings.total_ms = clock.lap();
-  return localize_segments(std::move(query), sensor_position, prior, timings);
+  if (deadline.passed()) {  // the segments may be incomplete: never match them
+    LocalizationResult r;
+    r.timings = timings;
+    return stopped(std::move(r), "during segmentation");
+  }
+  return localize_segments(std::move(query), sensor_position, prior, timings, deadline);
 }
 
 LocalizationResult Localizer::localize_segments(Segments query, const Eigen::Vector3f& sensor_position,
-                                                const PosePrior* prior, const ModuleTimings& timings) const {
+                                                const PosePrior* prior, const ModuleTimings& timings,
+                                                const Deadline& deadline) const {
   check_prior(prior);
   LocalizationResult r;
   r.timings = timings;
@@ -286,6 +301,7 @@ LocalizationResult Localizer::localize_segments(Segments query, const Eigen::Vec
   const int min_inliers = config_.verification.min_inliers;
   r.query = std::move(query);
   r.query_segments = r.query.size();
+  if (deadline.passed()) return finish(stopped(std::move(r), "before retrieval"));
   if (targets_.empty()) return finish(refuse(std::move(r), Refusal::kEmptyMap, "the map has no segments"));
   if (r.query.size() < static_cast<size_t>(min_inliers))
     return finish(refuse(std::move(r), Refusal::kTooFewSegments, "only " + std::to_string(r.query.size()) +
@@ -299,12 +315,15 @@ LocalizationResult Localizer::localize_segments(Segments query, const Eigen::Vec
             : retrieve_candidates(r.query, index_, config_.retrieval);
   r.candidates = candidates.size();
   r.timings.retrieve_ms = clock.lap();
+  if (deadline.passed()) return finish(stopped(std::move(r), "during retrieval"));
   const Matches matches = filter_matches(r.query, targets_, candidates, config_.matcher, classifier_.get());
   r.matches = matches.size();
   r.timings.classify_ms = clock.lap();
+  if (deadline.passed()) return finish(stopped(std::move(r), "during classification"));
   // Paper III-E: geometric verification on the segment centroids.
-  VerificationResult v = verify_matches(r.query, targets_, matches, config_.verification);
+  VerificationResult v = verify_matches(r.query, targets_, matches, config_.verification, deadline);
   r.timings.verify_ms = clock.lap();
+  if (deadline.passed()) return finish(stopped(std::move(r), "during verification"));
   if (!v.found)
     return finish(refuse(std::move(r), Refusal::kNoConsistentMatches, "no geometrically consistent set of " + std::to_string(min_inliers) +
                                            " matches among " + std::to_string(matches.size())));
@@ -331,12 +350,14 @@ LocalizationResult Localizer::localize_segments(Segments query, const Eigen::Vec
     return finish(refuse(std::move(r), Refusal::kAmbiguous, "ambiguous: two distinct poses are supported by " + std::to_string(r.support) +
                                            " and " + std::to_string(r.runner_up_support) + " query segments"));
   r.refine_fitness = 1.0f;
+  if (deadline.passed()) return finish(stopped(std::move(r), "during ranking"));
   if (config_.refine_pose) {
     const size_t stride = segment_point_stride(r.query, static_cast<size_t>(config_.refine.max_segment_points));
     const RefineResult refined = refine_alignment(gather(r.query, ranked.support.pairs, true, stride),
                                                   gather(targets_, ranked.support.pairs, false, 1, points_.get()), r.T_map_query,
                                                   config_.refine);
     r.timings.refine_ms = clock.lap();
+    if (deadline.passed()) return finish(stopped(std::move(r), "during refinement"));
     r.refine_fitness = refined.fitness;
     r.refine_rmse_m = refined.rmse_m;
     if (refined.fitness < floors.min_fitness)

@@ -123,7 +123,7 @@ void keep_distinct(std::vector<Fit>& kept, Fit fit, size_t max_kept, const Vec3&
 // precision at the millimetre level for maps kilometres from their origin. The graph and the
 // degrees are the same as from testing every pair.
 void build_consistency(const Points& q, const Points& t, const Matches& candidates, float res, Graph& graph,
-                       std::vector<int>& degree) {
+                       std::vector<int>& degree, const Deadline& deadline) {
   const size_t n = q.size();
   Vec3 q_mean = Vec3::Zero(), t_mean = Vec3::Zero();
   Vec3 q_lo = q[0], q_hi = q[0];
@@ -193,8 +193,10 @@ void build_consistency(const Points& q, const Points& t, const Matches& candidat
       strip[dx + 1][0] = lower(base - 1);
       strip[dx + 1][1] = lower(base + 2);
     }
-    for (size_t p = cell_begin; p < cell_end; ++p)
+    for (size_t p = cell_begin; p < cell_end; ++p) {
+      if (p % 256 == 0 && deadline.passed()) return;  // the graph is incomplete: the caller gives up
       for (const auto& s : strip) test_range(p, std::max(s[0], p + 1), s[1]);
+    }
     cell_begin = cell_end;
   }
 }
@@ -224,7 +226,8 @@ void grow_clique(const Graph& graph, int s, const std::vector<int>& rank, std::v
 }  // namespace
 
 VerificationResult verify_matches(const Segments& queries, const Segments& targets,
-                                  const Matches& candidates, const VerificationConfig& config) {
+                                  const Matches& candidates, const VerificationConfig& config,
+                                  const Deadline& deadline) {
   config.validate();
   const size_t n = candidates.size();
   const size_t min_inliers = static_cast<size_t>(config.min_inliers);
@@ -249,7 +252,8 @@ VerificationResult verify_matches(const Segments& queries, const Segments& targe
   const double res = config.resolution_m;
   Graph graph(n);
   std::vector<int> degree(n, 0);
-  build_consistency(q, t, candidates, static_cast<float>(res), graph, degree);
+  build_consistency(q, t, candidates, static_cast<float>(res), graph, degree, deadline);
+  if (deadline.passed()) return result;
 
   // Seeds and growth order: most-connected first (ties by candidate order) - deterministic.
   std::vector<int> order(n);
@@ -280,6 +284,7 @@ VerificationResult verify_matches(const Segments& queries, const Segments& targe
   for (size_t k = 0; k < n; ++k) rank[order[k]] = static_cast<int>(k);
   std::vector<uint64_t> mask;
   for (int s : seeds) {
+    if (deadline.passed()) return result;
     const size_t reach = static_cast<size_t>(degree[s]) + 1;
     if (in_kept[s] || reach < min_inliers || reach <= smallest_kept()) continue;
     grow_clique(graph, s, rank, clique, neighbours, mask);

@@ -59,6 +59,11 @@ int main(int argc, char** argv) {
   app.add_option("--token-file", token_file, "file holding the shared-secret token clients must send first");
   app.add_option("--max-frame-mb", max_frame_mb, "largest accepted frame payload (MiB)")->capture_default_str()->check(CLI::Range(0.001, 4095.0));
   app.add_option("--read-timeout-s", config.read_timeout_s, "drop a connection idle or stalled this long")->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--request-timeout-s", config.request_timeout_s,
+                 "answer ERROR REQUEST_TIMEOUT to a localization not done this long after it arrived, and free its "
+                 "worker (0 = no limit)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1e6));
   app.add_option("--max-connections", config.max_connections, "connections served at once")->capture_default_str()->check(CLI::PositiveNumber);
   app.add_option("--stats-interval-s", config.stats_interval_s, "counters line period (0 = none)")->capture_default_str();
   std::string map_points = "lazy";

@@ -25,7 +25,7 @@ struct Handled {
   std::vector<uint8_t> reply;
   std::string detail;       // for the log line
   std::string status = "ok";
-  bool is_localize = false, localized = false, error = false;
+  bool is_localize = false, localized = false, error = false, timed_out = false;
   bool close_after = false;
 };
 
@@ -72,15 +72,18 @@ std::optional<api::ErrorReply> refuse(const LoadedMap& map, const api::LocalizeS
   return refuse_segments(map, r);
 }
 
-api::LocalizeReply localize(const LoadedMap& map, const api::LocalizeRequest& r) { return localize_request(map, r); }
+Outcome localize(const LoadedMap& map, const api::LocalizeRequest& r, const Deadline& deadline) {
+  return serve_localize(map, r, deadline);
+}
 // The segments move into the localizer (the request is not read again).
-api::LocalizeReply localize(const LoadedMap& map, api::LocalizeSegmentsRequest& r) {
-  return localize_segments_request(map, std::move(r));
+Outcome localize(const LoadedMap& map, api::LocalizeSegmentsRequest& r, const Deadline& deadline) {
+  return serve_localize_segments(map, std::move(r), deadline);
 }
 
 // LOCALIZE or LOCALIZE_SEGMENTS: decode, check, localize on the worker pool, reply.
 template <typename Request>
 Handled handle_localize(Server::State& s, const std::vector<uint8_t>& payload, TimePoint start) {
+  const TimePoint received = std::chrono::steady_clock::now();
   Request request;
   const DecodeStatus d = api::decode(payload.data(), payload.size(), s.limits, request);
   std::optional<api::ErrorReply> refused;
@@ -100,12 +103,24 @@ Handled handle_localize(Server::State& s, const std::vector<uint8_t>& payload, T
   // The localization runs on the bounded worker pool; this connection thread waits for it.
   // The task is shared with the pool: the worker may still be inside it when get() returns.
   // From here on only the worker touches `request`.
-  auto task = std::make_shared<std::packaged_task<api::LocalizeReply()>>(
-      [&s, &request] { return localize(*s.map, request); });
-  std::future<api::LocalizeReply> result = task->get_future();
+  // The deadline counts from the moment the frame was read whole, so a request that waited for
+  // a worker past it is answered at once without running (docs/protocol.md 9).
+  const Deadline deadline = Deadline::after_s(s.config.request_timeout_s, received);
+  auto task = std::make_shared<std::packaged_task<Outcome()>>(
+      [&s, &request, deadline] { return localize(*s.map, request, deadline); });
+  std::future<Outcome> result = task->get_future();
   s.pool->submit([task] { (*task)(); });
   try {
-    api::LocalizeReply reply = result.get();
+    Outcome outcome = result.get();
+    if (const api::ErrorReply* e = std::get_if<api::ErrorReply>(&outcome)) {
+      const std::string keep = h.detail;
+      h = error_reply(e->code, e->message, false);
+      h.is_localize = true;
+      h.timed_out = e->code == ErrorCode::kRequestTimeout;
+      h.detail = keep;
+      return h;
+    }
+    api::LocalizeReply& reply = std::get<api::LocalizeReply>(outcome);
     reply.timings.server_total =
         std::chrono::duration<float, std::milli>(std::chrono::steady_clock::now() - start).count();
     h.reply = api::encode(reply);
@@ -221,7 +236,7 @@ void serve_connection(Server::State& s, api::Socket socket, const std::string& p
     // Counted before the reply leaves: a client that reads its reply and then asks for the
     // counters must see its own request in them.
     const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    s.stats.record(h.is_localize, h.localized, h.error, ms);
+    s.stats.record(h.is_localize, h.localized, h.error, h.timed_out, ms);
     r = api::write_all(socket.fd(), h.reply.data(), h.reply.size(), api::deadline_after(s.config.write_timeout_s));
     const char* type_name = d == DecodeStatus::kOk ? api::to_string(static_cast<MessageType>(header.type)) : "FRAME";
     log_request(s, peer, type_name, h, ms);

@@ -166,16 +166,35 @@ api::LocalizeReply reply_of(const LoadedMap& map, const LocalizationResult& r, u
 
 }  // namespace
 
-api::LocalizeReply localize_request(const LoadedMap& map, const api::LocalizeRequest& request) {
-  const auto start = std::chrono::steady_clock::now();
+namespace {
+
+// The localizer's result for a request; the reply is built by outcome_of.
+LocalizationResult localize_cloud(const LoadedMap& map, const api::LocalizeRequest& request, const Deadline& deadline) {
   const PointCloud cloud =
       crop_cylinder(request.points, request.sensor_position_local, map.config.local_cloud.radius_m);
   const CloudKind kind = (request.flags & api::kFlagVoxelized) ? CloudKind::kVoxelized : CloudKind::kRaw;
-  const PriorFields fields = prior_fields(request);
-  const std::optional<PosePrior> prior = pose_prior_of(fields);
-  const LocalizationResult r =
-      map.localizer->localize(cloud, request.sensor_position_local.cast<float>(), kind, prior ? &*prior : nullptr);
-  return reply_of(map, r, request.request_id, fields, start);
+  const std::optional<PosePrior> prior = pose_prior_of(prior_fields(request));
+  return map.localizer->localize(cloud, request.sensor_position_local.cast<float>(), kind, prior ? &*prior : nullptr,
+                                 deadline);
+}
+
+Outcome outcome_of(const LoadedMap& map, const LocalizationResult& r, uint64_t request_id, const PriorFields& prior,
+                   std::chrono::steady_clock::time_point start) {
+  if (r.refusal == Refusal::kDeadlinePassed)
+    return api::ErrorReply{api::ErrorCode::kRequestTimeout, "request timed out: " + r.reason};
+  return reply_of(map, r, request_id, prior, start);
+}
+
+}  // namespace
+
+api::LocalizeReply localize_request(const LoadedMap& map, const api::LocalizeRequest& request) {
+  const auto start = std::chrono::steady_clock::now();
+  return reply_of(map, localize_cloud(map, request, Deadline::never()), request.request_id, prior_fields(request), start);
+}
+
+Outcome serve_localize(const LoadedMap& map, const api::LocalizeRequest& request, const Deadline& deadline) {
+  const auto start = std::chrono::steady_clock::now();
+  return outcome_of(map, localize_cloud(map, request, deadline), request.request_id, prior_fields(request), start);
 }
 
 std::optional<api::ErrorReply> refuse_segments(const LoadedMap& map, const api::LocalizeSegmentsRequest& request) {
@@ -194,13 +213,17 @@ std::optional<api::ErrorReply> refuse_segments(const LoadedMap& map, const api::
   return std::nullopt;
 }
 
-api::LocalizeReply localize_segments_request(const LoadedMap& map, api::LocalizeSegmentsRequest request) {
+Outcome serve_localize_segments(const LoadedMap& map, api::LocalizeSegmentsRequest request, const Deadline& deadline) {
   const auto start = std::chrono::steady_clock::now();
   const PriorFields fields = prior_fields(request);
   const std::optional<PosePrior> prior = pose_prior_of(fields);
   const LocalizationResult r = map.localizer->localize_segments(
-      std::move(request.segments), request.sensor_position_local.cast<float>(), prior ? &*prior : nullptr);
-  return reply_of(map, r, request.request_id, fields, start);
+      std::move(request.segments), request.sensor_position_local.cast<float>(), prior ? &*prior : nullptr, {}, deadline);
+  return outcome_of(map, r, request.request_id, fields, start);
+}
+
+api::LocalizeReply localize_segments_request(const LoadedMap& map, api::LocalizeSegmentsRequest request) {
+  return std::get<api::LocalizeReply>(serve_localize_segments(map, std::move(request), Deadline::never()));
 }
 
 }  // namespace server

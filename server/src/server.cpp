@@ -19,13 +19,14 @@
 namespace segmatch {
 namespace server {
 
-void Stats::record(bool is_localize, bool localized, bool error, double latency_ms) {
+void Stats::record(bool is_localize, bool localized, bool error, bool timed_out, double latency_ms) {
   std::lock_guard<std::mutex> lock(mutex_);
   ++counters_.requests;
   ++period_requests_;
   counters_.localize_requests += is_localize;
   counters_.localized += localized;
   counters_.errors += error;
+  counters_.timed_out += timed_out;
   if (is_localize && !error) period_latencies_ms_.push_back(latency_ms);
 }
 
@@ -54,7 +55,7 @@ std::string Stats::period_line() {
   }
   std::ostringstream s;
   s << "stats: requests=" << counters_.requests << " (+" << period_requests_ << ") localize=" << counters_.localize_requests
-    << " localized=" << counters_.localized << " errors=" << counters_.errors << " connections=" << counters_.connections
+    << " localized=" << counters_.localized << " errors=" << counters_.errors << " timed_out=" << counters_.timed_out << " connections=" << counters_.connections
     << " refused=" << counters_.refused_connections << " localize_p50_ms=" << p50 << " (period)";
   l.clear();
   period_requests_ = 0;

@@ -19,7 +19,7 @@ namespace server {
 // Counters and the latencies of the LOCALIZE requests of the current stats period.
 class Stats {
  public:
-  void record(bool is_localize, bool localized, bool error, double latency_ms);
+  void record(bool is_localize, bool localized, bool error, bool timed_out, double latency_ms);
   void received();
   void connection(bool refused);
   ServerCounters counters() const;

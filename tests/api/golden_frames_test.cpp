@@ -43,7 +43,9 @@ TEST(GoldenFrames, Revision1LocalizeWithPriorDecodesAndReencodesByteForByte) {
   ASSERT_EQ(again.size(), bytes.size());
   constexpr size_t kPriorQuaternion = kHeaderBytes + 68;  // 4 x f64 (docs/protocol.md 5.4)
   for (size_t i = 0; i < bytes.size(); ++i)
-    if (i < kPriorQuaternion || i >= kPriorQuaternion + 32) EXPECT_EQ(again[i], bytes[i]) << "byte " << i;
+    if (i < kPriorQuaternion || i >= kPriorQuaternion + 32) {
+      EXPECT_EQ(again[i], bytes[i]) << "byte " << i;
+    }
   for (size_t k = 0; k < 4; ++k) {
     double a, b;
     std::memcpy(&a, &bytes[kPriorQuaternion + 8 * k], 8);
@@ -61,4 +63,16 @@ TEST(GoldenFrames, Revision1GlobalLocalizeDecodesAndReencodesByteForByte) {
   EXPECT_EQ(r.point_stride, 3u);
   ASSERT_EQ(r.points.size(), 1u);
   EXPECT_EQ(encode(r), bytes);
+}
+
+// Revision 4's REQUEST_TIMEOUT, as a server sends it: an ERROR frame like every other (rule 6),
+// so revision 1's decoder reads it as a failed request with code 16 and its message.
+TEST(GoldenFrames, Revision4RequestTimeoutErrorDecodesAndReencodesByteForByte) {
+  const std::vector<uint8_t> bytes = golden("error_request_timeout_v4.bin");
+  ErrorReply e;
+  ASSERT_EQ(decode_frame(bytes, Limits{}, e), DecodeStatus::kOk);
+  EXPECT_EQ(e.code, ErrorCode::kRequestTimeout);
+  EXPECT_EQ(static_cast<int>(e.code), 16);
+  EXPECT_EQ(e.message, "request timed out: the query's deadline passed during segmentation");
+  EXPECT_EQ(encode(e), bytes);
 }

@@ -184,7 +184,9 @@ TEST(Protocol, RejectsEveryTruncationAndTrailingBytes) {
     std::vector<uint8_t> longer = full;
     longer.push_back(0);
     PingRequest ping;
-    if (h.type == static_cast<uint16_t>(MessageType::kPing)) EXPECT_EQ(decode_frame(longer, kLimits, ping), DecodeStatus::kTrailingBytes);
+    if (h.type == static_cast<uint16_t>(MessageType::kPing)) {
+      EXPECT_EQ(decode_frame(longer, kLimits, ping), DecodeStatus::kTrailingBytes);
+    }
   }
   PingRequest ping;
   std::vector<uint8_t> f = encode(PingRequest{5});

@@ -74,6 +74,9 @@ enum class ErrorCode : uint16_t {
   // Revision 3: LOCALIZE_SEGMENTS computed with other parameters than the map's (digest), or
   // without a descriptor the map's matcher needs. The connection stays usable.
   kParametersMismatch = 15,
+  // The request ran past the server's --request-timeout-s (counted from its arrival, queueing
+  // included); its worker stopped and took the next request. The connection stays usable.
+  kRequestTimeout = 16,
 };
 ErrorCode error_code_for(DecodeStatus status);
 // Whether the byte stream is still in sync after this decode failure (the whole frame could

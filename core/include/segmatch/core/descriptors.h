@@ -6,6 +6,7 @@
 // triples are drawn from segmatch::Rng seeded by the caller, never from rand() or the clock.
 #pragma once
 
+#include "segmatch/core/deadline.h"
 #include "segmatch/core/segment.h"
 #include "segmatch/core/types.h"
 
@@ -59,6 +60,8 @@ EsfDescriptor esf_descriptor(const PointCloud& points, int samples, uint64_t see
 // set means "computed"; degenerate segments get all-zero descriptors). A zero centroid of a
 // non-empty segment is recomputed as the mean of its points. Every segment uses
 // config.esf_seed, so a segment's descriptors depend only on its points. Validates `config`.
-void describe_segments(Segments& segments, const DescriptorConfig& config);
+// Once `deadline` has passed, the remaining segments are left undescribed (the caller sees
+// deadline.passed() and drops the result).
+void describe_segments(Segments& segments, const DescriptorConfig& config, const Deadline& deadline = {});
 
 }  // namespace segmatch

@@ -79,6 +79,7 @@ enum class Refusal {
   kAmbiguous,            // another distinct pose is supported almost as well
   kSurfacesDisagree,     // refinement fitness below min_refine_fitness
   kLowConfidence,        // confidence below min_confidence
+  kDeadlinePassed,       // the query's deadline passed before it was answered (Deadline)
 };
 const char* to_string(Refusal refusal);
 
@@ -108,10 +109,11 @@ struct LocalizationResult {
 // Voxel grid, ground removal, segmentation and description of one cloud. sensor_position
 // is in the cloud's frame (the height threshold needs it). Labels, if given, mark each
 // segment with its majority ground-truth label.
+// Once `deadline` has passed, the stages still to run are skipped (the caller checks it).
 Segments extract_segments(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
                           const SegmentationConfig& config,
                           const std::vector<uint32_t>* labels = nullptr,
-                          ModuleTimings* timings = nullptr);
+                          ModuleTimings* timings = nullptr, const Deadline& deadline = {});
 
 // The same without the voxel grid: ground removal, segmentation and description of an
 // already voxelized cloud (voxel_filter's output, e.g. VoxelAccumulator::crop) with its
@@ -119,7 +121,7 @@ Segments extract_segments(const PointCloud& cloud, const Eigen::Vector3f& sensor
 Segments extract_segments_from_voxels(const PointCloud& voxels, const Eigen::Vector3f& sensor_position,
                                       const SegmentationConfig& config,
                                       const std::vector<uint32_t>* voxel_labels = nullptr,
-                                      ModuleTimings* timings = nullptr);
+                                      ModuleTimings* timings = nullptr, const Deadline& deadline = {});
 
 // The stride s with which every segment keeps every s-th of its points so that at most
 // max_points remain in all (1 when they already fit or max_points is 0): RefineConfig's
@@ -180,8 +182,10 @@ class Localizer {
   // With CloudKind::kVoxelized the cloud is already voxel_filter'ed with
   // config().segmentation.voxel (e.g. a vehicle's VoxelAccumulator): the voxel grid is skipped.
   // With a prior, only poses within prior->radius_m of it are considered (see PosePrior).
+  // Past `deadline`, the query stops and is refused with Refusal::kDeadlinePassed.
   LocalizationResult localize(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
-                              CloudKind kind = CloudKind::kRaw, const PosePrior* prior = nullptr) const;
+                              CloudKind kind = CloudKind::kRaw, const PosePrior* prior = nullptr,
+                              const Deadline& deadline = {}) const;
 
   // The same from the query's described segments (query frame), as extract_segments gives
   // them: everything after description (retrieval, classification, verification, ranking,
@@ -189,7 +193,8 @@ class Localizer {
   // its own cloud with the map's SegmentationConfig gets the server's answer. `timings`
   // carries the caller's voxel..describe times into the result.
   LocalizationResult localize_segments(Segments query, const Eigen::Vector3f& sensor_position,
-                                       const PosePrior* prior = nullptr, const ModuleTimings& timings = {}) const;
+                                       const PosePrior* prior = nullptr, const ModuleTimings& timings = {},
+                                       const Deadline& deadline = {}) const;
 
   const Segments& targets() const { return targets_; }
   const LocalizerConfig& config() const { return config_; }

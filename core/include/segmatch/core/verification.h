@@ -10,6 +10,7 @@
 // T_target_query maps query-frame points into the target (map) frame.
 #pragma once
 
+#include "segmatch/core/deadline.h"
 #include "segmatch/core/segment.h"
 #include "segmatch/core/types.h"
 
@@ -57,8 +58,11 @@ struct VerificationResult {
 // target segment), then the transform. found = false if fewer than min_inliers remain after
 // dropping members whose residual under the fitted transform exceeds resolution_m. The other
 // distinct clusters of at least min_inliers are returned as further hypotheses.
+// Once `deadline` has passed (checked while the consistency graph is built and between seeds,
+// the O(n^2) part), it gives up: found = false, and the caller sees the deadline passed.
 VerificationResult verify_matches(const Segments& queries, const Segments& targets,
-                                  const Matches& candidates, const VerificationConfig& config);
+                                  const Matches& candidates, const VerificationConfig& config,
+                                  const Deadline& deadline = {});
 
 struct RefineConfig {
   int max_iterations = 30;

@@ -18,6 +18,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <variant>
 #include <vector>
 
 namespace segmatch {
@@ -70,6 +71,12 @@ std::optional<api::ErrorReply> refuse_segments(const LoadedMap& map, const api::
 // description, on segments accepted by refuse_segments.
 // Takes the request by value: a caller done with it moves its segments in.
 api::LocalizeReply localize_segments_request(const LoadedMap& map, api::LocalizeSegmentsRequest request);
+
+// What the server answers a request: its reply, or ERROR kRequestTimeout when `deadline`
+// passed before the localizer finished (it stops between stages: core/deadline.h).
+using Outcome = std::variant<api::LocalizeReply, api::ErrorReply>;
+Outcome serve_localize(const LoadedMap& map, const api::LocalizeRequest& request, const Deadline& deadline);
+Outcome serve_localize_segments(const LoadedMap& map, api::LocalizeSegmentsRequest request, const Deadline& deadline);
 
 }  // namespace server
 }  // namespace segmatch

@@ -7,7 +7,8 @@
 // only ever holds its own connection thread: it is dropped after read_timeout_s without a
 // byte, and it never occupies a localization worker while it trickles a frame in (frames are
 // read whole before they are queued). Each connection has at most one request in flight, so
-// the queue is bounded by max_connections.
+// the queue is bounded by max_connections. A request that runs past request_timeout_s is
+// stopped by its worker and answered with ERROR REQUEST_TIMEOUT.
 //
 // stop(): the accept thread stops, idle connections close, every request already received is
 // localized and answered, then all threads are joined.
@@ -31,6 +32,10 @@ struct ServerConfig {
   size_t max_frame_bytes = 64u << 20;        // payload limit; larger frames: ERROR, close
   double read_timeout_s = 10.0;              // idle connection / frame-in-progress limit
   double write_timeout_s = 10.0;             // a client that does not read its reply is dropped
+  // A LOCALIZE / LOCALIZE_SEGMENTS not answered this long after it was read (queueing for a
+  // worker included) gets ERROR REQUEST_TIMEOUT, and its worker stops (between the localizer's
+  // stages, core/deadline.h) and takes the next request. <= 0: no limit.
+  double request_timeout_s = 30.0;
   int max_connections = 64;
   double stats_interval_s = 10.0;            // periodic counters line; <= 0 = none
   bool log_requests = true;                  // one line per request
@@ -44,6 +49,7 @@ struct ServerCounters {
   uint64_t localize_requests = 0;
   uint64_t localized = 0;
   uint64_t errors = 0;          // ERROR replies sent
+  uint64_t timed_out = 0;       // of which REQUEST_TIMEOUT (request_timeout_s)
   uint64_t connections = 0;     // accepted and served
   uint64_t refused_connections = 0;  // over max_connections
 };
