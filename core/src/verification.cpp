@@ -25,6 +25,7 @@ void VerificationConfig::validate() const {
     throw std::invalid_argument("VerificationConfig.max_iterations must be > 0");
   if (max_hypotheses < 1)
     throw std::invalid_argument("VerificationConfig.max_hypotheses must be >= 1");
+  if (max_candidates < 0) throw std::invalid_argument("VerificationConfig.max_candidates must be >= 0 (0: no bound)");
   if (!(distinct_translation_m > 0.f) || !(distinct_rotation_deg > 0.f))
     throw std::invalid_argument("VerificationConfig.distinct_translation_m and distinct_rotation_deg must be > 0");
 }
@@ -223,12 +224,29 @@ void grow_clique(const Graph& graph, int s, const std::vector<int>& rank, std::v
   }
 }
 
+// The `max_count` candidates with the highest scores (ties: the earlier), in candidate order.
+Matches best_scored(const Matches& candidates, size_t max_count) {
+  std::vector<size_t> order(candidates.size());
+  std::iota(order.begin(), order.end(), size_t{0});
+  std::stable_sort(order.begin(), order.end(),
+                   [&](size_t a, size_t b) { return candidates[a].score > candidates[b].score; });
+  order.resize(max_count);
+  std::sort(order.begin(), order.end());
+  Matches kept;
+  kept.reserve(max_count);
+  for (size_t i : order) kept.push_back(candidates[i]);
+  return kept;
+}
+
 }  // namespace
 
 VerificationResult verify_matches(const Segments& queries, const Segments& targets,
-                                  const Matches& candidates, const VerificationConfig& config,
+                                  const Matches& all_candidates, const VerificationConfig& config,
                                   const Deadline& deadline) {
   config.validate();
+  const size_t bound = static_cast<size_t>(config.max_candidates);
+  const Matches bounded = bound > 0 && all_candidates.size() > bound ? best_scored(all_candidates, bound) : Matches{};
+  const Matches& candidates = bounded.empty() ? all_candidates : bounded;
   const size_t n = candidates.size();
   const size_t min_inliers = static_cast<size_t>(config.min_inliers);
   VerificationResult result;

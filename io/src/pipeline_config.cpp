@@ -95,6 +95,7 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("max_hypotheses", l.verification.max_hypotheses);
   v("distinct_translation_m", l.verification.distinct_translation_m);
   v("distinct_rotation_deg", l.verification.distinct_rotation_deg);
+  v("max_candidates", l.verification.max_candidates);
   v.section("refine");
   v("max_iterations", l.refine.max_iterations);
   v("max_correspondence_m", l.refine.max_correspondence_m);

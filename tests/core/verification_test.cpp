@@ -154,6 +154,40 @@ TEST(VerificationTest, FindsTheTrueSetAmongThousandsOfCandidatesOnAWideMap) {
   }
 }
 
+// max_candidates: beyond it only the best-scored candidates are verified, which is the same as
+// verifying that subset (an oracle: the subset given directly); at or under it nothing changes.
+TEST(VerificationTest, BeyondMaxCandidatesTheBestScoredAreVerified) {
+  Scene s = make_scene(10, 400, 0.02, 31);
+  Rng rng(32);
+  for (Match& m : s.candidates) m.score = s.truth.count({m.query, m.target}) ? 0.9f : static_cast<float>(rng.uniform(0.0, 0.8));
+  VerificationConfig bounded;
+  bounded.max_candidates = 60;
+  const VerificationResult r = verify_matches(s.queries, s.targets, s.candidates, bounded);
+  ASSERT_TRUE(r.found);
+  EXPECT_EQ(as_set(r.inliers), s.truth);
+  // The oracle: the 60 best by score, in candidate order (ties: the earlier first).
+  std::vector<size_t> order(s.candidates.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return s.candidates[a].score > s.candidates[b].score; });
+  order.resize(60);
+  std::sort(order.begin(), order.end());
+  Matches subset;
+  for (size_t i : order) subset.push_back(s.candidates[i]);
+  VerificationConfig unbounded;
+  unbounded.max_candidates = 0;
+  const VerificationResult oracle = verify_matches(s.queries, s.targets, subset, unbounded);
+  ASSERT_EQ(r.hypotheses.size(), oracle.hypotheses.size());
+  EXPECT_TRUE(r.T_target_query.isApprox(oracle.T_target_query, 0.0));
+  for (size_t h = 0; h < r.hypotheses.size(); ++h) EXPECT_EQ(as_set(r.hypotheses[h].inliers), as_set(oracle.hypotheses[h].inliers));
+  // At the bound (410 candidates, bound 410) and without one, the same answer.
+  VerificationConfig at;
+  at.max_candidates = static_cast<int>(s.candidates.size());
+  const VerificationResult a = verify_matches(s.queries, s.targets, s.candidates, at);
+  const VerificationResult b = verify_matches(s.queries, s.targets, s.candidates, unbounded);
+  EXPECT_TRUE(a.T_target_query.isApprox(b.T_target_query, 0.0));
+  EXPECT_EQ(as_set(a.inliers), as_set(b.inliers));
+}
+
 TEST(VerificationTest, ConfigValidation) {
   VerificationConfig c;
   EXPECT_NO_THROW(c.validate());
@@ -161,6 +195,9 @@ TEST(VerificationTest, ConfigValidation) {
   EXPECT_THROW(c.validate(), std::invalid_argument);
   c = VerificationConfig{};
   c.min_inliers = 2;
+  EXPECT_THROW(c.validate(), std::invalid_argument);
+  c = VerificationConfig{};
+  c.max_candidates = -1;
   EXPECT_THROW(c.validate(), std::invalid_argument);
   const Scene s = make_scene(4, 0, 0.0, 10);
   Matches bad = s.candidates;
