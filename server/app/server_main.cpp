@@ -33,16 +33,46 @@ std::string read_token(const std::string& path) {
   return token;
 }
 
-// Blocks SIGINT/SIGTERM in every thread (they inherit the mask) so that only sigwait() in
-// main sees them; SIGPIPE is ignored (sends use MSG_NOSIGNAL anyway).
-sigset_t block_stop_signals() {
+// Blocks SIGINT/SIGTERM/SIGHUP in every thread (they inherit the mask) so that only sigwait()
+// in main sees them; SIGPIPE is ignored (sends use MSG_NOSIGNAL anyway).
+sigset_t block_signals() {
   sigset_t set;
   sigemptyset(&set);
   sigaddset(&set, SIGINT);
   sigaddset(&set, SIGTERM);
+  sigaddset(&set, SIGHUP);
   pthread_sigmask(SIG_BLOCK, &set, nullptr);
   std::signal(SIGPIPE, SIG_IGN);
   return set;
+}
+
+std::string describe(const server::LoadedMap& map, const std::string& points, double load_s) {
+  std::ostringstream s;
+  s << "map '" << map.metadata.name << "': " << map.segment_count() << " segments, matcher "
+    << (map.config.localizer.matcher.type == MatcherType::kL2 ? "l2" : "random_forest") << ", local cloud radius "
+    << map.config.local_cloud.radius_m << " m, points " << points << ", ready in " << load_s << " s";
+  return s.str();
+}
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// SIGHUP: the map file is opened and checked whole before it replaces the served one; on any
+// failure the old map keeps serving. Replace the file by renaming a new one over it (as
+// segmatch-mapbuilder writes maps): the old map's lazy point reads keep the old file open.
+void reload(server::Server& served, const std::string& path, const server::MapLoadOptions& load, const std::string& points) {
+  std::cerr << "SIGHUP: reloading " << path << " ...\n";
+  const auto t0 = std::chrono::steady_clock::now();
+  try {
+    std::shared_ptr<const server::LoadedMap> map = server::load_map(path, load);
+    for (const std::string& w : map->warnings) std::cerr << "warning: " << w << '\n';
+    const std::string what = describe(*map, points, seconds_since(t0));
+    served.replace_map(std::move(map));
+    std::cerr << "reloaded: " << what << '\n';
+  } catch (const std::exception& e) {
+    std::cerr << "reload failed, still serving map '" << served.map()->metadata.name << "': " << e.what() << '\n';
+  }
 }
 
 }  // namespace
@@ -81,23 +111,20 @@ int main(int argc, char** argv) {
   load.points = map_points == "lazy" ? server::MapPoints::kLazy : server::MapPoints::kMemory;
   load.cache_points = static_cast<size_t>(point_cache_mb * 1024 * 1024 / sizeof(Point));
   config.max_frame_bytes = static_cast<size_t>(max_frame_mb * 1024 * 1024);
-  const sigset_t stop_signals = block_stop_signals();
+  const sigset_t signals = block_signals();
   try {
     if (!token_file.empty()) config.token = read_token(token_file);
     std::cerr << "loading " << map_path << " ...\n";
     const auto load_start = std::chrono::steady_clock::now();
     std::shared_ptr<const server::LoadedMap> map = server::load_map(map_path, load);
-    const double load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - load_start).count();
+    const double load_s = seconds_since(load_start);
     for (const std::string& w : map->warnings) std::cerr << "warning: " << w << '\n';
-    std::cerr << "map '" << map->metadata.name << "': " << map->segment_count() << " segments, matcher "
-              << (map->config.localizer.matcher.type == MatcherType::kL2 ? "l2" : "random_forest") << ", local cloud radius "
-              << map->config.local_cloud.radius_m << " m" << (config.token.empty() ? "" : ", token required")
-              << ", points " << map_points << ", ready in " << load_s << " s\n";
+    std::cerr << describe(*map, map_points, load_s) << (config.token.empty() ? "" : ", token required") << '\n';
     server::Server server(config, map);
     server.start();
     std::cout << "listening on " << server.address() << std::endl;
     int signal = 0;
-    sigwait(&stop_signals, &signal);
+    while (sigwait(&signals, &signal) == 0 && signal == SIGHUP) reload(server, map_path, load, map_points);
     std::cerr << "signal " << signal << ": stopping (finishing in-flight requests)\n";
     server.stop();
     const server::ServerCounters c = server.counters();

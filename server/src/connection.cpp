@@ -88,7 +88,9 @@ Handled handle_localize(Server::State& s, const std::vector<uint8_t>& payload, T
   const DecodeStatus d = api::decode(payload.data(), payload.size(), s.limits, request);
   std::optional<api::ErrorReply> refused;
   if (d != DecodeStatus::kOk) refused = api::ErrorReply{api::error_code_for(d), api::to_string(d)};
-  if (!refused) refused = refuse(*s.map, request);
+  // The map this request is answered with, even if a reload replaces it meanwhile.
+  const std::shared_ptr<const LoadedMap> map = s.current_map();
+  if (!refused) refused = refuse(*map, request);
   if (refused) {
     Handled h = error_reply(refused->code, refused->message, false);
     h.is_localize = true;
@@ -107,7 +109,7 @@ Handled handle_localize(Server::State& s, const std::vector<uint8_t>& payload, T
   // a worker past it is answered at once without running (docs/protocol.md 9).
   const Deadline deadline = Deadline::after_s(s.config.request_timeout_s, received);
   auto task = std::make_shared<std::packaged_task<Outcome()>>(
-      [&s, &request, deadline] { return localize(*s.map, request, deadline); });
+      [map, &request, deadline] { return localize(*map, request, deadline); });
   std::future<Outcome> result = task->get_future();
   s.pool->submit([task] { (*task)(); });
   try {
@@ -155,7 +157,7 @@ Handled handle_frame(Server::State& s, const api::Header& header, const std::vec
       const DecodeStatus d = api::decode(payload.data(), payload.size(), s.limits, info);
       if (d != DecodeStatus::kOk) return error_reply(api::error_code_for(d), api::to_string(d), false);
       Handled h;
-      h.reply = api::encode(info_of(*s.map));
+      h.reply = api::encode(info_of(*s.current_map()));
       return h;
     }
     case MessageType::kLocalize:

@@ -182,6 +182,13 @@ uint16_t Server::port() const { return state_->port; }
 std::string Server::address() const { return state_->address; }
 ServerCounters Server::counters() const { return state_->stats.counters(); }
 
+void Server::replace_map(std::shared_ptr<const LoadedMap> map) {
+  if (!map || !map->localizer) throw std::invalid_argument("Server::replace_map needs a loaded map");
+  std::atomic_store(&state_->map, std::shared_ptr<const LoadedMap>(std::move(map)));
+}
+
+std::shared_ptr<const LoadedMap> Server::map() const { return state_->current_map(); }
+
 void Server::stop() {
   State& s = *state_;
   {

@@ -9,6 +9,7 @@
 #include <atomic>
 #include <condition_variable>
 #include <list>
+#include <memory>
 #include <mutex>
 #include <thread>
 #include <vector>
@@ -40,7 +41,10 @@ struct ConnectionThread {
 
 struct Server::State {
   ServerConfig config;
+  // Read and replaced with std::atomic_load / atomic_store (Server::replace_map): a request
+  // holds its own reference, so it finishes on the map it started with.
   std::shared_ptr<const LoadedMap> map;
+  std::shared_ptr<const LoadedMap> current_map() const { return std::atomic_load(&map); }
   api::Limits limits;
   api::Socket listener;
   uint16_t port = 0;

@@ -69,6 +69,11 @@ class Server {
   // Graceful stop as described above; idempotent, thread-safe. Returns when all threads ended.
   void stop();
   ServerCounters counters() const;
+  // Serves `map` from the next request on (a reload: SIGHUP in segmatch-server). Requests
+  // already running finish on the map they started with, which lives until the last of them
+  // ends. Thread-safe. Throws std::invalid_argument for a null map.
+  void replace_map(std::shared_ptr<const LoadedMap> map);
+  std::shared_ptr<const LoadedMap> map() const;  // the map new requests get
 
   struct State;
 
