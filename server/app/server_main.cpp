@@ -1,4 +1,5 @@
 // segmatch-server: serves one segment map to many vehicles over the SGMQ protocol.
+#include <segmatch/server/log.h>
 #include <segmatch/server/server.h>
 
 #include <CLI/CLI.hpp>
@@ -29,7 +30,7 @@ std::string read_token(const std::string& path) {
   if (token.empty()) throw std::runtime_error("token file " + path + " is empty");
   struct stat st {};
   if (::stat(path.c_str(), &st) == 0 && (st.st_mode & 077))
-    std::cerr << "warning: token file " << path << " is readable by other users (chmod 600 it)\n";
+    server::log_to_stderr(server::LogLevel::kWarning, "token file " + path + " is readable by other users (chmod 600 it)");
   return token;
 }
 
@@ -45,6 +46,8 @@ sigset_t block_signals() {
   std::signal(SIGPIPE, SIG_IGN);
   return set;
 }
+
+void info(const std::string& text) { server::log_to_stderr(server::LogLevel::kInfo, text); }
 
 std::string describe(const server::LoadedMap& map, const std::string& points, double load_s) {
   std::ostringstream s;
@@ -62,16 +65,17 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 // failure the old map keeps serving. Replace the file by renaming a new one over it (as
 // segmatch-mapbuilder writes maps): the old map's lazy point reads keep the old file open.
 void reload(server::Server& served, const std::string& path, const server::MapLoadOptions& load, const std::string& points) {
-  std::cerr << "SIGHUP: reloading " << path << " ...\n";
+  info("SIGHUP: reloading " + path + " ...");
   const auto t0 = std::chrono::steady_clock::now();
   try {
     std::shared_ptr<const server::LoadedMap> map = server::load_map(path, load);
-    for (const std::string& w : map->warnings) std::cerr << "warning: " << w << '\n';
+    for (const std::string& w : map->warnings) server::log_to_stderr(server::LogLevel::kWarning, w);
     const std::string what = describe(*map, points, seconds_since(t0));
     served.replace_map(std::move(map));
-    std::cerr << "reloaded: " << what << '\n';
+    info("reloaded: " + what);
   } catch (const std::exception& e) {
-    std::cerr << "reload failed, still serving map '" << served.map()->metadata.name << "': " << e.what() << '\n';
+    server::log_to_stderr(server::LogLevel::kError,
+                          "reload failed, still serving map '" + served.map()->metadata.name + "': " + e.what());
   }
 }
 
@@ -95,6 +99,10 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1e6));
   app.add_option("--max-connections", config.max_connections, "connections served at once")->capture_default_str()->check(CLI::PositiveNumber);
+  std::string log_requests = "on";  // on|off rather than a flag: a service file says which
+  app.add_option("--log-requests", log_requests, "one log line per request: on or off")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"on", "off"}));
   app.add_option("--stats-interval-s", config.stats_interval_s, "counters line period (0 = none)")->capture_default_str();
   std::string map_points = "lazy";
   double point_cache_mb = 32.0;
@@ -107,6 +115,7 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1e6));
   CLI11_PARSE(app, argc, argv);
+  config.log_requests = log_requests == "on";
   server::MapLoadOptions load;
   load.points = map_points == "lazy" ? server::MapPoints::kLazy : server::MapPoints::kMemory;
   load.cache_points = static_cast<size_t>(point_cache_mb * 1024 * 1024 / sizeof(Point));
@@ -114,24 +123,25 @@ int main(int argc, char** argv) {
   const sigset_t signals = block_signals();
   try {
     if (!token_file.empty()) config.token = read_token(token_file);
-    std::cerr << "loading " << map_path << " ...\n";
+    info("loading " + map_path + " ...");
     const auto load_start = std::chrono::steady_clock::now();
     std::shared_ptr<const server::LoadedMap> map = server::load_map(map_path, load);
     const double load_s = seconds_since(load_start);
-    for (const std::string& w : map->warnings) std::cerr << "warning: " << w << '\n';
-    std::cerr << describe(*map, map_points, load_s) << (config.token.empty() ? "" : ", token required") << '\n';
+    for (const std::string& w : map->warnings) server::log_to_stderr(server::LogLevel::kWarning, w);
+    info(describe(*map, map_points, load_s) + (config.token.empty() ? "" : ", token required"));
     server::Server server(config, map);
     server.start();
     std::cout << "listening on " << server.address() << std::endl;
     int signal = 0;
     while (sigwait(&signals, &signal) == 0 && signal == SIGHUP) reload(server, map_path, load, map_points);
-    std::cerr << "signal " << signal << ": stopping (finishing in-flight requests)\n";
+    info("signal " + std::to_string(signal) + ": stopping (finishing in-flight requests)");
     server.stop();
     const server::ServerCounters c = server.counters();
-    std::cerr << "stopped: " << c.requests << " requests, " << c.localized << " localized, " << c.errors << " errors\n";
+    info("stopped: " + std::to_string(c.requests) + " requests, " + std::to_string(c.localized) + " localized, " +
+         std::to_string(c.errors) + " errors");
     return 0;
   } catch (const std::exception& e) {
-    std::cerr << "segmatch-server: " << e.what() << '\n';
+    server::log_to_stderr(server::LogLevel::kError, std::string("segmatch-server: ") + e.what());
     return 1;
   }
 }

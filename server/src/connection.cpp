@@ -204,7 +204,7 @@ void log_request(Server::State& s, const std::string& peer, const char* type, co
   if (!s.config.log_requests) return;
   char latency[48];
   std::snprintf(latency, sizeof(latency), " latency_ms=%.1f", ms);
-  s.log(peer + " " + type + h.detail + " status=" + h.status + latency);
+  s.log(peer + " " + type + h.detail + " status=" + h.status + latency, h.error ? LogLevel::kWarning : LogLevel::kInfo);
 }
 
 }  // namespace
@@ -227,7 +227,7 @@ void serve_connection(Server::State& s, api::Socket socket, const std::string& p
     } else {
       r = read_payload(socket.fd(), header.payload_bytes, s.config.read_timeout_s, payload);
       if (r != api::IoResult::kOk) {
-        s.log(peer + " closed: frame cut off (" + api::to_string(r) + ")");
+        s.log(peer + " closed: frame cut off (" + api::to_string(r) + ")", LogLevel::kWarning);
         return;
       }
       s.stats.received();

@@ -62,14 +62,12 @@ std::string Stats::period_line() {
   return s.str();
 }
 
-void Server::State::log(const std::string& line) const {
+void Server::State::log(const std::string& line, LogLevel level) const {
   if (config.log) {
     config.log(line);
     return;
   }
-  static std::mutex mutex;  // whole lines, never interleaved
-  std::lock_guard<std::mutex> lock(mutex);
-  std::cerr << line << '\n';
+  log_to_stderr(level, line);
 }
 
 namespace {
@@ -117,7 +115,7 @@ void refuse_busy(Server::State& s, api::Socket socket, const std::string& peer) 
   const std::vector<uint8_t> bytes = api::encode(api::ErrorReply{api::ErrorCode::kServerBusy,
       "server busy: " + std::to_string(s.config.max_connections) + " connections already open"});
   api::write_all(socket.fd(), bytes.data(), bytes.size(), api::deadline_after(1.0));
-  s.log(peer + " refused: max connections (" + std::to_string(s.config.max_connections) + ") reached");
+  s.log(peer + " refused: max connections (" + std::to_string(s.config.max_connections) + ") reached", LogLevel::kWarning);
 }
 
 void accept_loop(Server::State& s) {

@@ -1,6 +1,7 @@
 // Internals of Server shared by server.cpp (accept loop, stop, counters) and connection.cpp.
 #pragma once
 
+#include "segmatch/server/log.h"
 #include "segmatch/server/server.h"
 #include "worker_pool.h"
 
@@ -59,7 +60,7 @@ struct Server::State {
   std::condition_variable stats_cv;
   bool started = false, stopped = false;
 
-  void log(const std::string& line) const;
+  void log(const std::string& line, LogLevel level = LogLevel::kInfo) const;
 };
 
 // Serves one accepted connection until the peer closes, times out, breaks the protocol

@@ -1,7 +1,8 @@
-// Map reload (issue 17): Server::replace_map in process, and SIGHUP on segmatch-server as its own
-// process with a good and a damaged new file.
+// Map reload and log lines (issue 17): Server::replace_map in process, and SIGHUP on
+// segmatch-server as its own process with a good and a damaged new file.
 #include "server_test_util.h"
 
+#include <segmatch/server/log.h>
 #include <segmatch/storage/map_reader.h>
 
 #include <signal.h>
@@ -10,6 +11,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <future>
+#include <regex>
 #include <sstream>
 #include <thread>
 
@@ -101,14 +103,16 @@ TEST(ServerRobustness, ReplaceMapKeepsRequestsInFlightOnTheOldMap) {
 
 // segmatch-server as an operator runs it: SIGHUP after a new map was renamed over the file
 // switches maps; SIGHUP after a damaged file was renamed over it keeps the map it has, says why,
-// and serving goes on.
+// and serving goes on. Its log lines carry a timestamp and a level (issue 17).
 TEST(ServerRobustness, SighupReloadsTheMapFileOrKeepsTheOldOne) {
   const std::string dir = test_world().folder + "/sighup";
   std::filesystem::create_directories(dir);
   const std::string map = dir + "/map.sqlite";
   std::filesystem::copy_file(test_world().map_path, map, std::filesystem::copy_options::overwrite_existing);
-  const std::string command = std::string(SEGMATCH_BIN_DIR) + "/segmatch-server --map " + map +
-                              " --port 0 --stats-interval-s 0 > " + dir + "/out 2> " + dir + "/log & echo $! > " + dir + "/pid";
+  const std::string binary = std::string(SEGMATCH_BIN_DIR) + "/segmatch-server";
+  ASSERT_TRUE(std::filesystem::exists(binary)) << binary << " is not built";
+  const std::string command = binary + " --map " + map +
+                              " --port 0 --stats-interval-s 0 --log-requests off > " + dir + "/out 2> " + dir + "/log & echo $! > " + dir + "/pid";
   ASSERT_EQ(std::system(command.c_str()), 0);
   ASSERT_TRUE(wait_for_text(dir + "/out", "\n")) << read_file(dir + "/log");
   const pid_t pid = static_cast<pid_t>(std::stol(read_file(dir + "/pid")));
@@ -132,4 +136,21 @@ TEST(ServerRobustness, SighupReloadsTheMapFileOrKeepsTheOldOne) {
 
   ASSERT_EQ(::kill(pid, SIGTERM), 0);
   EXPECT_TRUE(wait_for_text(dir + "/log", "stopped: ")) << read_file(dir + "/log");
+  // Every line: an ISO-8601 UTC timestamp and a level; no per-request lines (--log-requests off).
+  std::istringstream log(read_file(dir + "/log"));
+  const std::regex stamped(R"(^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z (INFO|WARN|ERROR) .+)");
+  int lines = 0;
+  for (std::string line; std::getline(log, line); ++lines) {
+    EXPECT_TRUE(std::regex_match(line, stamped)) << line;
+    EXPECT_EQ(line.find("LOCALIZE"), std::string::npos) << line;
+  }
+  EXPECT_GE(lines, 6);
+}
+
+TEST(ServerLog, LinesStartWithAnIsoUtcTimestampAndALevel) {
+  const std::chrono::system_clock::time_point when{std::chrono::milliseconds(1764796956123)};  // 2025-12-03T21:22:36.123Z
+  EXPECT_EQ(server::format_log_line(server::LogLevel::kInfo, "ready", when), "2025-12-03T21:22:36.123Z INFO ready");
+  EXPECT_EQ(server::format_log_line(server::LogLevel::kWarning, "x", when), "2025-12-03T21:22:36.123Z WARN x");
+  EXPECT_EQ(server::format_log_line(server::LogLevel::kError, "y", std::chrono::system_clock::time_point{}),
+            "1970-01-01T00:00:00.000Z ERROR y");
 }
