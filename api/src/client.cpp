@@ -4,15 +4,38 @@ namespace segmatch {
 namespace api {
 
 Client::Client(const std::string& host, uint16_t port, const ClientOptions& options)
-    : options_(options), where_(host + ":" + std::to_string(port)) {
+    : options_(options), host_(host), port_(port), where_(host + ":" + std::to_string(port)) {
+  if (options_.retries < 0) throw std::invalid_argument("ClientOptions::retries must be >= 0");
+  connect();
+}
+
+void Client::connect() {
   try {
-    socket_ = connect_tcp(host, port, std::chrono::milliseconds(static_cast<int64_t>(options.connect_timeout_s * 1000)));
+    socket_ = connect_tcp(host_, port_, std::chrono::milliseconds(static_cast<int64_t>(options_.connect_timeout_s * 1000)));
   } catch (const std::exception& e) {
     throw ClientError(ClientError::Kind::kConnect, e.what());
   }
+  broken_ = false;
   if (!options_.token.empty()) {
     send_raw(encode(HelloRequest{options_.token}));
     expect<HelloOkReply>(MessageType::kHelloOk);
+  }
+}
+
+template <typename RoundTrip>
+auto Client::with_retries(RoundTrip round_trip) -> decltype(round_trip()) {
+  for (int attempt = 0;; ++attempt) {
+    try {
+      if (broken_ && attempt == 0 && options_.retries > 0) {  // broken by an earlier call
+        ++retries_used_;
+        connect();
+      }
+      return round_trip();
+    } catch (const ClientError& e) {
+      if (e.kind != ClientError::Kind::kClosed || attempt >= options_.retries) throw;
+      ++retries_used_;
+      connect();
+    }
   }
 }
 
@@ -90,15 +113,19 @@ Reply Client::expect(MessageType type) {
 }
 
 uint64_t Client::ping(uint64_t nonce) {
-  send_raw(encode(PingRequest{nonce}));
-  const PongReply pong = expect<PongReply>(MessageType::kPong);
-  if (pong.nonce != nonce) fail(ClientError::Kind::kProtocol, "PONG nonce differs from the PING's");
-  return pong.nonce;
+  return with_retries([&] {
+    send_raw(encode(PingRequest{nonce}));
+    const PongReply pong = expect<PongReply>(MessageType::kPong);
+    if (pong.nonce != nonce) fail(ClientError::Kind::kProtocol, "PONG nonce differs from the PING's");
+    return pong.nonce;
+  });
 }
 
 InfoReply Client::info() {
-  send_raw(encode(InfoRequest{}));
-  return expect<InfoReply>(MessageType::kInfoReply);
+  return with_retries([&] {
+    send_raw(encode(InfoRequest{}));
+    return expect<InfoReply>(MessageType::kInfoReply);
+  });
 }
 
 LocalizeReply Client::localize_reply(uint64_t request_id) {
@@ -110,13 +137,19 @@ LocalizeReply Client::localize_reply(uint64_t request_id) {
 }
 
 LocalizeReply Client::localize(const LocalizeRequest& request) {
-  send_raw(encode(request));
-  return localize_reply(request.request_id);
+  const std::vector<uint8_t> bytes = encode(request);
+  return with_retries([&] {
+    send_raw(bytes);
+    return localize_reply(request.request_id);
+  });
 }
 
 LocalizeReply Client::localize_segments(const LocalizeSegmentsRequest& request) {
-  send_raw(encode(request));
-  return localize_reply(request.request_id);
+  const std::vector<uint8_t> bytes = encode(request);
+  return with_retries([&] {
+    send_raw(bytes);
+    return localize_reply(request.request_id);
+  });
 }
 
 }  // namespace api

@@ -1,5 +1,6 @@
 // segmatch-server: serves one segment map to many vehicles over the SGMQ protocol.
 #include <segmatch/server/log.h>
+#include <segmatch/server/metrics.h>
 #include <segmatch/server/server.h>
 
 #include <CLI/CLI.hpp>
@@ -99,6 +100,12 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1e6));
   app.add_option("--max-connections", config.max_connections, "connections served at once")->capture_default_str()->check(CLI::PositiveNumber);
+  int metrics_port = -1;
+  std::string metrics_listen = "127.0.0.1";
+  app.add_option("--metrics-port", metrics_port,
+                 "serve Prometheus metrics over HTTP on this port (GET /metrics; 0: a free port, printed)")
+      ->check(CLI::Range(0, 65535));
+  app.add_option("--metrics-listen", metrics_listen, "address of the metrics endpoint (default loopback)")->capture_default_str();
   std::string log_requests = "on";  // on|off rather than a flag: a service file says which
   app.add_option("--log-requests", log_requests, "one log line per request: on or off")
       ->capture_default_str()
@@ -129,6 +136,10 @@ int main(int argc, char** argv) {
     const double load_s = seconds_since(load_start);
     for (const std::string& w : map->warnings) server::log_to_stderr(server::LogLevel::kWarning, w);
     info(describe(*map, map_points, load_s) + (config.token.empty() ? "" : ", token required"));
+    if (metrics_port >= 0) {
+      config.metrics = std::make_shared<server::Metrics>(metrics_listen, static_cast<uint16_t>(metrics_port));
+      info("metrics on http://" + metrics_listen + ":" + std::to_string(config.metrics->port()) + "/metrics");
+    }
     server::Server server(config, map);
     server.start();
     std::cout << "listening on " << server.address() << std::endl;

@@ -4,6 +4,8 @@
 // failures are answered with ERROR and the connection is closed.
 #include "server_state.h"
 
+#include "segmatch/server/metrics.h"
+
 #include <chrono>
 #include <cstdio>
 #include <future>
@@ -26,6 +28,7 @@ struct Handled {
   std::string detail;       // for the log line
   std::string status = "ok";
   bool is_localize = false, localized = false, error = false, timed_out = false;
+  uint16_t error_code = 0;  // with error
   bool close_after = false;
 };
 
@@ -34,6 +37,7 @@ Handled error_reply(ErrorCode code, const std::string& message, bool close_after
   h.reply = api::encode(api::ErrorReply{code, message});
   h.status = "error(" + std::to_string(static_cast<int>(code)) + ": " + message + ")";
   h.error = true;
+  h.error_code = static_cast<uint16_t>(code);
   h.close_after = close_after;
   return h;
 }
@@ -111,6 +115,13 @@ Handled handle_localize(Server::State& s, const std::vector<uint8_t>& payload, T
   auto task = std::make_shared<std::packaged_task<Outcome()>>(
       [map, &request, deadline] { return localize(*map, request, deadline); });
   std::future<Outcome> result = task->get_future();
+  if (s.config.metrics) s.config.metrics->in_flight(+1);
+  struct Answered {  // however the wait below ends
+    Metrics* metrics;
+    ~Answered() {
+      if (metrics) metrics->in_flight(-1);
+    }
+  } answered{s.config.metrics.get()};
   s.pool->submit([task] { (*task)(); });
   try {
     Outcome outcome = result.get();
@@ -209,7 +220,20 @@ void log_request(Server::State& s, const std::string& peer, const char* type, co
 
 }  // namespace
 
+// What the metrics count of one answered frame.
+void count(Metrics& metrics, const char* type, const Handled& h, double ms) {
+  metrics.request(type, h.error ? "error" : h.is_localize ? h.status : "ok", ms / 1000.0, h.is_localize && !h.error);
+  if (h.error) metrics.error(h.error_code);
+}
+
 void serve_connection(Server::State& s, api::Socket socket, const std::string& peer) {
+  if (s.config.metrics) s.config.metrics->connections(+1);
+  struct Closed {
+    Metrics* metrics;
+    ~Closed() {
+      if (metrics) metrics->connections(-1);
+    }
+  } closed{s.config.metrics.get()};
   bool authed = s.config.token.empty();
   std::vector<uint8_t> payload;
   for (;;) {
@@ -239,8 +263,9 @@ void serve_connection(Server::State& s, api::Socket socket, const std::string& p
     // counters must see its own request in them.
     const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     s.stats.record(h.is_localize, h.localized, h.error, h.timed_out, ms);
-    r = api::write_all(socket.fd(), h.reply.data(), h.reply.size(), api::deadline_after(s.config.write_timeout_s));
     const char* type_name = d == DecodeStatus::kOk ? api::to_string(static_cast<MessageType>(header.type)) : "FRAME";
+    if (s.config.metrics) count(*s.config.metrics, type_name, h, ms);
+    r = api::write_all(socket.fd(), h.reply.data(), h.reply.size(), api::deadline_after(s.config.write_timeout_s));
     log_request(s, peer, type_name, h, ms);
     if (r != api::IoResult::kOk) return;
     if (h.close_after) return linger_close(socket.fd());

@@ -43,6 +43,7 @@ std::shared_ptr<const LoadedMap> load_map(const std::string& path, const MapLoad
   auto map = std::make_shared<LoadedMap>();
   map->path = path;
   map->metadata = reader.metadata();
+  map->schema_version = reader.schema_version();
   if (map->metadata.parameters_json.empty())
     throw std::runtime_error(path + ": the map stores no parameters (parameters_json is empty)");
   map->config = io::parse_map_parameters(map->metadata.parameters_json, path + " (parameters_json)");

@@ -2,6 +2,8 @@
 // connection.cpp.
 #include "server_state.h"
 
+#include "segmatch/server/metrics.h"
+
 #include <netdb.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
@@ -156,6 +158,7 @@ Server::Server(const ServerConfig& config, std::shared_ptr<const LoadedMap> map)
   if (config.max_connections < 1) throw std::invalid_argument("max_connections must be >= 1");
   if (!(config.read_timeout_s > 0) || !(config.write_timeout_s > 0)) throw std::invalid_argument("timeouts must be > 0");
   state_->config = config;
+  if (config.metrics) config.metrics->map(map->metadata.name, map->schema_version, map->segment_count());
   state_->map = std::move(map);
   state_->limits.max_payload_bytes = config.max_frame_bytes;
 }
@@ -182,6 +185,7 @@ ServerCounters Server::counters() const { return state_->stats.counters(); }
 
 void Server::replace_map(std::shared_ptr<const LoadedMap> map) {
   if (!map || !map->localizer) throw std::invalid_argument("Server::replace_map needs a loaded map");
+  if (state_->config.metrics) state_->config.metrics->map(map->metadata.name, map->schema_version, map->segment_count());
   std::atomic_store(&state_->map, std::shared_ptr<const LoadedMap>(std::move(map)));
 }
 

@@ -1,5 +1,5 @@
-// Blocking TCP client of segmatch-server. One Client is one connection, used from one thread
-// at a time. Every failure throws ClientError saying what went wrong; a server ERROR reply
+// Blocking TCP client of segmatch-server. One Client is one connection at a time (a new one
+// when the last was lost: ClientOptions::retries), used from one thread at a time. Every failure throws ClientError saying what went wrong; a server ERROR reply
 // carries the server's code and message.
 #pragma once
 
@@ -20,6 +20,12 @@ struct ClientOptions {
   double send_timeout_s = 30.0;
   std::string token;  // sent in HELLO right after connecting when not empty
   Limits limits;      // for replies
+  // A request whose connection is lost before its reply (the server closed or reset it: a
+  // replica restarted, a load balancer moved it) is sent again on a new connection, this many
+  // times. Every request is idempotent: a LOCALIZE answered twice gives the same answer. Not
+  // retried: a timeout (the server may still be working on it), an ERROR reply, a failed
+  // connect. A Client whose connection broke earlier reconnects on its next call the same way.
+  int retries = 1;
 };
 
 class ClientError : public std::runtime_error {
@@ -59,12 +65,19 @@ class Client {
   void send_raw(const std::vector<uint8_t>& bytes);
   Frame read_frame();
 
-  // After a timeout, a closed connection or an undecodable reply the byte stream is lost:
-  // every later call throws kClosed. A server ERROR leaves the connection usable.
+  // After a timeout, a closed connection or an undecodable reply the byte stream is lost: the
+  // next call connects again (ClientOptions::retries > 0) or throws kClosed (retries = 0). A
+  // server ERROR leaves the connection usable.
   bool broken() const { return broken_; }
   void close() { socket_.close(); broken_ = true; }
+  // Requests sent again on a new connection so far (ClientOptions::retries).
+  int retries_used() const { return retries_used_; }
 
  private:
+  void connect();
+  // Runs one round trip (send, then read the reply) under the retry policy above.
+  template <typename RoundTrip>
+  auto with_retries(RoundTrip round_trip) -> decltype(round_trip());
   template <typename Reply>
   Reply expect(MessageType type);
   LocalizeReply localize_reply(uint64_t request_id);
@@ -81,9 +94,12 @@ class Client {
   [[noreturn]] void throw_server_error(const ErrorReply& e) const;
 
   ClientOptions options_;
+  std::string host_;
+  uint16_t port_ = 0;
   std::string where_;
   Socket socket_;
   bool broken_ = false;
+  int retries_used_ = 0;
 };
 
 }  // namespace api

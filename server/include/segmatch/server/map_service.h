@@ -37,6 +37,7 @@ struct LoadedMap {
   uint64_t segments_digest = 0;
   std::vector<std::string> warnings;
   std::shared_ptr<const storage::LazyPoints> lazy_points;  // kLazy: the localizer's point source
+  int schema_version = 0;  // of the map file as read (an old one is served as it is)
   size_t segment_count() const { return localizer ? localizer->targets().size() : 0; }
 };
 

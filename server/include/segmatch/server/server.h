@@ -24,6 +24,8 @@
 namespace segmatch {
 namespace server {
 
+class Metrics;
+
 struct ServerConfig {
   std::string listen_address = "127.0.0.1";  // loopback unless another address is asked for
   uint16_t port = 7878;                      // 0: ephemeral, see Server::port()
@@ -39,8 +41,11 @@ struct ServerConfig {
   int max_connections = 64;
   double stats_interval_s = 10.0;            // periodic counters line; <= 0 = none
   bool log_requests = true;                  // one line per request
-  // Where log lines go (one call per line, without newline); default: stderr.
+  // Where log lines go (one call per line, without newline); default: stderr, each line with a
+  // timestamp and a level (log.h).
   std::function<void(const std::string&)> log;
+  // Prometheus metrics (metrics.h), counted as frames are answered; null: none.
+  std::shared_ptr<Metrics> metrics;
 };
 
 struct ServerCounters {
