@@ -28,7 +28,7 @@ uint64_t merge64(uint64_t acc, uint64_t v) { return (acc ^ round64(0, v)) * kP1 
 // The 32-byte stripes of inputs longer than 31 bytes, folded into one value.
 uint64_t stripes(const uint8_t*& p, const uint8_t* end, uint64_t seed) {
   uint64_t v1 = seed + kP1 + kP2, v2 = seed + kP2, v3 = seed, v4 = seed - kP1;
-  for (; p + 32 <= end; p += 32) {
+  for (; end - p >= 32; p += 32) {
     v1 = round64(v1, read64(p));
     v2 = round64(v2, read64(p + 8));
     v3 = round64(v3, read64(p + 16));
@@ -41,13 +41,15 @@ uint64_t stripes(const uint8_t*& p, const uint8_t* end, uint64_t seed) {
 
 }  // namespace
 
+// Bounds are compared as distances (end - p), never as p + n: SQLite hands a zero-length BLOB
+// over as a null pointer, and null + 8 is undefined behaviour (found by fuzz_map, UBSan).
 uint64_t xxh64(const void* data, size_t size, uint64_t seed) {
   const auto* p = static_cast<const uint8_t*>(data);
   const uint8_t* end = p + size;
   uint64_t h = size >= 32 ? stripes(p, end, seed) : seed + kP5;
   h += size;
-  for (; p + 8 <= end; p += 8) h = rotl(h ^ round64(0, read64(p)), 27) * kP1 + kP4;
-  if (p + 4 <= end) {
+  for (; end - p >= 8; p += 8) h = rotl(h ^ round64(0, read64(p)), 27) * kP1 + kP4;
+  if (end - p >= 4) {
     h = rotl(h ^ (read32(p) * kP1), 23) * kP2 + kP3;
     p += 4;
   }

@@ -162,6 +162,18 @@ TEST_F(StorageRefusal, MissingPointRowIsNamed) {
   EXPECT_NE(problems[0].find("point rows"), std::string::npos) << problems[0];
 }
 
+// SQLite hands a zero-length BLOB over as a null pointer; checksumming one added 8 to null
+// (undefined behaviour that UBSan reported under fuzz_map). Now it is a checksum mismatch like
+// any other damage, named by row.
+TEST_F(StorageRefusal, EmptyPointBlobIsAChecksumMismatch) {
+  const std::string path = variant("emptypoints.segmap", [](std::string&) {});
+  run_sql(path, "UPDATE segment_points SET points = x'' WHERE row = 9");
+  expect_storage_error([&] { MapReader::open(path).load_segments(); }, path, {"corrupted", "segment row 9"});
+  const std::vector<std::string> problems = MapReader::open(path).check_integrity();
+  ASSERT_EQ(problems.size(), 1u);
+  EXPECT_NE(problems[0].find("segment row 9"), std::string::npos) << problems[0];
+}
+
 TEST_F(StorageRefusal, CorruptedClassifier) {
   const std::string packed = stored_blob(path_, "SELECT bytes FROM classifier");
   ASSERT_GT(packed.size(), 8u);
