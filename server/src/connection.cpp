@@ -23,6 +23,23 @@ using api::MessageType;
 
 constexpr size_t kReadChunkBytes = 1u << 20;  // payload memory grows only as bytes arrive
 
+// One unit on a gauge of the metrics (in flight, connections) for as long as it lives.
+class GaugeHeld {
+ public:
+  GaugeHeld(Metrics* metrics, void (Metrics::*gauge)(int)) : metrics_(metrics), gauge_(gauge) {
+    if (metrics_) (metrics_->*gauge_)(+1);
+  }
+  ~GaugeHeld() {
+    if (metrics_) (metrics_->*gauge_)(-1);
+  }
+  GaugeHeld(const GaugeHeld&) = delete;
+  GaugeHeld& operator=(const GaugeHeld&) = delete;
+
+ private:
+  Metrics* metrics_;
+  void (Metrics::*gauge_)(int);
+};
+
 struct Handled {
   std::vector<uint8_t> reply;
   std::string detail;       // for the log line
@@ -115,13 +132,7 @@ Handled handle_localize(Server::State& s, const std::vector<uint8_t>& payload, T
   auto task = std::make_shared<std::packaged_task<Outcome()>>(
       [map, &request, deadline] { return localize(*map, request, deadline); });
   std::future<Outcome> result = task->get_future();
-  if (s.config.metrics) s.config.metrics->in_flight(+1);
-  struct Answered {  // however the wait below ends
-    Metrics* metrics;
-    ~Answered() {
-      if (metrics) metrics->in_flight(-1);
-    }
-  } answered{s.config.metrics.get()};
+  const GaugeHeld in_flight(s.config.metrics.get(), &Metrics::in_flight);  // however the wait ends
   s.pool->submit([task] { (*task)(); });
   try {
     Outcome outcome = result.get();
@@ -218,22 +229,16 @@ void log_request(Server::State& s, const std::string& peer, const char* type, co
   s.log(peer + " " + type + h.detail + " status=" + h.status + latency, h.error ? LogLevel::kWarning : LogLevel::kInfo);
 }
 
-}  // namespace
-
 // What the metrics count of one answered frame.
 void count(Metrics& metrics, const char* type, const Handled& h, double ms) {
   metrics.request(type, h.error ? "error" : h.is_localize ? h.status : "ok", ms / 1000.0, h.is_localize && !h.error);
   if (h.error) metrics.error(h.error_code);
 }
 
+}  // namespace
+
 void serve_connection(Server::State& s, api::Socket socket, const std::string& peer) {
-  if (s.config.metrics) s.config.metrics->connections(+1);
-  struct Closed {
-    Metrics* metrics;
-    ~Closed() {
-      if (metrics) metrics->connections(-1);
-    }
-  } closed{s.config.metrics.get()};
+  const GaugeHeld open(s.config.metrics.get(), &Metrics::connections);
   bool authed = s.config.token.empty();
   std::vector<uint8_t> payload;
   for (;;) {
