@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <stdexcept>
 #include <thread>
 
@@ -18,6 +19,20 @@ namespace storage {
 using namespace detail;
 
 namespace {
+
+// A count in map_info sizes allocations before any row is read, so one that no file of this
+// size could hold (negative, or more rows than bytes) is damage, not a request for memory
+// (fuzz_map found a negative segment count reaching vector::reserve). Points are compressed,
+// so only their sign is checked.
+uint64_t stored_count(const MapReader::Impl& impl, const char* what, int64_t count, bool one_row_each) {
+  std::error_code ec;
+  const uintmax_t file_bytes = std::filesystem::file_size(impl.path, ec);
+  if (count < 0 || (one_row_each && !ec && static_cast<uintmax_t>(count) > file_bytes)) {
+    fail(impl.path, "the map file is corrupted: map_info records " + std::to_string(count) + " " + what +
+                        ", impossible in a file of " + std::to_string(ec ? 0 : file_bytes) + " bytes");
+  }
+  return static_cast<uint64_t>(count);
+}
 
 void load_metadata(MapReader::Impl* impl) {
   Statement st(impl->db.get(),
@@ -34,9 +49,9 @@ void load_metadata(MapReader::Impl* impl) {
   m.parameters_json = st.column_text(4);
   m.eigen_dims = static_cast<int>(st.column_int(5));
   m.esf_dims = static_cast<int>(st.column_int(6));
-  impl->segment_count = static_cast<uint64_t>(st.column_int(7));
-  impl->point_count = static_cast<uint64_t>(st.column_int(8));
-  impl->keyframe_count = static_cast<uint64_t>(st.column_int(9));
+  impl->segment_count = stored_count(*impl, "segments", st.column_int(7), true);
+  impl->point_count = stored_count(*impl, "points", st.column_int(8), false);
+  impl->keyframe_count = stored_count(*impl, "keyframes", st.column_int(9), true);
   if (m.eigen_dims != kEigenFeatureCount || m.esf_dims != kEsfBins) {
     fail(impl->path, "the map stores " + std::to_string(m.eigen_dims) + " eigen features and " +
                          std::to_string(m.esf_dims) + " ESF bins; this build uses " +

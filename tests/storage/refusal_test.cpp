@@ -174,6 +174,18 @@ TEST_F(StorageRefusal, EmptyPointBlobIsAChecksumMismatch) {
   EXPECT_NE(problems[0].find("segment row 9"), std::string::npos) << problems[0];
 }
 
+// map_info's counts size allocations before any row is read: a negative one reached
+// vector::reserve as 2^64 - 103 (found by fuzz_map), a huge one would ask for terabytes. Both are
+// named as damage.
+TEST_F(StorageRefusal, ImpossibleSegmentCountIsNamed) {
+  for (const char* count : {"-103", "4000000000000"}) {
+    const std::string path = variant(std::string("count") + count + ".segmap", [](std::string&) {});
+    run_sql(path, (std::string("UPDATE map_info SET segment_count = ") + count).c_str());
+    expect_storage_error([&] { MapReader::open(path).load_segments_without_points(); }, path,
+                         {"corrupted", std::string("records ") + count + " segments"});
+  }
+}
+
 TEST_F(StorageRefusal, CorruptedClassifier) {
   const std::string packed = stored_blob(path_, "SELECT bytes FROM classifier");
   ASSERT_GT(packed.size(), 8u);
