@@ -10,6 +10,7 @@ PACKAGES=(
   libcli11-dev nlohmann-json3-dev
   libceres-dev libzstd-dev
   prometheus-cpp-dev curl
+  haproxy  # tests/deploy: replicas behind deploy/haproxy (Debian's own haproxy service listens on nothing)
 )
 # `install-deps.sh fuzz`: also clang and its libFuzzer runtime (scripts/fuzz.sh).
 if [ "${1:-}" = "fuzz" ]; then PACKAGES+=(clang libclang-rt-14-dev); fi

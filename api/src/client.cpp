@@ -1,11 +1,15 @@
 #include "segmatch/api/client.h"
 
+#include <algorithm>
+#include <thread>
+
 namespace segmatch {
 namespace api {
 
 Client::Client(const std::string& host, uint16_t port, const ClientOptions& options)
     : options_(options), host_(host), port_(port), where_(host + ":" + std::to_string(port)) {
   if (options_.retries < 0) throw std::invalid_argument("ClientOptions::retries must be >= 0");
+  if (!(options_.reconnect_window_s >= 0)) throw std::invalid_argument("ClientOptions::reconnect_window_s must be >= 0");
   connect();
 }
 
@@ -22,19 +26,41 @@ void Client::connect() {
   }
 }
 
+void Client::reconnect() {
+  const auto give_up = Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                          std::chrono::duration<double>(options_.reconnect_window_s));
+  std::chrono::milliseconds pause(50);
+  for (;;) {
+    try {
+      socket_ = connect_tcp(host_, port_, std::chrono::milliseconds(static_cast<int64_t>(options_.connect_timeout_s * 1000)));
+      broken_ = false;
+      send_raw(encode(HelloRequest{options_.token}));
+      expect<HelloOkReply>(MessageType::kHelloOk);
+      return;
+    } catch (const ClientError& e) {
+      // An ERROR (a wrong token), a stalled or garbled handshake: a live server said no.
+      if (e.kind != ClientError::Kind::kClosed || Clock::now() + pause > give_up) throw;
+    } catch (const std::exception& e) {
+      if (Clock::now() + pause > give_up) throw ClientError(ClientError::Kind::kConnect, e.what());
+    }
+    std::this_thread::sleep_for(pause);
+    pause = std::min(pause * 2, std::chrono::milliseconds(1000));
+  }
+}
+
 template <typename RoundTrip>
 auto Client::with_retries(RoundTrip round_trip) -> decltype(round_trip()) {
   for (int attempt = 0;; ++attempt) {
     try {
       if (broken_ && attempt == 0 && options_.retries > 0) {  // broken by an earlier call
         ++retries_used_;
-        connect();
+        reconnect();
       }
       return round_trip();
     } catch (const ClientError& e) {
       if (e.kind != ClientError::Kind::kClosed || attempt >= options_.retries) throw;
       ++retries_used_;
-      connect();
+      reconnect();
     }
   }
 }

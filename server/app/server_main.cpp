@@ -30,8 +30,10 @@ std::string read_token(const std::string& path) {
   while (!token.empty() && std::isspace(static_cast<unsigned char>(token.back()))) token.pop_back();
   if (token.empty()) throw std::runtime_error("token file " + path + " is empty");
   struct stat st {};
-  if (::stat(path.c_str(), &st) == 0 && (st.st_mode & 077))
-    server::log_to_stderr(server::LogLevel::kWarning, "token file " + path + " is readable by other users (chmod 600 it)");
+  // Group access is how service managers hand secrets over (a Kubernetes secret with fsGroup,
+  // systemd credentials); access for everyone is a mistake.
+  if (::stat(path.c_str(), &st) == 0 && (st.st_mode & 007))
+    server::log_to_stderr(server::LogLevel::kWarning, "token file " + path + " is readable by every user (chmod 600 it)");
   return token;
 }
 

@@ -10,7 +10,9 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <thread>
 
 using namespace segmatch;
@@ -18,12 +20,14 @@ using namespace segmatch::api;
 
 namespace {
 
-// Accepts connections on a loopback port; on each it reads one frame and then, while
-// `drops` lasts, closes without a reply, else answers LOCALIZE_REPLY (or ERROR kInternal when
-// `error_reply`) for the request's id.
+// Accepts connections on a loopback port. Connections numbered in `close_at_once` (from 1) are
+// closed before anything is read, like a dying replica's backlog. On the others it answers HELLO
+// with HELLO_OK, then reads one request and, while `drops` lasts, closes without a reply, else
+// answers LOCALIZE_REPLY (or ERROR kInternal when `error_reply`) for the request's id.
 class ScriptedServer {
  public:
-  explicit ScriptedServer(int drops, bool error_reply = false) : drops_(drops), error_reply_(error_reply) {
+  explicit ScriptedServer(int drops, bool error_reply = false, std::vector<int> close_at_once = {})
+      : drops_(drops), error_reply_(error_reply), close_at_once_(std::move(close_at_once)) {
     listener_ = ::socket(AF_INET, SOCK_STREAM, 0);
     sockaddr_in a{};
     a.sin_family = AF_INET;
@@ -42,39 +46,55 @@ class ScriptedServer {
   }
   uint16_t port() const { return port_; }
   int connections() const { return connections_; }
+  int hellos() const { return hellos_; }
 
  private:
+  // One frame; false when the connection ended first.
+  static bool read_frame(int fd, Header& header, std::vector<uint8_t>& payload) {
+    uint8_t header_bytes[kHeaderBytes];
+    const auto deadline = deadline_after(5);
+    if (read_exact(fd, header_bytes, kHeaderBytes, deadline) != IoResult::kOk ||
+        decode_header(header_bytes, kHeaderBytes, Limits{}, header) != DecodeStatus::kOk)
+      return false;
+    payload.resize(header.payload_bytes);
+    return read_exact(fd, payload.data(), payload.size(), deadline) == IoResult::kOk;
+  }
+  void answer(int fd, const std::vector<uint8_t>& payload) {
+    LocalizeRequest request;
+    decode(payload.data(), payload.size(), Limits{}, request);
+    LocalizeReply reply;
+    reply.request_id = request.request_id;
+    reply.status = LocalizeStatus::kNotLocalized;
+    reply.reason = "scripted";
+    const std::vector<uint8_t> out = error_reply_ ? encode(ErrorReply{ErrorCode::kInternal, "scripted failure"}) : encode(reply);
+    write_all(fd, out.data(), out.size(), deadline_after(5));
+  }
   void serve() {
     for (;;) {
       const int fd = ::accept(listener_, nullptr, nullptr);
       if (fd < 0) return;
-      ++connections_;
-      uint8_t header_bytes[kHeaderBytes];
+      const int number = ++connections_;
       Header header;
-      const auto deadline = deadline_after(5);
-      if (read_exact(fd, header_bytes, kHeaderBytes, deadline) == IoResult::kOk &&
-          decode_header(header_bytes, kHeaderBytes, Limits{}, header) == DecodeStatus::kOk) {
-        std::vector<uint8_t> payload(header.payload_bytes);
-        read_exact(fd, payload.data(), payload.size(), deadline);
-        if (drops_-- <= 0) {
-          LocalizeRequest request;
-          decode(payload.data(), payload.size(), Limits{}, request);
-          LocalizeReply reply;
-          reply.request_id = request.request_id;
-          reply.status = LocalizeStatus::kNotLocalized;
-          reply.reason = "scripted";
-          const std::vector<uint8_t> out =
-              error_reply_ ? encode(ErrorReply{ErrorCode::kInternal, "scripted failure"}) : encode(reply);
-          write_all(fd, out.data(), out.size(), deadline);
+      std::vector<uint8_t> payload;
+      const bool dying = std::find(close_at_once_.begin(), close_at_once_.end(), number) != close_at_once_.end();
+      while (!dying && read_frame(fd, header, payload)) {
+        if (header.type == static_cast<uint16_t>(MessageType::kHello)) {
+          ++hellos_;
+          const std::vector<uint8_t> ok = encode(HelloOkReply{});
+          write_all(fd, ok.data(), ok.size(), deadline_after(5));
+          continue;
         }
+        if (drops_-- <= 0) answer(fd, payload);
+        break;
       }
       ::close(fd);
     }
   }
   int listener_ = -1;
   uint16_t port_ = 0;
-  std::atomic<int> drops_, connections_{0};
+  std::atomic<int> drops_, connections_{0}, hellos_{0};
   bool error_reply_;
+  std::vector<int> close_at_once_;
   std::thread thread_;
 };
 
@@ -95,6 +115,34 @@ TEST(ClientRetry, ALostConnectionIsRetriedOnceOnANewOne) {
   EXPECT_EQ(reply.reason, "scripted");
   EXPECT_EQ(client.retries_used(), 1);
   EXPECT_EQ(server.connections(), 2);
+  EXPECT_EQ(server.hellos(), 1) << "the retry's connection is proven live by a HELLO first";
+}
+
+// Behind a balancer, a retry may first reach a replica that is going away: its connection is
+// closed before HELLO_OK. That attempt is made again after a pause; the one retry is kept for a
+// server that answers.
+TEST(ClientRetry, ARetryReconnectsUntilAServerAnswersHello) {
+  ScriptedServer server(1, false, {2, 3});
+  Client client("127.0.0.1", server.port());
+  const auto t0 = std::chrono::steady_clock::now();
+  EXPECT_EQ(client.localize(request(11)).request_id, 11u);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(client.retries_used(), 1);
+  EXPECT_EQ(server.connections(), 4);
+  EXPECT_GE(seconds, 0.15) << "pauses of 50 and 100 ms between the attempts";
+
+  // Nobody answering HELLO within the window: a connection error, not a hang.
+  ScriptedServer gone(1, false, {2, 3, 4, 5, 6, 7, 8, 9, 10});
+  ClientOptions options;
+  options.reconnect_window_s = 0.3;
+  Client doomed("127.0.0.1", gone.port(), options);
+  try {
+    doomed.localize(request(12));
+    FAIL() << "no server answered HELLO";
+  } catch (const ClientError& e) {
+    EXPECT_EQ(e.kind, ClientError::Kind::kClosed) << e.what();
+  }
+  EXPECT_LE(gone.connections(), 5);
 }
 
 TEST(ClientRetry, ASecondLossIsReportedAfterTheOneRetry) {

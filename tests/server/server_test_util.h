@@ -15,6 +15,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -32,6 +33,12 @@ struct TestWorld {
   std::string folder, map_path;
   io::PipelineConfig config;
   std::vector<Query> queries;  // revisit local clouds every 15 m
+  // The folder goes with the test process unless SEGMATCH_KEEP_TEST_FILES is set (to read the
+  // logs of the processes a test ran).
+  ~TestWorld() {
+    std::error_code ec;
+    if (!folder.empty() && !std::getenv("SEGMATCH_KEEP_TEST_FILES")) std::filesystem::remove_all(folder, ec);
+  }
 };
 
 inline io::PipelineConfig fast_config() {

@@ -26,6 +26,12 @@ struct ClientOptions {
   // retried: a timeout (the server may still be working on it), an ERROR reply, a failed
   // connect. A Client whose connection broke earlier reconnects on its next call the same way.
   int retries = 1;
+  // The new connection of a retry counts only once a server has answered HELLO (sent with the
+  // token, or empty: a server without a token answers any HELLO). A connection refused or
+  // closed before HELLO_OK (a replica going away: its backlog still accepts while the process
+  // dies) is made again after a pause (50 ms, doubling to 1 s) for this long, without spending
+  // the retry or sending the request to it.
+  double reconnect_window_s = 5.0;
 };
 
 class ClientError : public std::runtime_error {
@@ -75,6 +81,8 @@ class Client {
 
  private:
   void connect();
+  // For a retry: connect() until a server answers HELLO (ClientOptions::reconnect_window_s).
+  void reconnect();
   // Runs one round trip (send, then read the reply) under the retry policy above.
   template <typename RoundTrip>
   auto with_retries(RoundTrip round_trip) -> decltype(round_trip());
