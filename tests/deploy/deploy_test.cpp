@@ -136,6 +136,26 @@ TEST(Deploy, SystemdUnitCommandLineStartsTheServer) {
   EXPECT_EQ(read_text(dir + "/log").find("WARN"), std::string::npos) << read_text(dir + "/log");
 }
 
+// docs/deploy.md's "try it on one machine" block, run as it is written there, with the test's
+// map, token and free ports put in its place.
+TEST(Deploy, DocumentedCommandsRun) {
+  if (haproxy_binary().empty()) GTEST_SKIP() << "haproxy is not installed (scripts/install-deps.sh installs it)";
+  const std::string dir = deploy_folder("documented");
+  std::string block = documented_block(source_path("docs/deploy.md"));
+  ASSERT_NE(block.find("haproxy -db -f deploy/haproxy/haproxy.cfg"), std::string::npos) << block;
+  const std::string token_path = dir + "/token";
+  write_token(token_path, "documented-token");
+  replace_all(block, "map=out/demo/demo-map.sqlite token=$HOME/segmatch-token",
+              "map=" + test_world().map_path + " token=" + token_path);
+  replace_all(block, "$PWD/build/bin", SEGMATCH_BIN_DIR);
+  for (const char* port : {"7878", "7001", "7002"}) replace_all(block, port, std::to_string(free_loopback_port()));
+  std::ofstream(dir + "/two.sh") << "set -e\ntrap 'kill $(jobs -p) 2>/dev/null' EXIT\n" << block;
+  const CommandResult r = run_command("cd " + source_path("") + " && bash " + dir + "/two.sh");
+  EXPECT_EQ(r.code, 0) << block << "\n" << r.output;
+  EXPECT_NE(r.output.find("pong from 127.0.0.1:"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("tiny-3"), std::string::npos) << r.output;
+}
+
 TEST(Deploy, SixteenVehiclesThroughHaproxySurviveAKilledReplica) {
   const std::string haproxy = haproxy_binary();
   if (haproxy.empty()) GTEST_SKIP() << "haproxy is not installed (scripts/install-deps.sh installs it)";
@@ -182,7 +202,19 @@ TEST(Deploy, SixteenVehiclesThroughHaproxySurviveAKilledReplica) {
   // New vehicles connect after the restart: the least-connections balance sends them to it.
   for (int v = kVehicles; v < kVehicles + kLateVehicles; ++v)
     vehicles.emplace_back(drive, v, balancer.port, token, &answers[v], &retries, &done);
+
+  // Meanwhile replica 2 is given a new map file (the same segments under a new name) and SIGHUP,
+  // as an operator updates a map: it switches while its vehicles' requests go on.
+  write_renamed_map(test_world().map_path, replicas[1]->map + ".new", "tiny-3 v2");
+  std::filesystem::rename(replicas[1]->map + ".new", replicas[1]->map);
+  const int done_at_reload = done;
+  ASSERT_EQ(::kill(replicas[1]->process->pid(), SIGHUP), 0);
+  const std::string replica2_log = dir + "/r2.log";
+  EXPECT_TRUE(wait_until([&] { return read_text(replica2_log).find("reloaded: map 'tiny-3 v2'") != std::string::npos; }, 60))
+      << read_text(replica2_log);
   for (std::thread& t : vehicles) t.join();
+  EXPECT_EQ(api::Client("127.0.0.1", replicas[1]->port, client_options(token)).info().map_name, "tiny-3 v2");
+  EXPECT_LT(done_at_reload, total) << "the reload came after the last query";
 
   int unanswered = 0, localized = 0;
   for (size_t v = 0; v < answers.size(); ++v)
@@ -201,9 +233,9 @@ TEST(Deploy, SixteenVehiclesThroughHaproxySurviveAKilledReplica) {
   const double served_by_2 = localize_count(replicas[1]->scrape()) - static_cast<double>(queries.size());
   std::printf("[deploy] %d queries from %d vehicles through HAProxy, %d localized, %d unanswered, %d sent again "
               "after the SIGKILL (at query %d); replica 1 answered %.0f before it and %.0f after its restart, replica 2 "
-              "%.0f\n",
+              "%.0f (its map reloaded by SIGHUP at query %d)\n",
               total, kVehicles + kLateVehicles, localized, unanswered, retries.load(), done_at_kill, served_before_kill,
-              served_after_restart, served_by_2);
+              served_after_restart, served_by_2, done_at_reload);
   EXPECT_EQ(unanswered, 0);
   EXPECT_GE(retries, 1) << "no request was lost with the killed replica";
   EXPECT_GT(served_before_kill, 0);

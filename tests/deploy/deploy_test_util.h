@@ -7,6 +7,8 @@
 #include "support/process.h"
 #include "support/run_command.h"
 
+#include <segmatch/storage/map_reader.h>
+
 #include <sys/stat.h>
 
 #include <cstdio>
@@ -81,6 +83,30 @@ inline double localize_count(const std::string& metrics) {
   return metric(metrics, R"(segmatch_requests_total\{status="[a-z_]+",type="LOCALIZE"\})");
 }
 
+// The segments of `from` written again as a map named `name` (a new map version, same answers).
+inline void write_renamed_map(const std::string& from, const std::string& path, const std::string& name) {
+  storage::MapMetadata meta;
+  meta.name = name;
+  meta.tool_version = "test_deploy";
+  meta.parameters_json = io::to_json(test_world().config);
+  storage::MapWriter writer = storage::MapWriter::create(path, meta, true);
+  writer.add_segments(storage::MapReader::open(from).load_segments(), {});
+  writer.commit();
+}
+
+// The fenced block between "<!-- deploy-test: begin -->" and "<!-- deploy-test: end -->".
+inline std::string documented_block(const std::string& markdown_path) {
+  const std::string text = test::read_text(markdown_path);
+  const size_t begin = text.find("<!-- deploy-test: begin -->"), end = text.find("<!-- deploy-test: end -->");
+  if (begin == std::string::npos || end == std::string::npos) return "";
+  const size_t first = text.find('\n', text.find("```", begin)) + 1;
+  return text.substr(first, text.rfind("```", end) - first);
+}
+
+inline void replace_all(std::string& text, const std::string& from, const std::string& to) {
+  for (size_t at = text.find(from); at != std::string::npos; at = text.find(from, at + to.size())) text.replace(at, from.size(), to);
+}
+
 // KEY=VALUE lines of a systemd environment file (comments and blank lines skipped).
 inline std::map<std::string, std::string> read_env_file(const std::string& path) {
   std::map<std::string, std::string> env;
@@ -127,15 +153,18 @@ inline std::vector<std::string> unit_exec_start(const std::string& unit_path, co
 // requiring the token of DIR/token, with its metrics endpoint. start() again after a kill
 // reuses the port.
 struct Replica {
+  // Serves its own copy of the world's map, DIR/NAME.sqlite (a reload renames a new map over it).
   Replica(const std::string& dir, const std::string& name)
-      : dir(dir), name(name), port(test::free_loopback_port()), metrics_port(test::free_loopback_port()) {
+      : dir(dir), name(name), map(dir + "/" + name + ".sqlite"), port(test::free_loopback_port()),
+        metrics_port(test::free_loopback_port()) {
+    std::filesystem::copy_file(test_world().map_path, map, std::filesystem::copy_options::overwrite_existing);
     start();
   }
   void start() {
     const std::string binary = std::string(SEGMATCH_BIN_DIR) + "/segmatch-server";
     ASSERT_TRUE(std::filesystem::exists(binary)) << binary << " is not built";
     process = std::make_unique<test::ChildProcess>(
-        std::vector<std::string>{binary, "--map", test_world().map_path, "--listen", "127.0.0.1", "--port",
+        std::vector<std::string>{binary, "--map", map, "--listen", "127.0.0.1", "--port",
                                  std::to_string(port), "--workers", "1", "--token-file", dir + "/token",
                                  "--metrics-port", std::to_string(metrics_port), "--stats-interval-s", "0",
                                  "--log-requests", "off"},
@@ -153,7 +182,7 @@ struct Replica {
     return test::wait_until([&] { return metric(scrape(), R"(segmatch_requests_total\{status="ok",type="PING"\})") >= checks; }, 30);
   }
 
-  std::string dir, name;
+  std::string dir, name, map;
   uint16_t port, metrics_port;
   std::unique_ptr<test::ChildProcess> process;
 };
