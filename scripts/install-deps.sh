@@ -10,6 +10,7 @@ PACKAGES=(
   libcli11-dev nlohmann-json3-dev
   libceres-dev libzstd-dev
   prometheus-cpp-dev curl
+  file dpkg-dev  # cpack -G DEB (tests/install): ELF detection and dpkg-shlibdeps
   haproxy  # tests/deploy: replicas behind deploy/haproxy (Debian's own haproxy service listens on nothing)
 )
 # `install-deps.sh fuzz`: also clang and its libFuzzer runtime (scripts/fuzz.sh).

@@ -14,6 +14,8 @@
 #include "segmatch/io/pipeline_config.h"
 #include "segmatch/sim/city.h"
 
+#include <segmatch/cli/tool.h>
+
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
@@ -100,7 +102,7 @@ int main(int argc, char** argv) {
   bool eigen_only = false;
   std::string eigen_out, real_dir;
   std::vector<std::string> baselines;
-  app.add_option("-o,--out", out, "model file to write (e.g. maps/models/default-rf.yml)")->required();
+  cli::add_output_option(app, out, "model file to write (e.g. maps/models/default-rf.yml), required");
   app.add_option("--config", config_path, "pipeline config JSON (default: the kitti-hdl64 preset)");
   app.add_option("--preset", preset, "simulated city size: tiny, demo, city")->check(CLI::IsMember(sim::dataset_preset_names()));
   app.add_option("--seeds", seeds, "city seeds to train on")->delimiter(',');
@@ -113,7 +115,9 @@ int main(int argc, char** argv) {
                  "keyframes, queries from the odd ones, labels by centroid distance; every 3rd 300 m stretch of the drive "
                  "is held out (default config: the auto profile measured from that folder)");
   app.add_option("--baseline", baselines, "also report these existing model files on the same held-out pairs");
-  CLI11_PARSE(app, argc, argv);
+  cli::add_version_flag(app, "segmatch-train");
+  SEGMATCH_CLI_PARSE(app, argc, argv);
+  if (const int status = cli::require_output("segmatch-train", out); status >= 0) return status;
   try {
     // Default: the auto profile. Simulated HDL-64E scans measure as dense-spinning, i.e. the
     // kitti-hdl64 values, so only a real folder is measured.

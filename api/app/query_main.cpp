@@ -4,6 +4,8 @@
 
 #include <segmatch/io/cloud_io.h>
 
+#include <segmatch/cli/tool.h>
+
 #include <CLI/CLI.hpp>
 
 #include <chrono>
@@ -55,8 +57,10 @@ int main(int argc, char** argv) {
   uint16_t port = 7878;
   double timeout_s = 30.0;
   query::ReplayOptions replay;
-  app.add_option("--host", host, "server address")->capture_default_str();
-  app.add_option("--port", port, "server port")->capture_default_str();
+  std::string server;
+  app.add_option("-s,--server", server, "HOST:PORT of segmatch-server (default 127.0.0.1:7878)");
+  app.add_option("--host", host, "server address (old spelling; use --server)")->group("");
+  app.add_option("--port", port, "server port (old spelling; use --server)")->group("");
   app.add_option("--token-file", token_file, "file holding the server's token");
   app.add_option("--timeout-s", timeout_s, "longest wait for one reply")->capture_default_str();
   CLI::App* ping = app.add_subcommand("ping", "round trip of one PING");
@@ -76,7 +80,17 @@ int main(int argc, char** argv) {
   rep->add_flag("--segments", replay.segments,
                 "query by segments (LOCALIZE_SEGMENTS): segment and describe each local cloud here with the map's "
                 "parameters and send the segments (a few hundred KB) instead of the cloud (MB)");
-  CLI11_PARSE(app, argc, argv);
+  cli::add_version_flag(app, "segmatch-query");
+  SEGMATCH_CLI_PARSE(app, argc, argv);
+  if (!server.empty()) {
+    try {
+      const cli::HostPort where = cli::parse_server(server);
+      host = where.host, port = where.port;
+    } catch (const std::invalid_argument& e) {
+      std::fprintf(stderr, "segmatch-query: error: %s\n", e.what());
+      return 2;
+    }
+  }
   try {
     api::ClientOptions options;
     options.token = read_token(token_file);
@@ -93,7 +107,10 @@ int main(int argc, char** argv) {
       request.sensor_position_local = parse_xyz(sensor);
       request.points = io::read_cloud(cloud_path).points;
       const auto sent = std::chrono::steady_clock::now();
-      query::print_reply(client.localize(request), ms_since(sent));
+      const api::LocalizeReply reply = client.localize(request);
+      query::print_reply(reply, ms_since(sent));
+      // Scripts tell a fix from a refusal by the status: 3 when the answer is not LOCALIZED.
+      if (reply.status != api::LocalizeStatus::kLocalized) return 3;
     } else {
       return query::replay(client, replay);
     }

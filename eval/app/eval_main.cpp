@@ -14,6 +14,8 @@
 #include "segmatch/vehicle/segment_query.h"
 #include "segmatch/sim/city.h"
 
+#include <segmatch/cli/tool.h>
+
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
@@ -202,7 +204,7 @@ int main(int argc, char** argv) {
   loc->add_option("--gnss-seed", lc.gnss_seed, "seed of the GNSS noise (default 1)");
   loc->add_flag("--compare-global", lc.compare_global,
                 "also send every query that has a prior without it (not scored) and report both server times");
-  loc->add_option("--out", out_dir, "report folder (JSON + PNG)");
+  cli::add_output_option(*loc, out_dir, "report folder (JSON + PNG)");
   bool segments = false;
   loc->add_flag("--segments", segments,
                 "query by segments (LOCALIZE_SEGMENTS): segment and describe each local cloud here, as a vehicle would, "
@@ -226,8 +228,9 @@ int main(int argc, char** argv) {
   cls->add_option("--real", co.real_dir,
                   "real keyframe folder instead of a city: every candidate pair of the stretches segmatch-train --real "
                   "holds out, labelled by centroid distance (default config: the auto profile measured from it)");
-  cls->add_option("--out", co.out_dir, "report folder");
-  CLI11_PARSE(app, argc, argv);
+  cli::add_output_option(*cls, co.out_dir, "report folder");
+  cli::add_version_flag(app, "segmatch-eval");
+  SEGMATCH_CLI_PARSE(app, argc, argv);
   try {
     if (*loc) {
       if (lc.query_folder.empty() == lc.sim_dataset.empty()) throw std::runtime_error("give exactly one of --query and --sim");

@@ -14,6 +14,8 @@
 #include <segmatch/io/sequence.h>
 #include <segmatch/posegraph/close_loops.h>
 
+#include <segmatch/cli/tool.h>
+
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
@@ -87,9 +89,9 @@ LoopDetectorConfig detector_config(const Options& o, const io::PipelineConfig& p
 std::shared_ptr<const RandomForestMatcher> pick_matcher(const Options& o, LoopDetectorConfig& c) {
   std::string path = o.classifier;
   const bool l2 = o.l2 || (path.empty() && c.localizer.matcher.type == MatcherType::kL2);
-  if (path.empty() && !l2 && fs::exists(SEGMATCH_DEFAULT_MODEL)) path = SEGMATCH_DEFAULT_MODEL;
+  if (path.empty() && !l2) path = cli::shipped_model("default-rf.yml");
   if (l2 || path.empty()) {
-    if (!l2) std::fprintf(stderr, "segmatch-loop: no classifier (%s missing): using the L2 matcher\n", SEGMATCH_DEFAULT_MODEL);
+    if (!l2) std::fprintf(stderr, "segmatch-loop: no classifier (share/segmatch/models/default-rf.yml missing): using the L2 matcher\n");
     c.localizer.matcher.type = MatcherType::kL2;
     c.localizer.matcher.use_shapes = false;
     return nullptr;
@@ -226,8 +228,10 @@ int main(int argc, char** argv) {
   app.add_option("--revisit-radius-m", o.eval.revisit_radius_m, "evaluation: a revisit is within this of an earlier pose");
   app.add_option("--revisit-gap-m", o.eval.min_revisit_gap_m,
                  "evaluation: ... driven at least this long before (default: --exclude-m)");
-  app.add_option("--out", o.out, "output folder")->required();
-  CLI11_PARSE(app, argc, argv);
+  cli::add_output_option(app, o.out, "output folder, required");
+  cli::add_version_flag(app, "segmatch-loop");
+  SEGMATCH_CLI_PARSE(app, argc, argv);
+  if (const int status = cli::require_output("segmatch-loop", o.out); status >= 0) return status;
   try {
     o.revisit_gap_given = app.count("--revisit-gap-m") > 0;
     return run_main(o);

@@ -1,4 +1,6 @@
 #include "build_map.h"
+
+#include <segmatch/cli/tool.h>
 #include "loop_poses.h"
 
 #include <segmatch/cli/progress.h>
@@ -71,12 +73,11 @@ std::optional<storage::ClassifierBlob> load_classifier(const BuildOptions& o) {
   if (o.no_classifier) return std::nullopt;
   std::string path = o.classifier_path;
   if (path.empty()) {
-    path = SEGMATCH_DEFAULT_MODEL;
-    if (!fs::exists(path)) {
+    path = cli::shipped_model("default-rf.yml");
+    if (path.empty()) {
       std::fprintf(stderr,
-                   "segmatch-mapbuilder: warning: default classifier %s not found, building the map "
-                   "without a classifier (pass --classifier FILE to add one)\n",
-                   path.c_str());
+                   "segmatch-mapbuilder: warning: the default classifier (share/segmatch/models/default-rf.yml) "
+                   "is not installed, building the map without a classifier (pass --classifier FILE to add one)\n");
       return std::nullopt;
     }
   }

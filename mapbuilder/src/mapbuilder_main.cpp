@@ -4,6 +4,8 @@
 #include <segmatch/io/error.h>
 #include <segmatch/storage/map_types.h>
 
+#include <segmatch/cli/tool.h>
+
 #include <CLI/CLI.hpp>
 
 #include <csignal>
@@ -61,14 +63,8 @@ int main(int argc, char** argv) {
   app.add_flag("--close-loops", o.close_loops,
                "the poses are a drifting odometry: detect loops and optimise the pose graph first, and build "
                "the map on the corrected poses");
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::CallForHelp& e) {
-    return app.exit(e);
-  } catch (const CLI::ParseError& e) {
-    app.exit(e);
-    return 2;
-  }
+  cli::add_version_flag(app, "segmatch-mapbuilder");
+  SEGMATCH_CLI_PARSE(app, argc, argv);
   if (!o.print_config && o.output.empty()) {
     std::fprintf(stderr, "segmatch-mapbuilder: error: --output is required\n");
     return 2;

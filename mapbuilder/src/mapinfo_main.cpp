@@ -8,6 +8,8 @@
 #include <segmatch/storage/map_reader.h>
 #include <segmatch/storage/map_writer.h>
 
+#include <segmatch/cli/tool.h>
+
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
@@ -91,14 +93,8 @@ int main(int argc, char** argv) {
   auto* ply_opt = app.add_option("--export-ply", ply, "write all segments' points, coloured per segment (ASCII PLY)");
   app.add_option("--export-pcd", pcd, "same as ASCII PCD with an rgb field")->excludes(ply_opt);
   app.add_option("--png", png, "top-down picture: segments, trajectory, scale bar");
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::CallForHelp& e) {
-    return app.exit(e);
-  } catch (const CLI::ParseError& e) {
-    app.exit(e);
-    return 2;
-  }
+  cli::add_version_flag(app, "segmatch-mapinfo");
+  SEGMATCH_CLI_PARSE(app, argc, argv);
   if (upgrade_paths.empty() && path.empty()) {
     std::fprintf(stderr, "segmatch-mapinfo: error: give a map file, or --upgrade OLD NEW\n");
     return 2;

@@ -3,6 +3,8 @@
 #include <segmatch/server/metrics.h>
 #include <segmatch/server/server.h>
 
+#include <segmatch/cli/tool.h>
+
 #include <CLI/CLI.hpp>
 
 #include <sys/stat.h>
@@ -123,7 +125,8 @@ int main(int argc, char** argv) {
   app.add_option("--point-cache-mb", point_cache_mb, "with --map-points lazy: points kept cached (MiB)")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1e6));
-  CLI11_PARSE(app, argc, argv);
+  cli::add_version_flag(app, "segmatch-server");
+  SEGMATCH_CLI_PARSE(app, argc, argv);
   config.log_requests = log_requests == "on";
   server::MapLoadOptions load;
   load.points = map_points == "lazy" ? server::MapPoints::kLazy : server::MapPoints::kMemory;

@@ -4,6 +4,8 @@
 #include "segmatch/cli/progress.h"
 #include "segmatch/sim/dataset.h"
 
+#include <segmatch/cli/tool.h>
+
 #include <CLI/CLI.hpp>
 
 #include <cstdio>
@@ -104,7 +106,7 @@ int main(int argc, char** argv) {
   app.add_option("--preset", preset, "tiny (seconds, tests), demo (~2 km), city (10+ km of streets)")
       ->check(CLI::IsMember(sim::dataset_preset_names()));
   app.add_option("--seed", seed, "world seed: same seed, same bytes");
-  app.add_option("-o,--out", out, "output folder (default: out/sim-<preset>-<seed>)");
+  cli::add_output_option(app, out, "output folder (default: out/sim-<preset>-<seed>)");
   app.add_option("--sensor", sensor,
                  "hdl64e (default), vlp16, os1-64 or livox-avia (rosette scan in a 70.4 x 77.2 deg forward cone, "
                  "24000 points per 0.1 s frame, never repeating; carried at 1.0 m)");
@@ -121,7 +123,8 @@ int main(int argc, char** argv) {
   app.add_flag("--force", force, "replace an existing dataset in the output folder");
   app.add_flag("--no-labels", no_labels, "do not write per-point labels");
   app.add_flag("--no-images", no_images, "do not draw world.png and scan.png");
-  CLI11_PARSE(app, argc, argv);
+  cli::add_version_flag(app, "segmatch-sim");
+  SEGMATCH_CLI_PARSE(app, argc, argv);
 
   try {
     sim::DatasetConfig config = sim::dataset_preset(preset, seed);

@@ -21,6 +21,9 @@ namespace api {
 
 constexpr std::array<uint8_t, 4> kMagic = {'S', 'G', 'M', 'Q'};
 constexpr uint16_t kProtocolVersion = 1;
+// The protocol document's revision (docs/protocol.md, History): messages, flag bits and error
+// codes added compatibly since version 1. The frame header still says kProtocolVersion.
+constexpr int kProtocolRevision = 4;
 constexpr size_t kHeaderBytes = 12;
 
 enum class MessageType : uint16_t {
