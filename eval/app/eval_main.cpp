@@ -95,7 +95,7 @@ int run_localize(const eval::LocalizationRunConfig& config, const std::string& s
   side.print();
   if (!out_dir.empty()) {
     eval::write_localization_report(run, out_dir);
-    std::printf("report: %s/{localization.json, trajectory.png, px.png, errors.png}\n", out_dir.c_str());
+    std::printf("report: %s/{localization.json, estimated.tum, reference.tum, trajectory.png, px.png, errors.png}\n", out_dir.c_str());
   }
   return 0;
 }
@@ -198,7 +198,7 @@ int main(int argc, char** argv) {
                 "track between fixes (api::Tracker): each query's prior is the last fix, its radius grows with the distance "
                 "driven since; with --query the vehicle's odometry is the sequence's odom_poses.txt when it has one");
   auto* odom = loc->add_option("--odometry", lc.odometry_path,
-                               "the vehicle's odometry poses (default with --track: QUERY/odom_poses.txt if present)");
+                               "the vehicle's odometry poses, KITTI or TUM (default with --track: QUERY/odom_poses.txt if present)");
   loc->add_option("--gnss-sigma-m", lc.gnss_sigma_m,
                   "GNSS-like priors: the true pose plus Gaussian noise of this many metres (seeded), radius 3 sigma");
   loc->add_option("--gnss-seed", lc.gnss_seed, "seed of the GNSS noise (default 1)");

@@ -118,6 +118,8 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
         o.support = reply.support;
         o.confidence = reply.confidence;
         const Pose3d& T_map_sensor_truth = truth.T_map_sensor[q.frame];
+        o.T_map_sensor_truth = T_map_sensor_truth;
+        o.time_s = truth.sequence.times()[q.frame];
         o.mapped = distance_to(run.map_trajectory, T_map_sensor_truth.translation()) <= c.thresholds.mapped_radius_m;
         score(o, reply.T_map_local * q.T_odom_sensor, T_map_sensor_truth, c.thresholds);
         add_timings(timings, reply.timings);
@@ -176,6 +178,25 @@ void print_summary(const LocalizationRun& run) {
   std::printf("\n");
 }
 
+// estimated.tum: T_map_sensor of every localized query; reference.tum: the reference pose of the
+// same queries, same times. `evo_ape tum reference.tum estimated.tum` compares them.
+namespace {
+
+void write_trajectories_for_evo(const std::vector<QueryOutcome>& outcomes, const std::string& out_dir) {
+  io::StampedPoses estimated, reference;
+  for (const QueryOutcome& o : outcomes) {
+    if (!o.localized) continue;
+    estimated.times.push_back(o.time_s);
+    estimated.poses.push_back(o.T_map_sensor);
+    reference.times.push_back(o.time_s);
+    reference.poses.push_back(o.T_map_sensor_truth);
+  }
+  io::write_tum((std::filesystem::path(out_dir) / "estimated.tum").string(), estimated);
+  io::write_tum((std::filesystem::path(out_dir) / "reference.tum").string(), reference);
+}
+
+}  // namespace
+
 void write_localization_report(const LocalizationRun& run, const std::string& out_dir) {
   namespace fs = std::filesystem;
   fs::create_directories(out_dir);
@@ -221,6 +242,7 @@ void write_localization_report(const LocalizationRun& run, const std::string& ou
   std::ofstream f(json_path);
   f << j.dump(2) << "\n";
   if (!f) throw std::runtime_error(json_path + ": cannot write");
+  write_trajectories_for_evo(run.outcomes, out_dir);
   plot_trajectory((fs::path(out_dir) / "trajectory.png").string(), run.map_trajectory, run.outcomes, run.title);
   plot_px((fs::path(out_dir) / "px.png").string(), s.px, "P(x), equation 1: " + run.title);
   plot_error_histogram((fs::path(out_dir) / "errors.png").string(), run.outcomes, "Translation errors: " + run.title);

@@ -96,7 +96,7 @@ Sequence Sequence::open(const std::string& folder, const SequenceOptions& option
   const std::string poses_path =
       options.poses_path.empty() ? (root / "poses.txt").string() : options.poses_path;
   require_file(poses_path, "a sequence needs one pose per scan");
-  Poses poses = read_kitti_poses(poses_path);
+  Poses poses = read_poses(poses_path);
   if (poses.size() != n) {
     detail::fail(
         folder, count_mismatch(n, poses.size(), "poses", fs::path(poses_path).filename().string()));

@@ -112,7 +112,7 @@ double percentile(std::vector<double> v, double p) {
 // --truth, else the folder's own poses.txt: with --odometry the sequence's poses are the
 // odometry, which must not be scored against itself.
 Poses reference_poses(const Options& o, const io::Sequence& seq) {
-  if (!o.truth.empty()) return io::read_kitti_poses(o.truth);
+  if (!o.truth.empty()) return io::read_poses(o.truth);
   if (o.odometry.empty()) return seq.poses();
   return io::Sequence::open(o.input).poses();
 }
@@ -165,12 +165,14 @@ int run_main(Options o) {
     loop::write_curve_png((out / "precision_recall.png").string(), e.curve, o.eval.max_rotation_error_deg);
   }
   loop::write_png((out / "loops.png").string(), r.frames, r.T_odom_sensor, r.processed, r.loops, correct);
-  std::string written = "loops.txt,loops.g2o,loops.png";
+  std::string written = "loops.txt,loops.g2o,loops.png,odometry.tum";
+  // The odometry of every processed frame, for evo (`evo_traj tum odometry.tum`).
+  std::vector<double> times;
+  for (size_t f : r.frames) times.push_back(seq.times()[f]);
+  loop::write_tum((out / "odometry.tum").string(), times, r.T_odom_sensor);
   if (o.optimize) {
     const loop::TrajectorySummary t = loop::summarize(r, reference);
     loop::print_summary(t, r.loops);
-    std::vector<double> times;
-    for (size_t f : r.frames) times.push_back(seq.times()[f]);
     io::write_kitti_poses((out / "poses_corrected.txt").string(), r.T_corrected_sensor);
     loop::write_tum((out / "poses_corrected.tum").string(), times, r.T_corrected_sensor);
     loop::write_g2o((out / "optimized.g2o").string(), r.frames, r.T_corrected_sensor, r.graph);
@@ -196,9 +198,9 @@ int main(int argc, char** argv) {
   app.add_option("--preset", o.preset, "pipeline preset: auto (default: measured from the input), kitti-hdl64, sparse-keyframes, livox-keyframes")->excludes(config_opt);
   app.add_option("--classifier", o.classifier, "random forest model (default: maps/models/default-rf.yml if present)");
   app.add_flag("--l2", o.l2, "use the L2 feature-distance matcher instead of a random forest");
-  app.add_option("--odometry", o.odometry, "odometry poses (KITTI 12 numbers) instead of the sequence's poses.txt");
+  app.add_option("--odometry", o.odometry, "odometry poses (KITTI 12 numbers or TUM 8 columns) instead of the sequence's poses.txt");
   app.add_option("--truth", o.truth,
-                 "ground-truth T_world_lidar poses, KITTI 12 numbers (default: the sequence's poses.txt, also with --odometry)");
+                 "ground-truth T_world_lidar poses, KITTI 12 numbers or TUM 8 columns (default: the sequence's poses.txt, also with --odometry)");
   app.add_flag("-v,--verbose", o.verbose, "print what each local cloud did");
   app.add_flag("--no-eval", o.no_eval, "do not evaluate (the input has no ground truth)");
   app.add_flag("--optimize", o.optimize,

@@ -59,7 +59,7 @@ int main(int argc, char** argv) {
   app.add_flag("--no-classifier", o.no_classifier, "store no classifier")->excludes(model);
   app.add_option("--name", o.name, "map name (default: the output file's stem)");
   app.add_flag("--force", o.force, "replace an existing map file");
-  app.add_option("--odometry", o.odometry_path, "poses (KITTI 12 numbers, as poses.txt) to build from instead of poses.txt");
+  app.add_option("--odometry", o.odometry_path, "poses (KITTI 12 numbers as poses.txt, or TUM 8 columns) to build from instead of poses.txt");
   app.add_flag("--close-loops", o.close_loops,
                "the poses are a drifting odometry: detect loops and optimise the pose graph first, and build "
                "the map on the corrected poses");

@@ -12,6 +12,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 
 using namespace segmatch;
 namespace fs = std::filesystem;
@@ -28,6 +29,45 @@ Pose3d pose_of(const nlohmann::json& j) {
   T.linear() = Eigen::Quaterniond(q[0], q[1], q[2], q[3]).normalized().toRotationMatrix();
   T.translation() << j.at("t")[0], j.at("t")[1], j.at("t")[2];
   return T;
+}
+
+// One TUM line as evo reads it (numpy.loadtxt): exactly 8 numbers, t tx ty tz qx qy qz qw.
+std::vector<double> tum_columns(const std::string& line) {
+  std::istringstream in(line);
+  std::vector<double> v;
+  for (std::string w; in >> w;) v.push_back(std::stod(w));
+  return v;
+}
+
+// The report's estimated.tum / reference.tum: one line per localized query, the same times in
+// both, the estimate and the reference pose of that query.
+void expect_trajectories_for_evo(const eval::LocalizationRun& run) {
+  const fs::path dir = fs::path(::testing::TempDir()) / "segmatch-regression-report";
+  eval::write_localization_report(run, dir.string());
+  std::ifstream estimated(dir / "estimated.tum"), reference(dir / "reference.tum");
+  ASSERT_TRUE(estimated && reference);
+  size_t lines = 0;
+  std::string e_line, r_line;
+  for (const eval::QueryOutcome& o : run.outcomes) {
+    if (!o.localized) continue;
+    do std::getline(estimated, e_line); while (!e_line.empty() && e_line[0] == '#');
+    do std::getline(reference, r_line); while (!r_line.empty() && r_line[0] == '#');
+    const std::vector<double> e = tum_columns(e_line), r = tum_columns(r_line);
+    ASSERT_EQ(e.size(), 8u) << e_line;
+    ASSERT_EQ(r.size(), 8u) << r_line;
+    EXPECT_EQ(e[0], r[0]) << "the same time in both files";
+    EXPECT_NEAR(e[0], o.time_s, 1e-6);
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_NEAR(e[1 + k], o.T_map_sensor.translation()[k], 1e-6);
+      EXPECT_NEAR(r[1 + k], o.T_map_sensor_truth.translation()[k], 1e-6);
+    }
+    const Eigen::Quaterniond q(o.T_map_sensor.linear());  // x y z w on the line, evo's order
+    EXPECT_NEAR(std::abs(e[4] * q.x() + e[5] * q.y() + e[6] * q.z() + e[7] * q.w()), 1.0, 1e-6);
+    ++lines;
+  }
+  EXPECT_FALSE(std::getline(estimated, e_line) && !e_line.empty()) << "more lines than localized queries";
+  EXPECT_EQ(lines, run.summary.localized);
+  fs::remove_all(dir);
 }
 
 }  // namespace
@@ -101,6 +141,7 @@ TEST_F(RegressionMap, TodaysCodeGivesTheGoldenAnswers) {
   std::printf("[regression] %zu queries, %zu localized in the golden run, %zu still at the same pose; %zu localized now\n",
               run.outcomes.size(), golden_localized, same, run.summary.localized);
   EXPECT_GE(golden_localized, 3u) << "the golden run should localize: regenerate the map";
+  expect_trajectories_for_evo(run);
 }
 
 // maps/tiny-3 is a schema-1 file (kept on purpose): upgraded to this build's schema it must

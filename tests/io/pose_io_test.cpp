@@ -223,6 +223,29 @@ TEST(Times, RoundTripAndErrors) {
                             {"times.txt line 2", "non-finite"}));
 }
 
+
+// --odometry / --truth take either format: told apart by the first pose line's columns.
+TEST(AnyPoses, KittiAndTumAreToldApartByTheirColumns) {
+  test::TempDir dir;
+  const Poses poses = random_poses(20, 43);
+  write_kitti_poses(dir.file("poses.txt"), poses);
+  StampedPoses stamped;
+  for (size_t i = 0; i < poses.size(); ++i) stamped.times.push_back(0.1 * static_cast<double>(i));
+  stamped.poses = poses;
+  write_tum(dir.file("poses.tum"), stamped);
+  const Poses from_kitti = read_poses(dir.file("poses.txt")), from_tum = read_poses(dir.file("poses.tum"));
+  ASSERT_EQ(from_kitti.size(), poses.size());
+  ASSERT_EQ(from_tum.size(), poses.size());
+  for (size_t i = 0; i < poses.size(); ++i) {
+    EXPECT_LT(max_difference(from_kitti[i], poses[i]), 1e-12);
+    EXPECT_LT(max_difference(from_tum[i], poses[i]), 1e-9);
+  }
+  test::write_bytes(dir.file("bad.txt"), "# a comment\n1 2 3 4 5 6 7\n");
+  EXPECT_TRUE(ThrowsIoError([&] { read_poses(dir.file("bad.txt")); }, {"bad.txt", "7 columns", "12 (KITTI", "8 (TUM"}));
+  test::write_bytes(dir.file("empty.txt"), "\n# nothing\n");
+  EXPECT_TRUE(ThrowsIoError([&] { read_poses(dir.file("empty.txt")); }, {"empty.txt", "no poses"}));
+}
+
 }  // namespace
 }  // namespace io
 }  // namespace segmatch

@@ -3,6 +3,8 @@
 // loop_closure_test.cpp (0.3 % long, 0.2 deg / 100 m yaw, 2 mm / m climb): segmatch-loop
 // --optimize corrects the trajectory and writes every output; segmatch-mapbuilder
 // --close-loops stores a map on the corrected poses. The dataset is simulated once.
+#include <segmatch/io/pose_io.h>
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -12,6 +14,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <string>
 
 namespace fs = std::filesystem;
@@ -46,7 +49,7 @@ TEST_F(ClosedRoute, LoopOptimizeCorrectsTheDriftedOdometry) {
                                              "/odom_poses.txt --optimize --out " + out.string());
   ASSERT_EQ(r.code, 0) << r.output;
   for (const char* f : {"loops.txt", "loops.g2o", "optimized.g2o", "poses_corrected.txt", "poses_corrected.tum",
-                        "trajectory.png", "eval.json"})
+                        "odometry.tum", "trajectory.png", "eval.json"})
     EXPECT_GT(fs::file_size(out / f), 0u) << f;
   std::ifstream in(out / "eval.json");
   const nlohmann::json e = nlohmann::json::parse(in);
@@ -67,6 +70,20 @@ TEST_F(ClosedRoute, LoopOptimizeCorrectsTheDriftedOdometry) {
   for (std::string line; std::getline(tum, line);) tum_lines += !line.empty() && line[0] != '#';
   EXPECT_EQ(kitti_lines, tum_lines);
   EXPECT_GT(kitti_lines, 900u);
+  // The odometry in TUM for evo: the same frames, 8 columns (t x y z qx qy qz qw) a line, and
+  // readable back as the poses --odometry / --truth accept.
+  std::ifstream odometry(out / "odometry.tum");
+  size_t odometry_lines = 0;
+  for (std::string line; std::getline(odometry, line);) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream words(line);
+    size_t columns = 0;
+    for (std::string w; words >> w;) ++columns;
+    EXPECT_EQ(columns, 8u) << line;
+    ++odometry_lines;
+  }
+  EXPECT_EQ(odometry_lines, tum_lines);
+  EXPECT_EQ(segmatch::io::read_poses((out / "odometry.tum").string()).size(), tum_lines);
 }
 
 TEST_F(ClosedRoute, MapbuilderCloseLoopsStoresTheCorrection) {

@@ -62,7 +62,8 @@ struct LocalizationRun {
 // Throws io::IoError / storage::StorageError / std::runtime_error naming the bad input.
 LocalizationRun run_localization(const LocalizationRunConfig& config, const LocalizeFn& localize);
 
-// out_dir/localization.json, trajectory.png, px.png, errors.png; prints the summary.
+// out_dir/localization.json, estimated.tum and reference.tum (localized queries, for evo),
+// trajectory.png, px.png, errors.png; prints the summary.
 void write_localization_report(const LocalizationRun& run, const std::string& out_dir);
 void print_summary(const LocalizationRun& run);
 

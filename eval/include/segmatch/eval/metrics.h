@@ -39,6 +39,8 @@ struct QueryOutcome {
   Eigen::Vector3d truth_xy = Eigen::Vector3d::Zero();     // map-frame truth position
   Eigen::Vector3d estimate_xy = Eigen::Vector3d::Zero();  // map-frame estimate when localized
   Pose3d T_map_sensor = Pose3d::Identity();              // the estimate when localized
+  Pose3d T_map_sensor_truth = Pose3d::Identity();        // the reference pose of the query scan
+  double time_s = 0.0;                                   // the query scan's time (times.txt)
 };
 
 // Fills correct / error_m / error_deg of a localized outcome from the estimated and true

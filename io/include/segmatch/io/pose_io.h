@@ -42,6 +42,11 @@ struct StampedPoses {
 StampedPoses read_tum(const std::string& path);
 void write_tum(const std::string& path, const StampedPoses& poses);
 
+// A trajectory in either format, told apart by the columns of its first pose line: 12 numbers
+// are KITTI, 8 are TUM (its times are dropped; the poses are in file order). Anything else
+// raises IoError naming the file and the count found.
+Poses read_poses(const std::string& path);
+
 // KITTI times.txt: one number (seconds) per line.
 std::vector<double> read_times(const std::string& path);
 void write_times(const std::string& path, const std::vector<double>& times);
