@@ -11,6 +11,7 @@ PACKAGES=(
   libceres-dev libzstd-dev
   prometheus-cpp-dev curl
   file dpkg-dev  # cpack -G DEB (tests/install): ELF detection and dpkg-shlibdeps
+  python3-venv python3-numpy python3-setuptools python3-wheel python3-pytest  # python/ and tests/python
   haproxy  # tests/deploy: replicas behind deploy/haproxy (Debian's own haproxy service listens on nothing)
 )
 # `install-deps.sh fuzz`: also clang and its libFuzzer runtime (scripts/fuzz.sh).

@@ -1,0 +1,38 @@
+"""Constants of the SGMQ protocol (docs/protocol.md): frame header, message types, LOCALIZE
+flag bits, reply statuses. Re-exported by segmatch.protocol."""
+
+from __future__ import annotations
+
+import enum
+
+MAGIC = b"SGMQ"
+VERSION = 1  # the frame header's version
+REVISION = 4  # the document's revision: additions since version 1 (docs/protocol.md 8)
+HEADER_BYTES = 12
+MAX_PAYLOAD_BYTES = 64 << 20  # the server's default --max-frame-mb
+
+# LOCALIZE flag bits (docs/protocol.md 5.4).
+FLAG_HAS_PRIOR = 1 << 0
+FLAG_VOXELIZED = 1 << 1  # the points are centroids of the map's voxel grid
+FLAG_PRIOR_HEADING = 1 << 2  # revision 2: the prior's heading tolerance follows the points
+KNOWN_FLAGS = FLAG_HAS_PRIOR | FLAG_VOXELIZED | FLAG_PRIOR_HEADING
+LOCALIZE_FIXED_BYTES = 140  # payload bytes before the points
+
+
+class MessageType(enum.IntEnum):
+    HELLO = 0x0001
+    PING = 0x0002
+    INFO = 0x0003
+    LOCALIZE = 0x0004
+    LOCALIZE_SEGMENTS = 0x0005  # revision 3
+    HELLO_OK = 0x8001  # replies have the high bit set
+    PONG = 0x8002
+    INFO_REPLY = 0x8003
+    LOCALIZE_REPLY = 0x8004
+    ERROR = 0x80FF
+
+
+class LocalizeStatus(enum.IntEnum):
+    LOCALIZED = 0
+    NOT_LOCALIZED = 1
+    OUTSIDE_PRIOR = 2  # a pose was found (and reported) but lies outside the prior's radius

@@ -1,0 +1,207 @@
+"""LOCALIZE and LOCALIZE_REPLY (docs/protocol.md 5.4, 6.4), as the C++ api/src/localize_codec.cpp,
+and the request head and pose fields LOCALIZE_SEGMENTS shares. Re-exported by segmatch.protocol.
+
+QUATERNION ORDER: w x y z on the wire; ROS uses x y z w (segmatch.pose.wxyz_from_ros_xyzw).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from typing import ClassVar, List, Optional, Tuple
+
+import numpy as np
+
+from ._constants import FLAG_PRIOR_HEADING, KNOWN_FLAGS, LOCALIZE_FIXED_BYTES, LocalizeStatus, MessageType
+from ._wire import Reader, Writer, all_finite
+from .errors import DecodeError, DecodeStatus
+from .pose import QUATERNION_NORM_TOLERANCE, Pose, unit_quaternion
+
+# Pose fields and the request head shared with LOCALIZE_SEGMENTS (C++ codec_util.h).
+
+
+def _put_quaternion(w: Writer, q) -> None:
+    w.f64s(unit_quaternion(q))
+
+
+def _put_pose(w: Writer, pose: Pose) -> None:
+    _put_quaternion(w, pose.q_wxyz)
+    w.f64s(pose.t)
+
+
+def _quaternion_status(q) -> Optional[DecodeStatus]:
+    if not all_finite(q):
+        return DecodeStatus.NON_FINITE
+    if not abs(math.sqrt(sum(v * v for v in q)) - 1.0) <= QUATERNION_NORM_TOLERANCE:
+        return DecodeStatus.BAD_QUATERNION
+    return None
+
+
+def _pose_status(pose: Pose) -> Optional[DecodeStatus]:
+    s = _quaternion_status(pose.q_wxyz)
+    return s if s else (None if all_finite(pose.t) else DecodeStatus.NON_FINITE)
+
+
+def put_request_head(w: Writer, m) -> None:
+    """The first 132 bytes of LOCALIZE and LOCALIZE_SEGMENTS."""
+    w.u64(m.request_id)
+    w.u32(m.flags)
+    w.f64s(m.sensor_position)
+    _put_quaternion(w, m.sensor_orientation_wxyz)
+    _put_pose(w, m.prior)
+    w.f64(m.prior_radius_m)
+
+
+def get_request_head(r: Reader) -> Tuple[dict, Optional[DecodeStatus]]:
+    """Reads the head; returns its fields and the first bad value's status (checked by the
+    caller after its flag and length checks, in the C++ order)."""
+    head = dict(request_id=r.u64(), flags=r.u32(), sensor_position=r.f64s(3), sensor_orientation_wxyz=r.f64s(4))
+    head["prior"] = Pose(r.f64s(4), r.f64s(3))
+    head["prior_radius_m"] = r.f64()
+    pos_status = None if all_finite(head["sensor_position"]) else DecodeStatus.NON_FINITE
+    status = pos_status or _quaternion_status(head["sensor_orientation_wxyz"]) or _pose_status(head["prior"])
+    return head, status
+
+
+def _empty_points() -> np.ndarray:
+    return np.zeros((0, 4), dtype=np.float32)
+
+
+@dataclass(eq=False)  # eq=False: points are an array; compare encode() bytes instead
+class Localize:
+    """LOCALIZE (docs/protocol.md 5.4). Positions and points are in the vehicle's local frame;
+    sensor_orientation_wxyz is w x y z (ROS: x y z w). points: float32 (N, 3) or (N, 4) with
+    intensity; the stride on the wire is the number of columns."""
+
+    TYPE: ClassVar[MessageType] = MessageType.LOCALIZE
+    request_id: int = 0
+    flags: int = 0
+    sensor_position: Tuple[float, float, float] = (0.0, 0.0, 0.0)
+    sensor_orientation_wxyz: Tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    prior: Pose = field(default_factory=Pose)  # T_map_local guess; used with FLAG_HAS_PRIOR
+    prior_radius_m: float = 0.0
+    prior_heading_tolerance_deg: float = 10.0  # sent only with FLAG_PRIOR_HEADING
+    points: np.ndarray = field(default_factory=_empty_points)
+
+    def _put(self, w: Writer) -> None:
+        pts = np.asarray(self.points)
+        if pts.ndim != 2 or pts.shape[1] not in (3, 4):
+            raise ValueError(f"points must be an (N, 3) or (N, 4) array, got shape {pts.shape}")
+        put_request_head(w, self)
+        w.u32(pts.shape[0])
+        w.u32(pts.shape[1])
+        w.array(pts, "<f4")
+        if self.flags & FLAG_PRIOR_HEADING:
+            w.f64(self.prior_heading_tolerance_deg)
+
+    @classmethod
+    def _get(cls, r: Reader) -> "Localize":
+        size = r.remaining()
+        if size < LOCALIZE_FIXED_BYTES:
+            raise DecodeError(DecodeStatus.TRUNCATED)
+        head, head_status = get_request_head(r)
+        count, stride = r.u32(), r.u32()
+        m = cls(**head)
+        if m.flags & ~KNOWN_FLAGS:
+            raise DecodeError(DecodeStatus.BAD_FIELD, f"unknown flag bits 0x{m.flags & ~KNOWN_FLAGS:x}")
+        if stride not in (3, 4):
+            raise DecodeError(DecodeStatus.BAD_STRIDE, f"stride {stride}")
+        trailer = 8 if m.flags & FLAG_PRIOR_HEADING else 0
+        if LOCALIZE_FIXED_BYTES + count * stride * 4 + trailer != size:
+            raise DecodeError(DecodeStatus.BAD_POINT_COUNT, f"{count} points of {stride} floats in {size} bytes")
+        if head_status:
+            raise DecodeError(head_status, "sensor pose or prior")
+        if not math.isfinite(m.prior_radius_m):
+            raise DecodeError(DecodeStatus.NON_FINITE, "prior radius")
+        if m.prior_radius_m < 0:
+            raise DecodeError(DecodeStatus.BAD_FIELD, "negative prior radius")
+        m.points = r.array("<f4", count * stride).reshape(count, stride)
+        if not np.all(np.isfinite(m.points)):
+            raise DecodeError(DecodeStatus.NON_FINITE, "point")
+        if trailer:
+            m.prior_heading_tolerance_deg = r.f64()
+            if not math.isfinite(m.prior_heading_tolerance_deg):
+                raise DecodeError(DecodeStatus.NON_FINITE, "heading tolerance")
+            if m.prior_heading_tolerance_deg < 0:
+                raise DecodeError(DecodeStatus.BAD_FIELD, "negative heading tolerance")
+        r.finish()
+        return m
+
+
+TIMING_NAMES = ("voxel", "ground", "segment", "describe", "retrieve", "classify", "verify", "refine", "total",
+                "server_total")
+
+
+@dataclass
+class Timings:
+    """Milliseconds per stage. total: the localizer's; server_total: frame received -> reply
+    encoded, queueing included. voxel..describe are 0 for LOCALIZE_SEGMENTS."""
+
+    voxel: float = 0.0
+    ground: float = 0.0
+    segment: float = 0.0
+    describe: float = 0.0
+    retrieve: float = 0.0
+    classify: float = 0.0
+    verify: float = 0.0
+    refine: float = 0.0
+    total: float = 0.0
+    server_total: float = 0.0
+
+
+@dataclass
+class LocalizeReply:
+    """LOCALIZE_REPLY (docs/protocol.md 6.4). T_map_local (4x4) maps local-frame points into the
+    map; the sensor's map pose is T_map_local @ T_local_sensor. pose holds the wire values."""
+
+    TYPE: ClassVar[MessageType] = MessageType.LOCALIZE_REPLY
+    request_id: int = 0
+    status: LocalizeStatus = LocalizeStatus.NOT_LOCALIZED
+    reason: str = ""  # empty when localized, why not otherwise
+    pose: Pose = field(default_factory=Pose)  # identity when not localized
+    inliers: int = 0
+    confidence: float = 0.0  # 0..1 (f32 on the wire)
+    support: int = 0  # query segments that land on a map segment under the pose
+    matched_segment_ids: List[int] = field(default_factory=list)  # map segment ids of the inliers
+    timings: Timings = field(default_factory=Timings)
+
+    @property
+    def T_map_local(self) -> np.ndarray:
+        return self.pose.matrix()
+
+    @property
+    def localized(self) -> bool:
+        return self.status == LocalizeStatus.LOCALIZED
+
+    def _put(self, w: Writer) -> None:
+        w.u64(self.request_id)
+        w.u16(int(self.status))
+        w.u16(0)  # reserved
+        w.str(self.reason)
+        _put_pose(w, self.pose)
+        w.u32(self.inliers)
+        w.f32(self.confidence)
+        w.u32(self.support)
+        w.u32(len(self.matched_segment_ids))
+        for i in self.matched_segment_ids:
+            w.u64(i)
+        for f in fields(Timings):
+            w.f32(getattr(self.timings, f.name))
+
+    @classmethod
+    def _get(cls, r: Reader) -> "LocalizeReply":
+        request_id, status, reserved, reason = r.u64(), r.u16(), r.u16(), r.str()
+        pose = Pose(r.f64s(4), r.f64s(3))
+        inliers, confidence, support, ids = r.u32(), r.f32(), r.u32(), r.u32()
+        if ids * 8 + len(TIMING_NAMES) * 4 != r.remaining():
+            raise DecodeError(DecodeStatus.TRUNCATED, f"{ids} segment ids and timings in {r.remaining()} bytes")
+        matched = [r.u64() for _ in range(ids)]
+        timings = Timings(*(r.f32() for _ in TIMING_NAMES))
+        pose_status = _pose_status(pose)
+        if pose_status:
+            raise DecodeError(pose_status, "T_map_local")
+        if reserved != 0 or status > 2:
+            raise DecodeError(DecodeStatus.BAD_FIELD, f"status {status}, reserved {reserved}")
+        if not math.isfinite(confidence):
+            raise DecodeError(DecodeStatus.NON_FINITE, "confidence")
+        return cls(request_id, LocalizeStatus(status), reason, pose, inliers, confidence, support, matched, timings)

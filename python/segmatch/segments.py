@@ -1,0 +1,161 @@
+"""LOCALIZE_SEGMENTS (docs/protocol.md 5.5, revision 3) at the wire level, and the parameters
+digest.
+
+Segments are kept quantised as on the wire (i16 point offsets in steps of 2^e m, ESF as u16
+mantissas of 2^f), so decoded frames re-encode byte for byte; .points and .esf give the values
+the server sees. Making segments (ground removal, segmentation, descriptors, quantisation) is
+the C++ vehicle library's job (vehicle/segment_query.h); this module does not re-implement it.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass, field
+from typing import ClassVar, List, Optional, Tuple
+
+import numpy as np
+
+from ._wire import Reader, Writer, all_finite
+from .errors import DecodeError, DecodeStatus
+from ._constants import MessageType
+from .localize import get_request_head, put_request_head
+from .pose import Pose
+
+SEGMENTS_FLAG_HAS_PRIOR = 1 << 0
+SEGMENTS_FLAG_ESF = 1 << 1  # every segment carries its ESF histogram
+KNOWN_SEGMENTS_FLAGS = SEGMENTS_FLAG_HAS_PRIOR | SEGMENTS_FLAG_ESF
+SEGMENTS_FIXED_BYTES = 156
+SEGMENT_BYTES = 45  # centroid, 7 eigen features, point count, step exponent
+EIGEN_FEATURES = 7
+ESF_BINS = 640
+ESF_BYTES = 1 + 2 * ESF_BINS
+POINT_EXPONENT_RANGE = (-16, 10)
+ESF_EXPONENT_RANGE = (-64, 0)
+SEGMENT_CODE_VERSION = 1  # core kSegmentCodeVersion: part of the digest
+
+
+def segments_digest(parameters_json: str, code_version: int = SEGMENT_CODE_VERSION) -> int:
+    """FNV-1a 64 over b"segmatch-segments/", the code version (u32 LE) and INFO_REPLY's
+    parameters JSON byte for byte (docs/protocol.md 5.5)."""
+    h = 0xCBF29CE484222325
+    for b in b"segmatch-segments/" + struct.pack("<I", code_version) + parameters_json.encode("utf-8", "surrogateescape"):
+        h = ((h ^ b) * 0x100000001B3) & 0xFFFFFFFFFFFFFFFF
+    return h
+
+
+@dataclass(eq=False)
+class WireSegment:
+    """One segment as sent: f32 centroid and eigenvalue features, points as i16 offsets from the
+    centroid in steps of 2^step_exponent m, ESF (with SEGMENTS_FLAG_ESF) as u16 mantissas."""
+
+    centroid: Tuple[float, float, float]
+    eigen: Tuple[float, ...]
+    step_exponent: int
+    offsets: np.ndarray  # int16 (n, 3)
+    esf_exponent: Optional[int] = None
+    esf_mantissas: Optional[np.ndarray] = None  # uint16 (640,)
+
+    @property
+    def points(self) -> np.ndarray:
+        """float32 (n, 3), local frame: centroid + offset * 2^e in float, as the C++ decoder."""
+        step = np.float32(math.ldexp(1.0, self.step_exponent))
+        return np.asarray(self.centroid, dtype=np.float32) + self.offsets.astype(np.float32) * step
+
+    @property
+    def esf(self) -> Optional[np.ndarray]:
+        if self.esf_mantissas is None:
+            return None
+        return self.esf_mantissas.astype(np.float32) * np.float32(math.ldexp(1.0, self.esf_exponent))
+
+
+@dataclass(eq=False)
+class LocalizeSegments:
+    """LOCALIZE_SEGMENTS. Head fields as Localize (sensor_orientation_wxyz: w x y z, not ROS's
+    x y z w); the heading tolerance is always sent; parameters_digest = segments_digest(JSON)."""
+
+    TYPE: ClassVar[MessageType] = MessageType.LOCALIZE_SEGMENTS
+    request_id: int = 0
+    flags: int = 0
+    sensor_position: Tuple[float, float, float] = (0.0, 0.0, 0.0)
+    sensor_orientation_wxyz: Tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    prior: Pose = field(default_factory=Pose)  # T_map_local guess; used with SEGMENTS_FLAG_HAS_PRIOR
+    prior_radius_m: float = 0.0
+    prior_heading_tolerance_deg: float = 10.0
+    parameters_digest: int = 0
+    segments: List[WireSegment] = field(default_factory=list)
+
+    def _put(self, w: Writer) -> None:
+        esf = bool(self.flags & SEGMENTS_FLAG_ESF)
+        put_request_head(w, self)
+        w.f64(self.prior_heading_tolerance_deg)
+        w.u64(self.parameters_digest)
+        w.u32(len(self.segments))
+        w.u32(sum(len(s.offsets) for s in self.segments))
+        for s in self.segments:
+            for v in tuple(s.centroid) + tuple(s.eigen):
+                w.f32(v)
+            w.u32(len(s.offsets))
+            w.i8(s.step_exponent)
+            if esf:
+                if s.esf_mantissas is None:
+                    raise ValueError("SEGMENTS_FLAG_ESF is set but a segment has no ESF")
+                w.i8(s.esf_exponent)
+                w.array(s.esf_mantissas, "<u2")
+            w.array(s.offsets, "<i2")
+
+    @classmethod
+    def _get(cls, r: Reader) -> "LocalizeSegments":
+        payload, size = r.data, r.remaining()
+        if size < SEGMENTS_FIXED_BYTES:
+            raise DecodeError(DecodeStatus.TRUNCATED)
+        head, head_status = get_request_head(r)
+        m = cls(**head)
+        m.prior_heading_tolerance_deg, m.parameters_digest = r.f64(), r.u64()
+        count, total_points = r.u32(), r.u32()
+        if m.flags & ~KNOWN_SEGMENTS_FLAGS:
+            raise DecodeError(DecodeStatus.BAD_FIELD, f"unknown flag bits 0x{m.flags & ~KNOWN_SEGMENTS_FLAGS:x}")
+        esf = bool(m.flags & SEGMENTS_FLAG_ESF)
+        fixed = SEGMENT_BYTES + (ESF_BYTES if esf else 0)
+        if SEGMENTS_FIXED_BYTES + count * fixed + total_points * 6 != size or \
+                not _counts_add_up(payload, size, count, total_points, fixed):
+            raise DecodeError(DecodeStatus.BAD_POINT_COUNT, f"{count} segments, {total_points} points in {size} bytes")
+        if head_status:
+            raise DecodeError(head_status, "sensor pose or prior")
+        if not (math.isfinite(m.prior_radius_m) and math.isfinite(m.prior_heading_tolerance_deg)):
+            raise DecodeError(DecodeStatus.NON_FINITE, "prior radius or heading tolerance")
+        if m.prior_radius_m < 0 or m.prior_heading_tolerance_deg < 0:
+            raise DecodeError(DecodeStatus.BAD_FIELD, "negative prior radius or heading tolerance")
+        m.segments = [_get_segment(r, esf) for _ in range(count)]
+        r.finish()
+        return m
+
+
+def _counts_add_up(payload, size: int, count: int, total_points: int, fixed: int) -> bool:
+    """The segments' point counts tile the payload and add up to the total (checked before any
+    value is read, as the C++ decoder: a miscount must not surface as misaligned garbage)."""
+    at, seen = SEGMENTS_FIXED_BYTES, 0
+    for _ in range(count):
+        if at + fixed > size:
+            return False
+        n = struct.unpack_from("<I", payload, at + 40)[0]
+        seen += n
+        at += fixed + n * 6
+    return at == size and seen == total_points
+
+
+def _get_segment(r: Reader, esf: bool) -> WireSegment:
+    centroid, eigen = tuple(r.f32() for _ in range(3)), tuple(r.f32() for _ in range(EIGEN_FEATURES))
+    if not all_finite(centroid + eigen):
+        raise DecodeError(DecodeStatus.NON_FINITE, "segment centroid or features")
+    n, step = r.u32(), r.i8()
+    if not POINT_EXPONENT_RANGE[0] <= step <= POINT_EXPONENT_RANGE[1]:
+        raise DecodeError(DecodeStatus.BAD_FIELD, f"point step exponent {step}")
+    s = WireSegment(centroid, eigen, step, np.zeros((0, 3), dtype=np.int16))
+    if esf:
+        s.esf_exponent = r.i8()
+        if not ESF_EXPONENT_RANGE[0] <= s.esf_exponent <= ESF_EXPONENT_RANGE[1]:
+            raise DecodeError(DecodeStatus.BAD_FIELD, f"ESF exponent {s.esf_exponent}")
+        s.esf_mantissas = r.array("<u2", ESF_BINS)
+    s.offsets = r.array("<i2", 3 * n).reshape(n, 3)
+    return s

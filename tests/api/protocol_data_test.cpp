@@ -1,0 +1,226 @@
+// tests/data/protocol/: one stored frame of every message type, written by this codec, that
+// these tests and the Python client's (tests/python/test_protocol.py) both decode and re-encode
+// byte for byte, so the two implementations cannot drift apart unnoticed. The field values are
+// listed in tests/data/protocol/README.md; the Python tests check the same values.
+//
+// By default nothing is written: each file must decode with today's codec, re-encode to the same
+// bytes, hold the listed values, and equal what the encoder writes for them. After a deliberate
+// change of the protocol, rewrite the files (then review the diff and commit them with a note):
+//   SEGMATCH_WRITE_PROTOCOL_DATA=1 build/tests/test_api --gtest_filter='ProtocolData.*'
+// Frames of older revisions stay in tests/api/golden/ and are never rewritten.
+#include "segmatch/api/protocol.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <iterator>
+#include <set>
+#include <string>
+#include <vector>
+
+using namespace segmatch;
+using namespace segmatch::api;
+
+namespace {
+
+const std::string kDir = std::string(SEGMATCH_SOURCE_DIR) + "/tests/data/protocol/";
+// Small, so the INFO_REPLY and the LOCALIZE_SEGMENTS digest (over these bytes) stay readable.
+const std::string kParametersJson = R"({"voxel":{"leaf_m":0.1,"min_points_per_voxel":2}})";
+
+bool writing() {
+  const char* v = std::getenv("SEGMATCH_WRITE_PROTOCOL_DATA");
+  return v != nullptr && std::string(v) == "1";
+}
+
+Pose3d pose(double yaw_rad, const Eigen::Vector3d& t) {
+  Pose3d T = Pose3d::Identity();
+  T.linear() = Eigen::AngleAxisd(yaw_rad, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  T.translation() = t;
+  return T;
+}
+
+ModuleTimingsMs timings() {
+  ModuleTimingsMs t;
+  t.voxel = 0.5f, t.ground = 1.25f, t.segment = 2.5f, t.describe = 3.75f, t.retrieve = 0.125f;
+  t.classify = 4.0f, t.verify = 0.25f, t.refine = 5.5f, t.total = 17.875f, t.server_total = 18.5f;
+  return t;
+}
+
+// Checks (or, when writing, first writes) one file: it equals encode(expected), decodes, and the
+// decoded message re-encodes to the same bytes; `fields` checks values the bytes alone don't show.
+template <typename M>
+void check_file(const std::string& name, const M& expected, const std::function<void(const M&)>& fields = {}) {
+  const std::vector<uint8_t> want = encode(expected);
+  {  // The expected message must be a fixed point of the codec, or its file could never be stable.
+    M back;
+    ASSERT_EQ(decode_frame(want, Limits{}, back), DecodeStatus::kOk) << name;
+    ASSERT_EQ(encode(back), want) << name << ": the expected message does not survive a round trip";
+  }
+  const std::string path = kDir + name;
+  if (writing()) {
+    std::filesystem::create_directories(kDir);
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    out.write(reinterpret_cast<const char*>(want.data()), static_cast<std::streamsize>(want.size()));
+    ASSERT_TRUE(out.good()) << "cannot write " << path;
+  }
+  std::ifstream in(path, std::ios::binary);
+  ASSERT_TRUE(in.good()) << path << " is missing; write it with SEGMATCH_WRITE_PROTOCOL_DATA=1";
+  const std::vector<uint8_t> bytes{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  EXPECT_EQ(bytes, want) << name << ": the encoder no longer writes the stored bytes for the listed values";
+  M decoded;
+  ASSERT_EQ(decode_frame(bytes, Limits{}, decoded), DecodeStatus::kOk) << name;
+  EXPECT_EQ(encode(decoded), bytes) << name << ": decoded and re-encoded, the bytes differ";
+  if (fields) fields(decoded);
+}
+
+const std::set<std::string> kFiles = {
+    "hello.bin", "hello_ok.bin", "ping.bin", "pong.bin", "info.bin", "info_reply.bin",
+    "localize_global.bin", "localize_prior_voxelized.bin", "localize_segments.bin",
+    "localize_reply_localized.bin", "localize_reply_not_localized.bin", "localize_reply_outside_prior.bin",
+    "error.bin"};
+
+}  // namespace
+
+TEST(ProtocolData, Hello) {
+  check_file<HelloRequest>("hello.bin", {"segmatch-token-1"},
+                           [](const HelloRequest& m) { EXPECT_EQ(m.token, "segmatch-token-1"); });
+}
+
+TEST(ProtocolData, HelloOk) { check_file<HelloOkReply>("hello_ok.bin", {}); }
+
+constexpr uint64_t kNonce = 0x0123456789ABCDEFull;
+
+TEST(ProtocolData, PingAndPong) {
+  check_file<PingRequest>("ping.bin", {kNonce}, [](const PingRequest& m) { EXPECT_EQ(m.nonce, kNonce); });
+  check_file<PongReply>("pong.bin", {kNonce}, [](const PongReply& m) { EXPECT_EQ(m.nonce, kNonce); });
+}
+
+TEST(ProtocolData, InfoAndInfoReply) {
+  check_file<InfoRequest>("info.bin", {});
+  InfoReply r;
+  r.map_name = "tiny-3";
+  r.segment_count = 175;
+  r.extent_min = Eigen::Vector3d(-51.625, 90.5, -2.5);
+  r.extent_max = Eigen::Vector3d(87.625, 165.125, 2.625);
+  r.parameters_json = kParametersJson;
+  check_file<InfoReply>("info_reply.bin", r, [](const InfoReply& m) {
+    EXPECT_EQ(m.protocol_version, 1);
+    EXPECT_EQ(m.map_name, "tiny-3");
+    EXPECT_EQ(m.extent_max.y(), 165.125);
+  });
+}
+
+TEST(ProtocolData, LocalizeGlobal) {
+  LocalizeRequest r;
+  r.request_id = 7;
+  r.sensor_position_local = Eigen::Vector3d(0.25, -1.5, 1.75);
+  r.sensor_orientation_local = Eigen::Quaterniond(0.5, 0.5, -0.5, 0.5);  // w x y z: all four differ in sign or place
+  r.point_stride = 3;
+  r.points = {{1.f, 2.f, 3.f, 0.f}, {-4.5f, 0.25f, 10.f, 0.f}, {12.125f, -7.f, 0.5f, 0.f}, {0.1f, 0.2f, 0.3f, 0.f}};
+  check_file<LocalizeRequest>("localize_global.bin", r, [](const LocalizeRequest& m) {
+    EXPECT_EQ(m.flags, 0u);
+    EXPECT_EQ(m.sensor_orientation_local.w(), 0.5);
+    EXPECT_EQ(m.sensor_orientation_local.y(), -0.5);
+    ASSERT_EQ(m.points.size(), 4u);
+    EXPECT_EQ(m.points[3].x, 0.1f);
+  });
+}
+
+TEST(ProtocolData, LocalizeWithPriorVoxelizedAndHeading) {
+  LocalizeRequest r;
+  r.request_id = 0x0102030405060708ull;
+  r.flags = kFlagHasPrior | kFlagVoxelized | kFlagPriorHeading;
+  r.sensor_position_local = Eigen::Vector3d(1.5, -2.25, 1.73);
+  r.sensor_orientation_local = Eigen::Quaterniond(Eigen::AngleAxisd(M_PI / 6, Eigen::Vector3d::UnitZ()));
+  r.T_map_local_prior = pose(M_PI / 2, Eigen::Vector3d(100.0, 50.0, -3.0));
+  r.prior_radius_m = 20.0;
+  r.prior_heading_tolerance_deg = 15.0;
+  r.point_stride = 4;
+  r.points = {{1.f, 2.f, 3.f, 0.5f}, {-4.f, 5.25f, 0.f, 1.f}, {7.f, -8.f, 9.5f, 0.f}};
+  check_file<LocalizeRequest>("localize_prior_voxelized.bin", r, [](const LocalizeRequest& m) {
+    EXPECT_EQ(m.prior_radius_m, 20.0);
+    EXPECT_EQ(m.prior_heading_tolerance_deg, 15.0);
+    EXPECT_NEAR(m.T_map_local_prior(0, 1), -1.0, 1e-15) << "yaw +90 deg: x_map = -y_local + 100";
+    EXPECT_EQ(m.points[1].intensity, 1.f);
+  });
+}
+
+TEST(ProtocolData, LocalizeSegments) {
+  LocalizeSegmentsRequest r;
+  r.request_id = 11;
+  r.flags = kSegmentsFlagHasPrior | kSegmentsFlagEsf;
+  r.sensor_position_local = Eigen::Vector3d(10.0, 20.0, 1.75);
+  r.T_map_local_prior = pose(M_PI, Eigen::Vector3d(-5.0, 2.5, 0.0));
+  r.prior_radius_m = 12.5;
+  r.prior_heading_tolerance_deg = 7.5;
+  r.parameters_digest = segments_digest(kParametersJson);
+  for (int k = 0; k < 2; ++k) {
+    Segment s;
+    const float c = 4.f * static_cast<float>(k + 1);
+    s.points = {{c, 1.f, 0.5f, 0.f}, {c + 0.75f, 1.5f, 0.25f, 0.f}, {c - 0.5f, 0.25f, 2.f, 0.f}};
+    for (const Point& p : s.points) s.centroid += p.xyz() / 3.f;
+    for (int i = 0; i < kEigenFeatureCount; ++i) s.eigen[i] = 0.125f * static_cast<float>(i + k + 1);
+    for (int i = 0; i < kEsfBins; ++i) s.esf[i] = (i % 64 == k) ? 0.0625f : 0.f;
+    r.segments.push_back(s);
+  }
+  check_file<LocalizeSegmentsRequest>("localize_segments.bin", r, [](const LocalizeSegmentsRequest& m) {
+    EXPECT_EQ(m.parameters_digest, segments_digest(kParametersJson));
+    ASSERT_EQ(m.segments.size(), 2u);
+    EXPECT_NEAR(m.segments[1].points[1].x, 8.75f, 1e-3f);
+    EXPECT_EQ(m.segments[0].esf[64], 0.0625f);
+  });
+}
+
+TEST(ProtocolData, LocalizeReplies) {
+  LocalizeReply ok;
+  ok.request_id = 7;
+  ok.status = LocalizeStatus::kLocalized;
+  ok.T_map_local = pose(-M_PI / 2, Eigen::Vector3d(162.5, 84.25, 3.5));
+  ok.inliers = 3;
+  ok.confidence = 0.875f;
+  ok.support = 12;
+  ok.matched_segment_ids = {4, 17, 1099511627776ull};
+  ok.timings = timings();
+  check_file<LocalizeReply>("localize_reply_localized.bin", ok, [](const LocalizeReply& m) {
+    EXPECT_EQ(m.status, LocalizeStatus::kLocalized);
+    EXPECT_NEAR(m.T_map_local(1, 0), -1.0, 1e-15) << "yaw -90 deg";
+    EXPECT_EQ(m.timings.server_total, 18.5f);
+  });
+
+  LocalizeReply no;
+  no.request_id = 8;
+  no.status = LocalizeStatus::kNotLocalized;
+  no.reason = "too few segments: 2 < 4";
+  no.timings = timings();
+  check_file<LocalizeReply>("localize_reply_not_localized.bin", no, [](const LocalizeReply& m) {
+    EXPECT_EQ(m.reason, "too few segments: 2 < 4");
+    EXPECT_TRUE(m.T_map_local.isApprox(Pose3d::Identity()));
+  });
+
+  LocalizeReply outside = ok;
+  outside.request_id = 9;
+  outside.status = LocalizeStatus::kOutsidePrior;
+  outside.reason = "pose 152.3 m from the prior (radius 0 m)";
+  outside.matched_segment_ids = {1, 2, 3};
+  check_file<LocalizeReply>("localize_reply_outside_prior.bin", outside,
+                            [](const LocalizeReply& m) { EXPECT_EQ(m.status, LocalizeStatus::kOutsidePrior); });
+}
+
+TEST(ProtocolData, Error) {
+  check_file<ErrorReply>("error.bin", {ErrorCode::kNonFinite, "NaN or Inf value"}, [](const ErrorReply& m) {
+    EXPECT_EQ(static_cast<int>(m.code), 7);
+    EXPECT_EQ(m.message, "NaN or Inf value");
+  });
+}
+
+// Last, so that with SEGMATCH_WRITE_PROTOCOL_DATA=1 it sees the files just written.
+TEST(ProtocolData, EveryStoredFrameIsCheckedHere) {
+  std::set<std::string> stored;
+  for (const auto& entry : std::filesystem::directory_iterator(kDir))
+    if (entry.path().extension() == ".bin") stored.insert(entry.path().filename().string());
+  EXPECT_EQ(stored, kFiles) << "a frame in " << kDir << " that no test reads, or one missing";
+}
