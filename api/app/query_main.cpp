@@ -17,17 +17,6 @@ using namespace segmatch;
 
 namespace {
 
-std::string read_token(const std::string& path) {
-  if (path.empty()) return {};
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::runtime_error("cannot read token file " + path);
-  std::ostringstream s;
-  s << in.rdbuf();
-  std::string token = s.str();
-  while (!token.empty() && std::isspace(static_cast<unsigned char>(token.back()))) token.pop_back();
-  return token;
-}
-
 double ms_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
@@ -82,18 +71,14 @@ int main(int argc, char** argv) {
                 "parameters and send the segments (a few hundred KB) instead of the cloud (MB)");
   cli::add_version_flag(app, "segmatch-query");
   SEGMATCH_CLI_PARSE(app, argc, argv);
+  if (const int status = cli::check_server("segmatch-query", server); status >= 0) return status;
   if (!server.empty()) {
-    try {
-      const cli::HostPort where = cli::parse_server(server);
-      host = where.host, port = where.port;
-    } catch (const std::invalid_argument& e) {
-      std::fprintf(stderr, "segmatch-query: error: %s\n", e.what());
-      return 2;
-    }
+    const cli::HostPort where = cli::parse_server(server);
+    host = where.host, port = where.port;
   }
   try {
     api::ClientOptions options;
-    options.token = read_token(token_file);
+    options.token = cli::read_token_file(token_file);
     options.reply_timeout_s = timeout_s;
     api::Client client(host, port, options);
     const auto start = std::chrono::steady_clock::now();

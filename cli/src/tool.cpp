@@ -5,7 +5,10 @@
 
 #include <unistd.h>
 
+#include <cctype>
 #include <cstdio>
+#include <fstream>
+#include <sstream>
 #include <filesystem>
 #include <stdexcept>
 #include <system_error>
@@ -47,6 +50,28 @@ HostPort parse_server(const std::string& host_port) {
     }
   }
   throw std::invalid_argument("--server wants HOST:PORT (port 1-65535), got '" + host_port + "'");
+}
+
+int check_server(const std::string& tool, const std::string& host_port) {
+  if (host_port.empty()) return -1;
+  try {
+    parse_server(host_port);
+    return -1;
+  } catch (const std::invalid_argument& e) {
+    std::fprintf(stderr, "%s: error: %s\n", tool.c_str(), e.what());
+    return 2;
+  }
+}
+
+std::string read_token_file(const std::string& path) {
+  if (path.empty()) return {};
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error("cannot read token file " + path);
+  std::ostringstream text;
+  text << in.rdbuf();
+  std::string token = text.str();
+  while (!token.empty() && std::isspace(static_cast<unsigned char>(token.back()))) token.pop_back();
+  return token;
 }
 
 int parse(CLI::App& app, int argc, char** argv) {

@@ -29,15 +29,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::string read_token(const std::string& path) {
-  if (path.empty()) return "";
-  std::ifstream f(path);
-  if (!f) throw std::runtime_error(path + ": cannot read the token file");
-  std::string token;
-  std::getline(f, token);
-  return token;
-}
-
 // --segments: the vehicle segments and describes each query itself (segmatch_vehicle) and
 // sends LOCALIZE_SEGMENTS; its own time and the request sizes are reported apart.
 struct SegmentsSide {
@@ -77,12 +68,10 @@ int run_localize(const eval::LocalizationRunConfig& config, const std::string& s
       localize = [&](const api::LocalizeRequest& r) { return server::localize_request(*loaded, r); };
     }
   } else {
-    const size_t colon = server.rfind(':');
-    if (colon == std::string::npos) throw std::runtime_error("--server must be HOST:PORT, got '" + server + "'");
+    const cli::HostPort where = cli::parse_server(server);
     api::ClientOptions options;
-    options.token = read_token(token_file);
-    client = std::make_unique<api::Client>(server.substr(0, colon), static_cast<uint16_t>(std::stoi(server.substr(colon + 1))),
-                                           options);
+    options.token = cli::read_token_file(token_file);
+    client = std::make_unique<api::Client>(where.host, where.port, options);
     if (segments) {
       side.query = std::make_unique<vehicle::SegmentQuery>(vehicle::SegmentQuery::from_info(client->info()));
       localize = [&](const api::LocalizeRequest& r) { return client->localize_segments(side.make(r)); };
@@ -231,6 +220,7 @@ int main(int argc, char** argv) {
   cli::add_output_option(*cls, co.out_dir, "report folder");
   cli::add_version_flag(app, "segmatch-eval");
   SEGMATCH_CLI_PARSE(app, argc, argv);
+  if (const int status = cli::check_server("segmatch-eval", server); status >= 0) return status;
   try {
     if (*loc) {
       if (lc.query_folder.empty() == lc.sim_dataset.empty()) throw std::runtime_error("give exactly one of --query and --sim");

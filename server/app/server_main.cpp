@@ -24,12 +24,7 @@ namespace {
 // The token comes from a file so it never shows in `ps` or shell history. Trailing
 // whitespace (the newline an editor adds) is not part of it.
 std::string read_token(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::runtime_error("cannot read token file " + path);
-  std::ostringstream s;
-  s << in.rdbuf();
-  std::string token = s.str();
-  while (!token.empty() && std::isspace(static_cast<unsigned char>(token.back()))) token.pop_back();
+  const std::string token = cli::read_token_file(path);
   if (token.empty()) throw std::runtime_error("token file " + path + " is empty");
   struct stat st {};
   // Group access is how service managers hand secrets over (a Kubernetes secret with fsGroup,

@@ -54,6 +54,9 @@ TEST(ToolFlags, RequiredOutputAndServerMistakesExit2) {
   EXPECT_NE(loop.output.find("-o/--output is required"), std::string::npos) << loop.output;
   EXPECT_EQ(run_command(tool_path("segmatch-query") + " --server nonsense ping").code, 2);
   EXPECT_EQ(run_command(tool_path("segmatch-query") + " --server host:99999 ping").code, 2);
+  const auto eval = run_command(tool_path("segmatch-eval") + " localize --map m --sim w --server nowhere");
+  EXPECT_EQ(eval.code, 2) << eval.output;
+  EXPECT_NE(eval.output.find("--server wants HOST:PORT"), std::string::npos) << eval.output;
   // The old spellings still parse: an unreachable server is a run-time failure (1), not a mistake.
   EXPECT_EQ(run_command(tool_path("segmatch-query") + " --host 127.0.0.1 --port 1 --timeout-s 1 ping").code, 1);
   EXPECT_EQ(run_command(tool_path("segmatch-query") + " --server 127.0.0.1:1 ping").code, 1);

@@ -5,6 +5,7 @@
 #include "deploy_test_util.h"
 
 #include <segmatch/core/preprocess.h>
+#include <segmatch/io/cloud_io.h>
 
 #include <atomic>
 #include <map>
@@ -154,6 +155,26 @@ TEST(Deploy, DocumentedCommandsRun) {
   EXPECT_EQ(r.code, 0) << block << "\n" << r.output;
   EXPECT_NE(r.output.find("pong from 127.0.0.1:"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("tiny-3"), std::string::npos) << r.output;
+}
+
+// segmatch-query as a script runs it: exit 0 for a fix, 3 for an answer that is not LOCALIZED.
+TEST(Deploy, QueryLocalizeExitsByStatus) {
+  const std::string dir = deploy_folder("query");
+  const std::string token = write_token(dir + "/token", "query-token");
+  Replica replica(dir, "r1");
+  ASSERT_FALSE(::testing::Test::HasFatalFailure());
+  const Query& fix = test_world().queries.front();  // localized by the server tests
+  io::write_kitti_bin(dir + "/fix.bin", fix.request.points);
+  io::write_kitti_bin(dir + "/nothing.bin", PointCloud{Point{1.f, 2.f, 3.f, 0.f}, Point{4.f, 5.f, 6.f, 0.f}});
+  const Eigen::Vector3d& s = fix.request.sensor_position_local;
+  const std::string query = std::string(SEGMATCH_BIN_DIR) + "/segmatch-query --server 127.0.0.1:" +
+                            std::to_string(replica.port) + " --token-file " + dir + "/token localize ";
+  const CommandResult found = run_command(query + dir + "/fix.bin --sensor " + std::to_string(s.x()) + "," +
+                                          std::to_string(s.y()) + "," + std::to_string(s.z()));
+  EXPECT_EQ(found.code, 0) << found.output;
+  EXPECT_EQ(found.output.rfind("localized ", 0), 0u) << found.output;
+  const CommandResult refused = run_command(query + dir + "/nothing.bin");
+  EXPECT_EQ(refused.code, 3) << refused.output;
 }
 
 TEST(Deploy, SixteenVehiclesThroughHaproxySurviveAKilledReplica) {

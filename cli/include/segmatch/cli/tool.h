@@ -29,6 +29,13 @@ struct HostPort {
   uint16_t port = 0;
 };
 HostPort parse_server(const std::string& host_port);
+// After the parse: 2 and a message when a --server given is not HOST:PORT, -1 otherwise.
+int check_server(const std::string& tool, const std::string& host_port);
+
+// The shared-secret token from --token-file, read the same way by the server and every client:
+// the whole file, trailing whitespace (an editor's newline) not part of it. An empty path gives
+// an empty token (none); an unreadable file throws std::runtime_error naming it.
+std::string read_token_file(const std::string& path);
 
 // Parses the command line. Returns -1 to go on, else the exit status: 0 after --help or
 // --version, 2 after a mistake (CLI11's message printed), the same in every tool.
