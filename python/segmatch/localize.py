@@ -67,20 +67,28 @@ def _empty_points() -> np.ndarray:
     return np.zeros((0, 4), dtype=np.float32)
 
 
-@dataclass(eq=False)  # eq=False: points are an array; compare encode() bytes instead
-class Localize:
-    """LOCALIZE (docs/protocol.md 5.4). Positions and points are in the vehicle's local frame;
-    sensor_orientation_wxyz is w x y z (ROS: x y z w). points: float32 (N, 3) or (N, 4) with
-    intensity; the stride on the wire is the number of columns."""
+@dataclass(eq=False)
+class RequestHead:
+    """The fields LOCALIZE and LOCALIZE_SEGMENTS share (put_request_head / get_request_head):
+    positions in the vehicle's local frame, sensor_orientation_wxyz w x y z (ROS: x y z w), the
+    prior T_map_local guess used with the message's has-prior flag. The heading tolerance
+    follows the head: LOCALIZE sends it only with FLAG_PRIOR_HEADING, LOCALIZE_SEGMENTS always."""
 
-    TYPE: ClassVar[MessageType] = MessageType.LOCALIZE
     request_id: int = 0
     flags: int = 0
     sensor_position: Tuple[float, float, float] = (0.0, 0.0, 0.0)
     sensor_orientation_wxyz: Tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
-    prior: Pose = field(default_factory=Pose)  # T_map_local guess; used with FLAG_HAS_PRIOR
+    prior: Pose = field(default_factory=Pose)
     prior_radius_m: float = 0.0
-    prior_heading_tolerance_deg: float = 10.0  # sent only with FLAG_PRIOR_HEADING
+    prior_heading_tolerance_deg: float = 10.0
+
+
+@dataclass(eq=False)  # eq=False: points are an array; compare encode() bytes instead
+class Localize(RequestHead):
+    """LOCALIZE (docs/protocol.md 5.4): the head, then points: float32 (N, 3) or (N, 4) with
+    intensity; the stride on the wire is the number of columns."""
+
+    TYPE: ClassVar[MessageType] = MessageType.LOCALIZE
     points: np.ndarray = field(default_factory=_empty_points)
 
     def _put(self, w: Writer) -> None:

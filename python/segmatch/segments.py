@@ -19,7 +19,7 @@ import numpy as np
 from ._wire import Reader, Writer, all_finite
 from .errors import DecodeError, DecodeStatus
 from ._constants import MessageType
-from .localize import get_request_head, put_request_head
+from .localize import RequestHead, get_request_head, put_request_head
 from .pose import Pose
 
 SEGMENTS_FLAG_HAS_PRIOR = 1 << 0
@@ -70,18 +70,11 @@ class WireSegment:
 
 
 @dataclass(eq=False)
-class LocalizeSegments:
-    """LOCALIZE_SEGMENTS. Head fields as Localize (sensor_orientation_wxyz: w x y z, not ROS's
-    x y z w); the heading tolerance is always sent; parameters_digest = segments_digest(JSON)."""
+class LocalizeSegments(RequestHead):
+    """LOCALIZE_SEGMENTS: the head (as Localize's), then parameters_digest =
+    segments_digest(JSON) and the segments."""
 
     TYPE: ClassVar[MessageType] = MessageType.LOCALIZE_SEGMENTS
-    request_id: int = 0
-    flags: int = 0
-    sensor_position: Tuple[float, float, float] = (0.0, 0.0, 0.0)
-    sensor_orientation_wxyz: Tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
-    prior: Pose = field(default_factory=Pose)  # T_map_local guess; used with SEGMENTS_FLAG_HAS_PRIOR
-    prior_radius_m: float = 0.0
-    prior_heading_tolerance_deg: float = 10.0
     parameters_digest: int = 0
     segments: List[WireSegment] = field(default_factory=list)
 
