@@ -42,6 +42,8 @@ struct Options {
   loop::EvalConfig eval;
   posegraph::PoseGraphConfig graph;
   bool revisit_gap_given = false;  // else the gap is the recent past excluded
+  bool scan_edges = false;
+  posegraph::ScanMatchConfig scan_match;
 };
 
 std::string read_file(const std::string& path) {
@@ -144,6 +146,7 @@ int run_main(Options o) {
   for (long i = o.first; i <= last; ++i) co.frames.push_back(static_cast<size_t>(i));
   co.optimize = o.optimize;
   co.graph = o.graph;
+  if (o.scan_edges) co.scan_edges = o.scan_match;
   co.verbose = o.verbose;
   const posegraph::ClosedLoops r = posegraph::close_loops(seq, config, classifier, co);
   std::printf("%zu local clouds, %zu loops, %zu map segments; per local cloud %.0f ms median, %.0f ms p90\n",
@@ -214,6 +217,15 @@ int main(int argc, char** argv) {
                  "--optimize: hold roll and pitch to the odometry's within this sigma (default 0: off)");
   app.add_option("--bias-stretch-m", o.graph.bias_stretch_m,
                  "--optimize: estimate the odometry's yaw-rate and climb bias per stretch of this length (default 100; 0: off)");
+  app.add_flag("--scan-edges", o.scan_edges,
+               "--optimize: register each scan onto the previous ones (ICP) and add the step as an edge: for odometry "
+               "that errs in scale or yaw rate (wheels), which loops cannot correct");
+  app.add_option("--scan-sigma-m", o.graph.scan_sigma_m, "--scan-edges: translation sigma of a scan edge (default 0.01)");
+  app.add_option("--scan-sigma-deg", o.graph.scan_sigma_deg, "--scan-edges: rotation sigma of a scan edge (default 1)");
+  app.add_option("--scan-voxel-m", o.scan_match.voxel_m, "--scan-edges: scans thinned to this voxel (default 0.3)");
+  app.add_option("--scan-target-scans", o.scan_match.target_scans,
+                 "--scan-edges: a scan is registered onto this many previous ones (default 3)");
+  app.add_option("--scan-max-range-m", o.scan_match.max_range_m, "--scan-edges: points farther are not used (default 60)");
   app.add_option("--first", o.first, "first frame (default 0)");
   app.add_option("--last", o.last, "last frame (default: the sequence's last)");
   app.add_option("--every-m", o.every_m, "local cloud every this many metres (default 10; livox-keyframes: 1)");
@@ -233,6 +245,10 @@ int main(int argc, char** argv) {
   cli::add_output_option(app, o.out, "output folder, required");
   cli::add_version_flag(app, "segmatch-loop");
   SEGMATCH_CLI_PARSE(app, argc, argv);
+  if (o.scan_edges && !o.optimize) {
+    std::fprintf(stderr, "segmatch-loop: --scan-edges needs --optimize (the edges only matter to the optimiser)\n");
+    return 2;
+  }
   if (const int status = cli::require_output("segmatch-loop", o.out); status >= 0) return status;
   try {
     o.revisit_gap_given = app.count("--revisit-gap-m") > 0;

@@ -6,6 +6,8 @@
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
+#include <cmath>
+#include <functional>
 #include <cstdio>
 #include <stdexcept>
 
@@ -56,6 +58,34 @@ void draw_error_strip(cv::Mat& img, int top, const posegraph::ClosedLoops& r, co
               cv::Point(left, top + height + 25), cv::FONT_HERSHEY_SIMPLEX, 0.5, black, 1, cv::LINE_AA);
 }
 
+// Median error of measured steps against the reference's steps, over the nodes given.
+TrajectorySummary::StepError step_error(const std::vector<size_t>& nodes, const std::function<Pose3d(size_t)>& measured,
+                                        const Poses& reference) {
+  std::vector<double> m, deg, scale;
+  for (size_t n : nodes) {
+    const Pose3d truth = reference[n - 1].inverse() * reference[n];
+    const Pose3d delta = truth.inverse() * measured(n);
+    m.push_back(delta.translation().norm());
+    deg.push_back(Eigen::AngleAxisd(delta.linear()).angle() * 180.0 / M_PI);
+    if (truth.translation().norm() > 0.1)
+      scale.push_back(100.0 * (measured(n).translation().norm() / truth.translation().norm() - 1.0));
+  }
+  return {median(m), median(deg), median(scale)};
+}
+
+void add_scan_figures(const posegraph::ClosedLoops& r, const Poses& reference, TrajectorySummary& s) {
+  s.scan_edges_tried = r.scan_edges_tried;
+  std::vector<size_t> nodes;
+  for (size_t n = 1; n < r.scan_steps.size(); ++n)
+    if (r.scan_steps[n]) nodes.push_back(n);
+  s.scan_edges_accepted = nodes.size();
+  if (r.last_solve) s.scan_edges_downweighted = r.last_solve->scans_downweighted;
+  if (reference.empty() || nodes.empty()) return;
+  s.scan_step_error = step_error(nodes, [&](size_t n) { return *r.scan_steps[n]; }, reference);
+  s.odometry_step_error = step_error(
+      nodes, [&](size_t n) { return Pose3d(r.T_odom_sensor[n - 1].inverse() * r.T_odom_sensor[n]); }, reference);
+}
+
 }  // namespace
 
 TrajectorySummary summarize(const posegraph::ClosedLoops& r, const Poses& reference) {
@@ -71,6 +101,7 @@ TrajectorySummary summarize(const posegraph::ClosedLoops& r, const Poses& refere
   s.map_segments_odometry = r.map_odom.size();
   s.map_segments_corrected = r.map_corrected.segments.size();
   s.merged_duplicates = r.map_corrected.merged;
+  add_scan_figures(r, reference, s);
   return s;
 }
 
@@ -89,6 +120,16 @@ nlohmann::json to_json(const TrajectorySummary& s, const std::vector<LoopClosure
                                 {"residual_m", w.residual_m}, {"residual_deg", w.residual_deg}};
     j["loop_weights"].push_back(one);
     if (w.downweighted) j["downweighted_loops"].push_back(one);
+  }
+  if (s.scan_edges_tried > 0) {
+    nlohmann::json scans = {{"tried", s.scan_edges_tried}, {"accepted", s.scan_edges_accepted},
+                            {"downweighted", s.scan_edges_downweighted}};
+    const auto step_json = [](const TrajectorySummary::StepError& e) {
+      return nlohmann::json{{"median_m", e.median_m}, {"median_deg", e.median_deg}, {"median_scale_pct", e.median_scale_pct}};
+    };
+    if (s.scan_step_error) scans["step_error"] = step_json(*s.scan_step_error);
+    if (s.odometry_step_error) scans["odometry_step_error"] = step_json(*s.odometry_step_error);
+    j["scan_edges"] = scans;
   }
   j["map"] = {{"segments_odometry", s.map_segments_odometry}, {"segments_corrected", s.map_segments_corrected},
               {"duplicates_merged", s.merged_duplicates}};
@@ -109,6 +150,21 @@ void print_summary(const TrajectorySummary& s, const std::vector<LoopClosure>& l
     if (w.downweighted)
       std::printf("  down-weighted: loop %zu -> %zu, weight %.3f, disagrees by %.2f m / %.2f deg\n",
                   loops.at(w.index).query_frame, loops.at(w.index).match_frame, w.weight, w.residual_m, w.residual_deg);
+  if (s.scan_edges_tried > 0) {
+    std::printf("scan edges: %zu of %zu registrations accepted, %zu down-weighted", s.scan_edges_accepted,
+                s.scan_edges_tried, s.scan_edges_downweighted);
+    if (s.scan_step_error && s.odometry_step_error)
+      std::printf("; step error against the reference, median: scans %.1f cm / %.3f deg / scale %+.2f %%, odometry "
+                  "%.1f cm / %.3f deg / scale %+.2f %%", 100 * s.scan_step_error->median_m, s.scan_step_error->median_deg,
+                  s.scan_step_error->median_scale_pct, 100 * s.odometry_step_error->median_m,
+                  s.odometry_step_error->median_deg, s.odometry_step_error->median_scale_pct);
+    std::printf("\n");
+    if (s.scan_edges_downweighted * 5 > s.scan_edges_accepted)
+      std::printf("warning: the optimiser down-weighted %zu of %zu scan edges: the registrations disagree with the "
+                  "odometry far beyond their sigma. An odometry this consistent (LiDAR-inertial) is better without "
+                  "--scan-edges (README, \"Pose-graph optimisation\")\n",
+                  s.scan_edges_downweighted, s.scan_edges_accepted);
+  }
   std::printf("segment map: %zu segments in the odometry frame, %zu on the corrected trajectory (%zu duplicates merged)\n",
               s.map_segments_odometry, s.map_segments_corrected, s.merged_duplicates);
 }

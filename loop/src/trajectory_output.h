@@ -20,6 +20,13 @@ struct TrajectorySummary {
   size_t solves = 0;
   double median_solve_ms = 0, max_solve_ms = 0;
   size_t map_segments_odometry = 0, map_segments_corrected = 0, merged_duplicates = 0;
+  // Scan edges (--scan-edges): registrations tried, accepted, down-weighted at the end; with a
+  // reference, the median error of each accepted step and of the odometry's same steps.
+  size_t scan_edges_tried = 0, scan_edges_accepted = 0, scan_edges_downweighted = 0;
+  struct StepError {
+    double median_m = 0, median_deg = 0, median_scale_pct = 0;  // scale: (|step| / |reference step| - 1)
+  };
+  std::optional<StepError> scan_step_error, odometry_step_error;
 };
 
 // reference: T_world_sensor of each frame fed (empty: no reference).

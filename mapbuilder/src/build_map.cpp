@@ -183,7 +183,7 @@ int build_map(const BuildOptions& o, const volatile std::sig_atomic_t* stop_sign
   const std::vector<size_t> frames = frames_of(range);
   warn_far_from_origin(seq, frames);
   std::optional<LoopCorrectedPoses> corrected;
-  if (o.close_loops) corrected = close_loops_first(seq, frames, config, classifier, stop_signal);
+  if (o.close_loops) corrected = close_loops_first(seq, frames, config, classifier, o.scan_edges, stop_signal);
 
   // Created before the loop: an unwritable target fails now, and an interrupted build leaves
   // nothing behind (the writer's destructor deletes its temporary file).

@@ -32,6 +32,7 @@ struct BuildOptions {
   bool force = false;           // replace an existing map
   std::string odometry_path;    // poses to use instead of the sequence's poses.txt (empty: those)
   bool close_loops = false;     // detect loops and optimise the poses first (loop_poses.h)
+  bool scan_edges = false;      // ... with LiDAR registration edges too (posegraph/scan_edges.h)
 };
 
 // Builds the map. Returns the process exit code: 0 written, 128 + signal when *stop_signal

@@ -10,7 +10,7 @@ namespace segmatch::mapbuilder {
 
 LoopCorrectedPoses close_loops_first(const io::Sequence& seq, const std::vector<size_t>& frames,
                                      const io::PipelineConfig& pipeline,
-                                     const std::optional<storage::ClassifierBlob>& classifier,
+                                     const std::optional<storage::ClassifierBlob>& classifier, bool scan_edges,
                                      const volatile std::sig_atomic_t* stop_signal) {
   LoopDetectorConfig config = io::loop_detector_config(pipeline);
   std::shared_ptr<const RandomForestMatcher> rf;
@@ -26,6 +26,7 @@ LoopCorrectedPoses close_loops_first(const io::Sequence& seq, const std::vector<
   posegraph::CloseLoopsOptions o;
   o.frames = frames;
   o.should_stop = [stop_signal] { return *stop_signal != 0; };
+  if (scan_edges) o.scan_edges = posegraph::ScanMatchConfig{};
   const posegraph::ClosedLoops r = posegraph::close_loops(seq, config, rf, o);
 
   size_t downweighted = 0;
@@ -44,6 +45,12 @@ LoopCorrectedPoses close_loops_first(const io::Sequence& seq, const std::vector<
   LoopCorrectedPoses out;
   out.T_map_sensor = r.T_corrected_sensor;
   out.summary = {{"loops", loops}, {"downweighted", downweighted}, {"max_correction_m", max_shift_m}};
+  if (scan_edges) {
+    size_t accepted = 0;
+    for (const auto& step : r.scan_steps) accepted += step.has_value();
+    out.summary["scan_edges"] = {{"tried", r.scan_edges_tried}, {"accepted", accepted}};
+    std::printf("scan edges: %zu of %zu registrations accepted\n", accepted, r.scan_edges_tried);
+  }
   return out;
 }
 

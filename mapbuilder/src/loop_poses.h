@@ -22,10 +22,11 @@ struct LoopCorrectedPoses {
 
 // frames: the scans the map is built from (increasing). classifier: the model the map stores
 // (used when the profile's matcher is the random forest; otherwise, or without one, L2).
+// scan_edges: register consecutive scans too (posegraph/scan_edges.h; default settings).
 // *stop_signal non-zero stops early (the caller then writes no map).
 LoopCorrectedPoses close_loops_first(const io::Sequence& sequence, const std::vector<size_t>& frames,
                                      const io::PipelineConfig& config,
-                                     const std::optional<storage::ClassifierBlob>& classifier,
+                                     const std::optional<storage::ClassifierBlob>& classifier, bool scan_edges,
                                      const volatile std::sig_atomic_t* stop_signal);
 
 }  // namespace segmatch::mapbuilder

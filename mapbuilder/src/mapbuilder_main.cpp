@@ -63,10 +63,17 @@ int main(int argc, char** argv) {
   app.add_flag("--close-loops", o.close_loops,
                "the poses are a drifting odometry: detect loops and optimise the pose graph first, and build "
                "the map on the corrected poses");
+  app.add_flag("--scan-edges", o.scan_edges,
+               "with --close-loops: also register each scan onto the previous ones (ICP), for odometry that errs "
+               "in scale or yaw rate (wheels), which loops cannot correct");
   cli::add_version_flag(app, "segmatch-mapbuilder");
   SEGMATCH_CLI_PARSE(app, argc, argv);
   if (!o.print_config && o.output.empty()) {
     std::fprintf(stderr, "segmatch-mapbuilder: error: --output is required\n");
+    return 2;
+  }
+  if (o.scan_edges && !o.close_loops) {
+    std::fprintf(stderr, "segmatch-mapbuilder: error: --scan-edges needs --close-loops\n");
     return 2;
   }
   if (first_opt->count()) o.first = first;

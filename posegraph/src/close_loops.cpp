@@ -40,6 +40,17 @@ void correct_map(const LoopDetector& detector, ClosedLoops& r, const SegmentMapC
   }, merge);
 }
 
+void add_scan_edge(ScanMatcher& matcher, const PointCloud& scan, const Pose3d& T_odom_sensor, size_t node,
+                   IncrementalPoseGraph& graph, ClosedLoops& r) {
+  const std::optional<ScanStep> step = matcher.add(scan, T_odom_sensor);
+  r.scan_steps.emplace_back();
+  if (!step) return;
+  ++r.scan_edges_tried;
+  if (!step->accepted) return;
+  graph.add_scan_edge(node - 1, step->T_previous_this);
+  r.scan_steps.back() = step->T_previous_this;
+}
+
 }  // namespace
 
 ClosedLoops close_loops(const io::Sequence& seq, const LoopDetectorConfig& config,
@@ -50,6 +61,8 @@ ClosedLoops close_loops(const io::Sequence& seq, const LoopDetectorConfig& confi
                                   std::to_string(seq.size() - 1));
   LoopDetector detector(config, std::move(classifier));
   IncrementalPoseGraph graph(o.graph);
+  std::optional<ScanMatcher> scans;
+  if (o.scan_edges) scans.emplace(*o.scan_edges);
   ClosedLoops r;
   cli::Progress progress("loop", o.frames.size(), "scans", o.progress ? stderr : nullptr);
   for (size_t frame : o.frames) {
@@ -58,7 +71,8 @@ ClosedLoops close_loops(const io::Sequence& seq, const LoopDetectorConfig& confi
     const LoopStep step = detector.process(scan.points, seq.poses()[frame], frame, seq.times()[frame]);
     r.frames.push_back(frame);
     r.T_odom_sensor.push_back(seq.poses()[frame]);
-    graph.add_node(seq.poses()[frame]);
+    const size_t node = graph.add_node(seq.poses()[frame]);
+    if (scans) add_scan_edge(*scans, scan.points, seq.poses()[frame], node, graph, r);
     if (step.processed) {
       r.processed.push_back(frame);
       r.step_ms.push_back(step.total_ms);
@@ -76,6 +90,10 @@ ClosedLoops close_loops(const io::Sequence& seq, const LoopDetectorConfig& confi
     progress.advance();
   }
   progress.finish();
+  if (o.optimize && !graph.graph().scans.empty()) {  // the scan edges after the last loop count too
+    r.last_solve = graph.solve();
+    r.solve_ms.push_back(r.last_solve->solve_ms);
+  }
   r.loops = detector.loops();
   r.graph = graph.graph();
   r.T_corrected_sensor = o.optimize ? graph.estimate() : r.T_odom_sensor;

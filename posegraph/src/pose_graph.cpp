@@ -66,34 +66,34 @@ void add_edge(ceres::Problem& problem, NodeBlocks& nodes, const Edge& e, ceres::
 // Odometry edges with a bias per stretch of bias_stretch_m (in the order of the edges, by the
 // distance their steps cover), a prior on the first stretch and a random walk between stretches.
 void add_biased_odometry(ceres::Problem& problem, NodeBlocks& nodes, const std::vector<Edge>& odometry,
-                         const PoseGraphConfig& c, std::vector<std::array<double, 2>>& biases) {
+                         const PoseGraphConfig& c, std::vector<std::array<double, 3>>& biases) {
   double odometer = 0;
   std::vector<size_t> stretch_of;
   for (const Edge& e : odometry) {
     stretch_of.push_back(static_cast<size_t>(odometer / c.bias_stretch_m));
     odometer += e.T_from_to.translation().norm();
   }
-  biases.assign(stretch_of.empty() ? 1 : stretch_of.back() + 1, {0.0, 0.0});
+  biases.assign(stretch_of.empty() ? 1 : stretch_of.back() + 1, {0.0, 0.0, 0.0});
   for (size_t i = 0; i < odometry.size(); ++i) {
     const Edge& e = odometry[i];
-    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<BiasedRelativePoseError, 6, 3, 4, 3, 4, 2>(
+    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<BiasedRelativePoseError, 6, 3, 4, 3, 4, 3>(
                                  new BiasedRelativePoseError(e.T_from_to, e.sqrt_information)),
                              nullptr, nodes.p[e.from].data(), nodes.q[e.from].coeffs().data(), nodes.p[e.to].data(),
                              nodes.q[e.to].coeffs().data(), biases[stretch_of[i]].data());
   }
-  problem.AddResidualBlock(new ceres::AutoDiffCostFunction<BiasPrior, 2, 2>(
-                               new BiasPrior(c.bias_yaw_sigma_deg_per_m * kRadPerDeg, c.bias_climb_sigma)),
-                           nullptr, biases[0].data());
+  const Eigen::Vector3d prior(c.bias_yaw_sigma_deg_per_m * kRadPerDeg, c.bias_climb_sigma, c.bias_scale_sigma);
+  const Eigen::Vector3d walk(c.bias_yaw_walk_deg_per_m * kRadPerDeg, c.bias_climb_walk, c.bias_scale_walk);
+  problem.AddResidualBlock(new ceres::AutoDiffCostFunction<BiasPrior, 3, 3>(new BiasPrior(prior)), nullptr,
+                           biases[0].data());
   for (size_t k = 1; k < biases.size(); ++k)
-    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<BiasStep, 2, 2, 2>(
-                                 new BiasStep(c.bias_yaw_walk_deg_per_m * kRadPerDeg, c.bias_climb_walk)),
-                             nullptr, biases[k - 1].data(), biases[k].data());
+    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<BiasStep, 3, 3, 3>(new BiasStep(walk)), nullptr,
+                             biases[k - 1].data(), biases[k].data());
 }
 
 // The world's up direction in the frame of a node at pose T (the gravity prior's reference).
 Eigen::Vector3d up_in(const Pose3d& T) { return T.linear().transpose() * Eigen::Vector3d::UnitZ(); }
 
-LoopReport report_loop(size_t index, const Edge& e, const Poses& T, const PoseGraphConfig& c) {
+LoopReport report_edge(size_t index, const Edge& e, const Poses& T, const PoseGraphConfig& c) {
   const Pose3d estimated = T[e.from].inverse() * T[e.to];
   const Pose3d delta = e.T_from_to.inverse() * estimated;
   const Eigen::Quaterniond dq(delta.linear());
@@ -119,6 +119,8 @@ void PoseGraphConfig::validate() const {
   require(odometry_min_sigma_deg > 0 && std::isfinite(odometry_min_sigma_deg), "odometry_min_sigma_deg must be > 0");
   require(loop_sigma_m > 0 && std::isfinite(loop_sigma_m), "loop_sigma_m must be > 0");
   require(loop_sigma_deg > 0 && std::isfinite(loop_sigma_deg), "loop_sigma_deg must be > 0");
+  require(scan_sigma_m > 0 && std::isfinite(scan_sigma_m), "scan_sigma_m must be > 0");
+  require(scan_sigma_deg > 0 && std::isfinite(scan_sigma_deg), "scan_sigma_deg must be > 0");
   require(min_loop_confidence > 0 && min_loop_confidence <= 1, "min_loop_confidence must be in (0, 1]");
   require(robust_scale_sigma > 0 && std::isfinite(robust_scale_sigma), "robust_scale_sigma must be > 0");
   require(downweighted_weight >= 0 && downweighted_weight <= 1, "downweighted_weight must be in [0, 1]");
@@ -126,7 +128,8 @@ void PoseGraphConfig::validate() const {
   require(odometry_lateral_ratio > 0 && odometry_lateral_ratio <= 1, "odometry_lateral_ratio must be in (0, 1]");
   require(gravity_sigma_deg >= 0 && std::isfinite(gravity_sigma_deg), "gravity_sigma_deg must be >= 0");
   require(bias_stretch_m >= 0 && std::isfinite(bias_stretch_m), "bias_stretch_m must be >= 0");
-  require(bias_yaw_sigma_deg_per_m > 0 && bias_climb_sigma > 0 && bias_yaw_walk_deg_per_m > 0 && bias_climb_walk > 0,
+  require(bias_yaw_sigma_deg_per_m > 0 && bias_climb_sigma > 0 && bias_scale_sigma > 0 && bias_yaw_walk_deg_per_m > 0 &&
+              bias_climb_walk > 0 && bias_scale_walk > 0,
           "the bias sigmas must be > 0");
 }
 
@@ -187,6 +190,15 @@ Edge loop_edge(size_t query, size_t match, const Pose3d& T_query_match, double c
   return e;
 }
 
+Edge scan_edge(size_t from, const Pose3d& T_from_next, const PoseGraphConfig& c) {
+  Edge e;
+  e.from = from;
+  e.to = from + 1;
+  e.T_from_to = T_from_next;
+  e.sqrt_information = sqrt_information(c.scan_sigma_m, c.scan_sigma_deg * kRadPerDeg);
+  return e;
+}
+
 OptimizationResult optimize(const PoseGraph& graph, const PoseGraphConfig& c) {
   c.validate();
   const auto start = std::chrono::steady_clock::now();
@@ -195,6 +207,7 @@ OptimizationResult optimize(const PoseGraph& graph, const PoseGraphConfig& c) {
   if (nodes.p.empty()) return result;
   for (const Edge& e : graph.odometry) check_edge(e, nodes.p.size());
   for (const Edge& e : graph.loops) check_edge(e, nodes.p.size());
+  for (const Edge& e : graph.scans) check_edge(e, nodes.p.size());
   ceres::Problem::Options problem_options;
   problem_options.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem problem(problem_options);
@@ -203,12 +216,13 @@ OptimizationResult optimize(const PoseGraph& graph, const PoseGraphConfig& c) {
     problem.AddParameterBlock(nodes.p[i].data(), 3);
     problem.AddParameterBlock(nodes.q[i].coeffs().data(), 4, &quaternion);
   }
-  std::vector<std::array<double, 2>> biases;  // per stretch: yaw rate (rad/m), climb (m/m)
+  std::vector<std::array<double, 3>> biases;  // per stretch: yaw rate (rad/m), climb (m/m), scale
   if (c.bias_stretch_m > 0)
     add_biased_odometry(problem, nodes, graph.odometry, c, biases);
   else
     for (const Edge& e : graph.odometry) add_edge(problem, nodes, e, nullptr);
   for (const Edge& e : graph.loops) add_edge(problem, nodes, e, new ceres::CauchyLoss(c.robust_scale_sigma));
+  for (const Edge& e : graph.scans) add_edge(problem, nodes, e, new ceres::CauchyLoss(c.robust_scale_sigma));
   if (c.gravity_sigma_deg > 0 && graph.up_in_node.size() == nodes.q.size())
     for (size_t i = 1; i < nodes.q.size(); ++i) {
       problem.AddResidualBlock(new ceres::AutoDiffCostFunction<GravityError, 3, 4>(
@@ -227,7 +241,9 @@ OptimizationResult optimize(const PoseGraph& graph, const PoseGraphConfig& c) {
   ceres::Solve(options, &problem, &summary);
 
   result.T_world_node = nodes.poses();
-  for (size_t i = 0; i < graph.loops.size(); ++i) result.loops.push_back(report_loop(i, graph.loops[i], result.T_world_node, c));
+  for (size_t i = 0; i < graph.loops.size(); ++i) result.loops.push_back(report_edge(i, graph.loops[i], result.T_world_node, c));
+  for (size_t i = 0; i < graph.scans.size(); ++i)
+    result.scans_downweighted += report_edge(i, graph.scans[i], result.T_world_node, c).downweighted;
   result.initial_cost = summary.initial_cost;
   result.final_cost = summary.final_cost;
   result.iterations = static_cast<int>(summary.iterations.size());
@@ -259,6 +275,10 @@ Poses IncrementalPoseGraph::estimate() const {
 void IncrementalPoseGraph::add_loop_edge(size_t query, size_t match, const Pose3d& T_query_match,
                                          double confidence) {
   graph_.loops.push_back(loop_edge(query, match, T_query_match, confidence, config_));
+}
+
+void IncrementalPoseGraph::add_scan_edge(size_t from, const Pose3d& T_from_next) {
+  graph_.scans.push_back(scan_edge(from, T_from_next, config_));
 }
 
 OptimizationResult IncrementalPoseGraph::solve() {

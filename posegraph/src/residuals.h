@@ -58,8 +58,9 @@ struct GravityError {
 };
 
 // An odometry edge whose measurement carries a slowly varying bias (bias[0]: yaw rate, rad per
-// metre; bias[1]: climb, metres per metre), removed before comparing: the measured step is
-// turned back by bias[0] * d about its z axis and lowered by bias[1] * d. Odometry errors are
+// metre; bias[1]: climb, metres per metre; bias[2]: scale), removed before comparing: the
+// measured step is shortened by the fraction bias[2], turned back by bias[0] * d about its z
+// axis and lowered by bias[1] * d. Odometry errors are
 // correlated along a route (a gyro bias, a miscalibrated mount), which white per-step noise
 // cannot express: with it, the optimiser spreads a loop's correction as a drift would have made
 // it, not as the smallest change.
@@ -71,7 +72,7 @@ struct BiasedRelativePoseError {
   bool operator()(const T* p_a, const T* q_a, const T* p_b, const T* q_b, const T* bias, T* residual) const {
     const T half = -bias[0] * T(d) * T(0.5);
     const Eigen::Quaternion<T> unturn(cos(half), T(0), T(0), sin(half));
-    Eigen::Matrix<T, 3, 1> p_measured = p_ab.template cast<T>();
+    Eigen::Matrix<T, 3, 1> p_measured = p_ab.template cast<T>() * (T(1) - bias[2]);
     p_measured.z() -= bias[1] * T(d);
     relative_pose_residual<T>(p_a, q_a, p_b, q_b, p_measured, unturn * q_ab.template cast<T>(), sqrt_information,
                               residual);
@@ -84,26 +85,25 @@ struct BiasedRelativePoseError {
   Matrix6d sqrt_information;
 };
 
-// The bias of one stretch against the next (a random walk) or against zero (the first).
+// The bias of one stretch against the next (a random walk) or against zero (the first):
+// yaw rate, climb, scale, each whitened by its own sigma.
 struct BiasStep {
-  BiasStep(double yaw_sigma, double climb_sigma) : w_yaw(1.0 / yaw_sigma), w_climb(1.0 / climb_sigma) {}
+  explicit BiasStep(const Eigen::Vector3d& sigmas) : w(sigmas.cwiseInverse()) {}
   template <typename T>
   bool operator()(const T* a, const T* b, T* residual) const {
-    residual[0] = (b[0] - a[0]) * T(w_yaw);
-    residual[1] = (b[1] - a[1]) * T(w_climb);
+    for (int k = 0; k < 3; ++k) residual[k] = (b[k] - a[k]) * T(w[k]);
     return true;
   }
-  double w_yaw, w_climb;
+  Eigen::Vector3d w;
 };
 struct BiasPrior {
-  BiasPrior(double yaw_sigma, double climb_sigma) : w_yaw(1.0 / yaw_sigma), w_climb(1.0 / climb_sigma) {}
+  explicit BiasPrior(const Eigen::Vector3d& sigmas) : w(sigmas.cwiseInverse()) {}
   template <typename T>
   bool operator()(const T* b, T* residual) const {
-    residual[0] = b[0] * T(w_yaw);
-    residual[1] = b[1] * T(w_climb);
+    for (int k = 0; k < 3; ++k) residual[k] = b[k] * T(w[k]);
     return true;
   }
-  double w_yaw, w_climb;
+  Eigen::Vector3d w;
 };
 
 }  // namespace segmatch::posegraph

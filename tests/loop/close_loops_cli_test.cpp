@@ -1,8 +1,9 @@
 // Loop closure that closes the loop (issue 21), end to end with the built tools on a
 // simulated closed route (segmatch-sim --route-00 loop) whose odometry drifts as in
 // loop_closure_test.cpp (0.3 % long, 0.2 deg / 100 m yaw, 2 mm / m climb): segmatch-loop
-// --optimize corrects the trajectory and writes every output; segmatch-mapbuilder
-// --close-loops stores a map on the corrected poses. The dataset is simulated once.
+// --optimize --scan-edges corrects the trajectory, scale included, and writes every output;
+// segmatch-mapbuilder --close-loops (loops only) stores a map on the corrected poses. The
+// dataset is simulated once.
 #include <segmatch/io/pose_io.h>
 
 #include <gtest/gtest.h>
@@ -12,6 +13,7 @@
 
 #include <unistd.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -46,7 +48,7 @@ std::string ClosedRoute::seq_;
 TEST_F(ClosedRoute, LoopOptimizeCorrectsTheDriftedOdometry) {
   const fs::path out = dir_ / "loop";
   const auto r = segmatch::test::run_command(kBin + "/segmatch-loop --input " + seq_ + " --odometry " + seq_ +
-                                             "/odom_poses.txt --optimize --out " + out.string());
+                                             "/odom_poses.txt --optimize --scan-edges --out " + out.string());
   ASSERT_EQ(r.code, 0) << r.output;
   for (const char* f : {"loops.txt", "loops.g2o", "optimized.g2o", "poses_corrected.txt", "poses_corrected.tum",
                         "odometry.tum", "trajectory.png", "eval.json"})
@@ -59,7 +61,11 @@ TEST_F(ClosedRoute, LoopOptimizeCorrectsTheDriftedOdometry) {
   const double before = t["odometry_error"]["rmse_m"], after = t["corrected_error"]["rmse_m"];
   std::printf("[close loops] ATE RMSE %.3f -> %.3f m\n", before, after);
   EXPECT_GT(before, 1.0) << "the odometry must drift";
-  EXPECT_LT(after, 0.5 * before);
+  EXPECT_LT(after, 0.2) << "issue 21: <= 0.2 m; the scale error needs the scan edges";
+  const nlohmann::json& scans = t["scan_edges"];
+  EXPECT_GT(scans["accepted"].get<int>(), 900) << scans.dump();
+  EXPECT_EQ(scans["downweighted"].get<int>(), 0) << scans.dump();
+  EXPECT_LT(std::abs(scans["step_error"]["median_scale_pct"].get<double>()), 0.2) << scans.dump();
   EXPECT_EQ(t["loop_weights"].size(), e["loops"].get<size_t>());
   EXPECT_EQ(t["downweighted_loops"].size(), 0u) << "every loop here is true";
   EXPECT_GT(t["map"]["duplicates_merged"].get<int>(), 0) << "the revisit's copies merge with the old views";
@@ -95,6 +101,18 @@ TEST_F(ClosedRoute, MapbuilderCloseLoopsStoresTheCorrection) {
   const auto info = segmatch::test::run_command(kBin + "/segmatch-mapinfo " + map.string());
   ASSERT_EQ(info.code, 0) << info.output;
   EXPECT_NE(info.output.find("loop_closure"), std::string::npos) << info.output.substr(0, 2000);
+}
+
+TEST_F(ClosedRoute, ScanEdgesNeedTheOptimiser) {
+  const auto loop = segmatch::test::run_command(kBin + "/segmatch-loop --input " + seq_ + " --scan-edges --out " +
+                                                (dir_ / "never").string());
+  EXPECT_EQ(loop.code, 2) << loop.output;
+  EXPECT_NE(loop.output.find("--scan-edges needs --optimize"), std::string::npos) << loop.output;
+  const auto build = segmatch::test::run_command(kBin + "/segmatch-mapbuilder --input " + seq_ +
+                                                 " --scan-edges --output " + (dir_ / "never.sqlite").string());
+  EXPECT_EQ(build.code, 2) << build.output;
+  EXPECT_NE(build.output.find("--scan-edges needs --close-loops"), std::string::npos) << build.output;
+  EXPECT_FALSE(fs::exists(dir_ / "never.sqlite"));
 }
 
 TEST_F(ClosedRoute, MapbuilderRefusesAMissingOdometryFile) {

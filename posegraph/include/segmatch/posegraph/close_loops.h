@@ -9,6 +9,7 @@
 #include "segmatch/core/map_correction.h"
 #include "segmatch/io/sequence.h"
 #include "segmatch/posegraph/pose_graph.h"
+#include "segmatch/posegraph/scan_edges.h"
 
 #include <functional>
 #include <memory>
@@ -21,6 +22,9 @@ struct CloseLoopsOptions {
   std::vector<size_t> frames;  // frames of the sequence to feed, increasing (node i = frames[i])
   bool optimize = true;        // false: detect only (T_corrected_sensor = odometry)
   PoseGraphConfig graph;
+  // Given: each scan is registered onto the previous ones and the step becomes a scan edge
+  // (scan_edges.h); the graph is then also solved once at the end, loops or not.
+  std::optional<ScanMatchConfig> scan_edges;
   bool verbose = false;        // print what each local cloud did (stderr)
   bool progress = true;        // progress bar with ETA (stderr)
   // Polled before each scan: true stops the run early (what was fed so far is returned).
@@ -34,6 +38,10 @@ struct ClosedLoops {
   std::vector<size_t> processed;  // frames where a local cloud was matched
   std::vector<double> step_ms;    // detector time of each processed local cloud
   std::vector<LoopClosure> loops;
+  // With scan edges: per node, the registration from the previous node (empty for node 0 and
+  // where it was rejected), and how many were tried and accepted.
+  std::vector<std::optional<Pose3d>> scan_steps;
+  size_t scan_edges_tried = 0;
   PoseGraph graph;                // odometry chain and one edge per loop (initial = odometry)
   std::optional<OptimizationResult> last_solve;  // the final optimisation, if any loop
   std::vector<double> solve_ms;   // every optimisation, in order (one per loop)

@@ -39,7 +39,7 @@ struct PoseGraphConfig {
   // sees gravity, so LiDAR-inertial odometry does not drift in roll and pitch); a height
   // drift is then undone by the steps' translations, not by tilting the trajectory. 0: off.
   double gravity_sigma_deg = 0.0;
-  // If > 0: the odometry's yaw-rate and climb biases are estimated per stretch of this many
+  // If > 0: the odometry's yaw-rate, climb and scale biases are estimated per stretch of this many
   // metres (a random walk from one stretch to the next) and removed from its steps. Odometry
   // errors are correlated along a route; white per-step noise alone lets a loop's correction
   // be spread as the smallest change, not as a drift would have made it. 0: off.
@@ -48,6 +48,10 @@ struct PoseGraphConfig {
   double bias_climb_sigma = 0.01;           // ... and its climb bias (metres per metre)
   double bias_yaw_walk_deg_per_m = 0.002;   // change from one stretch to the next
   double bias_climb_walk = 0.001;
+  // ... and its scale (a step read this fraction too long; a wheel's radius). Loops back to the
+  // same places cannot see it, so without scan edges it stays at its prior, 0.
+  double bias_scale_sigma = 0.02;
+  double bias_scale_walk = 0.001;
   double odometry_sigma_deg_per_m = 0.05;
   double odometry_min_sigma_deg = 0.05;
   // Loop edge at confidence 1 (refined loops: errors of a few cm and < 1 deg measured); the
@@ -55,6 +59,12 @@ struct PoseGraphConfig {
   double loop_sigma_m = 0.1;
   double loop_sigma_deg = 1.0;
   double min_loop_confidence = 0.1;
+  // Scan edge (LiDAR registration of consecutive nodes, scan_edges.h): its sigmas. They carry
+  // the robust loss as loops do. Tight in translation (the LiDAR measures metres: this is what
+  // fixes an odometry's scale), loose in rotation: a registration's rotation noise, small per
+  // step, integrates into height and sideways errors, where an odometry's gyro does better.
+  double scan_sigma_m = 0.01;
+  double scan_sigma_deg = 1.0;
   // Cauchy loss scale on a loop's whitened residual, in sigmas: a loop off by this many
   // sigmas gets half the weight of a consistent one.
   double robust_scale_sigma = 2.0;
@@ -79,6 +89,7 @@ struct PoseGraph {
   Poses T_world_node;
   std::vector<Edge> odometry;
   std::vector<Edge> loops;
+  std::vector<Edge> scans;  // LiDAR registrations between consecutive nodes (scan_edges.h)
   // The world's up direction in each node's frame as the odometry measured it (the gravity
   // prior's reference; empty: no prior).
   std::vector<Eigen::Vector3d> up_in_node;
@@ -110,6 +121,7 @@ struct LoopReport {
 struct OptimizationResult {
   Poses T_world_node;                // optimised; node 0 is held fixed
   std::vector<LoopReport> loops;     // one per loop edge, same order
+  size_t scans_downweighted = 0;     // scan edges whose weight ended below downweighted_weight
   double initial_cost = 0, final_cost = 0;
   int iterations = 0;
   bool converged = false;
@@ -131,6 +143,8 @@ class IncrementalPoseGraph {
   size_t add_node(const Pose3d& T_odom_node);
   // Adds a loop edge (no solve).
   void add_loop_edge(size_t query, size_t match, const Pose3d& T_query_match, double confidence);
+  // Adds a scan edge from node `from` to node `from + 1` (no solve).
+  void add_scan_edge(size_t from, const Pose3d& T_from_next);
   // Solves the graph warm-started from the current estimate; returns the solve's result.
   OptimizationResult solve();
   // add_loop_edge, then solve.
@@ -149,6 +163,9 @@ class IncrementalPoseGraph {
   Poses solved_;                    // estimate of the nodes present at the last solve
   std::vector<OptimizationResult> solves_;
 };
+
+// A scan edge from node `from` to `from + 1` with the config's scan noise.
+Edge scan_edge(size_t from, const Pose3d& T_from_next, const PoseGraphConfig& config);
 
 // Absolute trajectory error of `estimate` against `truth` (same length): the estimate is
 // aligned by its first pose (T_align = truth[0] * estimate[0]^-1, no scale), then the
