@@ -16,6 +16,8 @@ PACKAGES=(
 )
 # `install-deps.sh fuzz`: also clang and its libFuzzer runtime (scripts/fuzz.sh).
 if [ "${1:-}" = "fuzz" ]; then PACKAGES+=(clang libclang-rt-14-dev); fi
+# `install-deps.sh cross`: also the aarch64 cross compiler (scripts/cross-aarch64.sh).
+if [ "${1:-}" = "cross" ]; then PACKAGES+=(g++-aarch64-linux-gnu); fi
 
 missing=()
 for p in "${PACKAGES[@]}"; do

@@ -5,14 +5,13 @@
 // point lies in its own or one of the 26 adjacent cells (found by a sweep over the sorted
 // (x, y) columns, no hashing).
 // Each cell pair is visited once and close pairs are merged with union-find; no search tree.
-#include <emmintrin.h>
-
 #include <algorithm>
 #include <stdexcept>
 #include <string>
 
 #include "seg_grid.h"
 #include "seg_segmenters.h"
+#include "segmatch/core/simd.h"
 
 namespace segmatch {
 namespace detail {
@@ -55,19 +54,18 @@ struct Positions {
 // Bit k set if slot j + k (k < 4, j + k < end) is within sqrt(d2) of slot i. The squares are
 // summed as Eigen's squaredNorm() sums them, x + (y + z), so every close / not close
 // decision is bitwise the one of (a - b).squaredNorm().
-int close_mask4(const Positions& p, uint32_t i, uint32_t j, uint32_t end, __m128 d2) {
-  const __m128 dx = _mm_sub_ps(_mm_loadu_ps(&p.x[j]), _mm_set1_ps(p.x[i]));
-  const __m128 dy = _mm_sub_ps(_mm_loadu_ps(&p.y[j]), _mm_set1_ps(p.y[i]));
-  const __m128 dz = _mm_sub_ps(_mm_loadu_ps(&p.z[j]), _mm_set1_ps(p.z[i]));
-  const __m128 s = _mm_add_ps(_mm_mul_ps(dx, dx),
-                              _mm_add_ps(_mm_mul_ps(dy, dy), _mm_mul_ps(dz, dz)));
-  const int mask = _mm_movemask_ps(_mm_cmple_ps(s, d2));
+int close_mask4(const Positions& p, uint32_t i, uint32_t j, uint32_t end, simd::F4 d2) {
+  const simd::F4 dx = simd::load(&p.x[j]) - simd::splat(p.x[i]);
+  const simd::F4 dy = simd::load(&p.y[j]) - simd::splat(p.y[i]);
+  const simd::F4 dz = simd::load(&p.z[j]) - simd::splat(p.z[i]);
+  const simd::F4 s = dx * dx + (dy * dy + dz * dz);
+  const int mask = simd::le_bits(s, d2);
   return end - j >= 4 ? mask : mask & ((1 << (end - j)) - 1);
 }
 
 // Merges the close pairs between the slot ranges [a0, a1) and [b0, b1).
 void link_ranges(const Positions& p, uint32_t a0, uint32_t a1, uint32_t b0, uint32_t b1,
-                 __m128 d2, bool same, UnionFind* uf) {
+                 simd::F4 d2, bool same, UnionFind* uf) {
   for (uint32_t i = a0; i < a1; ++i) {
     for (uint32_t j = same ? i + 1 : b0; j < b1; j += 4) {
       for (int m = close_mask4(p, i, j, b1, d2); m; m &= m - 1) uf->unite(i, j + __builtin_ctz(m));
@@ -77,7 +75,7 @@ void link_ranges(const Positions& p, uint32_t a0, uint32_t a1, uint32_t b0, uint
 
 // True if some point of [a0, a1) is within sqrt(d2) of some point of [b0, b1).
 bool any_close(const Positions& p, uint32_t a0, uint32_t a1, uint32_t b0, uint32_t b1,
-               __m128 d2) {
+               simd::F4 d2) {
   for (uint32_t i = a0; i < a1; ++i) {
     for (uint32_t j = b0; j < b1; j += 4) {
       if (close_mask4(p, i, j, b1, d2)) return true;
@@ -233,7 +231,7 @@ void for_each_adjacent_pair(const Cells& g, Fn&& fn) {
 // Links the points of a cell of at most 32 points through adjacency bit masks, without
 // union-find traffic: each point's parent becomes the first point of its component (the
 // component's smallest slot, as unite() would choose). Returns true if that is one component.
-bool link_small_cell(const Positions& p, uint32_t a0, uint32_t n, __m128 d2, UnionFind* uf) {
+bool link_small_cell(const Positions& p, uint32_t a0, uint32_t n, simd::F4 d2, UnionFind* uf) {
   uint32_t adj[32];  // the distance is symmetric, so row i is also column i
   for (uint32_t i = 0; i < n; ++i) {
     adj[i] = 0;
@@ -260,35 +258,34 @@ bool link_small_cell(const Positions& p, uint32_t a0, uint32_t n, __m128 d2, Uni
 
 // Bounding box of a cell's points as (x, y, z, 0) lanes.
 struct CellBox {
-  __m128 lo, hi;
+  simd::F4 lo, hi;
 };
 
 // Squared distance between two boxes, summed in close_mask4()'s order: no pair of points of the
 // boxes is closer, also after rounding, so a pair skipped on this is never a close pair.
 float box_gap2(const CellBox& a, const CellBox& b) {
-  const __m128 gap = _mm_max_ps(_mm_max_ps(_mm_sub_ps(b.lo, a.hi), _mm_sub_ps(a.lo, b.hi)),
-                                _mm_setzero_ps());
-  const __m128 sq = _mm_mul_ps(gap, gap);
-  const __m128 yz = _mm_add_ss(_mm_shuffle_ps(sq, sq, 1), _mm_shuffle_ps(sq, sq, 2));
-  return _mm_cvtss_f32(_mm_add_ss(sq, yz));
+  const simd::F4 gap = simd::max(simd::max(b.lo - a.hi, a.lo - b.hi), simd::zero());
+  float sq[4];
+  simd::store(sq, gap * gap);
+  return sq[0] + (sq[1] + sq[2]);
 }
 
 // Links the points within each cell; returns the cells' boxes and whether each cell is
 // already one component.
 std::vector<CellBox> link_cells(const Cells& g, float d2, UnionFind* uf,
                                 std::vector<uint8_t>* connected) {
-  const __m128 d2x4 = _mm_set1_ps(d2);
+  const simd::F4 d2x4 = simd::splat(d2);
   const uint32_t cells = static_cast<uint32_t>(g.z.size());
   std::vector<CellBox> boxes(cells);
   connected->resize(cells);
   const Positions& p = g.xyz;
   for (uint32_t c = 0; c < cells; ++c) {
     const uint32_t a0 = g.begin[c], a1 = g.begin[c + 1];
-    __m128 lo = _mm_set_ps(0.f, p.z[a0], p.y[a0], p.x[a0]), hi = lo;
+    simd::F4 lo = simd::make(p.x[a0], p.y[a0], p.z[a0], 0.f), hi = lo;
     for (uint32_t i = a0 + 1; i < a1; ++i) {
-      const __m128 v = _mm_set_ps(0.f, p.z[i], p.y[i], p.x[i]);
-      lo = _mm_min_ps(lo, v);
-      hi = _mm_max_ps(hi, v);
+      const simd::F4 v = simd::make(p.x[i], p.y[i], p.z[i], 0.f);
+      lo = simd::min(lo, v);
+      hi = simd::max(hi, v);
     }
     boxes[c] = {lo, hi};
     if (a1 - a0 <= 32) {
@@ -342,7 +339,7 @@ Clusters euclidean_clusters(const PointCloud& cloud, const SegmenterConfig& conf
   UnionFind uf(g.order.size());
   std::vector<uint8_t> connected;
   const std::vector<CellBox> boxes = link_cells(g, d2, &uf, &connected);
-  const __m128 d2x4 = _mm_set1_ps(d2);
+  const simd::F4 d2x4 = simd::splat(d2);
   for_each_adjacent_pair(g, [&](uint32_t c, uint32_t nb) {
     if (box_gap2(boxes[c], boxes[nb]) > d2) return;
     const uint32_t a0 = g.begin[c], a1 = g.begin[c + 1];

@@ -4,7 +4,7 @@
 // over the primitives' tight world-space AABBs gives a binary tree, which is collapsed into
 // 8-wide nodes (repeatedly opening the child with the largest surface area) flattened
 // depth-first into one array. A node stores its children's AABBs structure-of-arrays, so
-// SSE2 tests four children per instruction. Leaves hold up to kMaxLeafSize primitives,
+// four-lane SIMD (segmatch/core/simd.h) tests four children at a time. Leaves hold up to kMaxLeafSize primitives,
 // stored contiguously in leaf order in a packed, intersection-ready form (precomputed yaw
 // sin/cos, triangle edges, inverse semi-axes, ...). Degenerate primitives (non-finite
 // values, negative or zero size, zero-area triangles) are skipped.
@@ -33,10 +33,7 @@
 #include <stdexcept>
 #include <vector>
 
-#if defined(__SSE2__) || defined(_M_X64)
-#include <emmintrin.h>
-#define SEGMATCH_SIM_SSE2 1
-#endif
+#include <segmatch/core/simd.h>
 
 namespace segmatch::sim {
 namespace {
@@ -299,29 +296,16 @@ struct alignas(16) Aabb {
                  -std::numeric_limits<float>::infinity(),
                  -std::numeric_limits<float>::infinity(), 0.0f};
 
+  // Lane-wise as one four-float min and max (segmatch/core/simd.h); the 4th lane is unused.
   void grow(const Aabb& o) {
-#ifdef SEGMATCH_SIM_SSE2
-    _mm_store_ps(lo, _mm_min_ps(_mm_load_ps(lo), _mm_load_ps(o.lo)));
-    _mm_store_ps(hi, _mm_max_ps(_mm_load_ps(hi), _mm_load_ps(o.hi)));
-#else
-    for (int k = 0; k < 3; ++k) {
-      lo[k] = std::min(lo[k], o.lo[k]);
-      hi[k] = std::max(hi[k], o.hi[k]);
-    }
-#endif
+    simd::store(lo, simd::min(simd::load(lo), simd::load(o.lo)));
+    simd::store(hi, simd::max(simd::load(hi), simd::load(o.hi)));
   }
   // p: 4 floats, the 4th ignored (must be finite).
   void grow_point(const float* p) {
-#ifdef SEGMATCH_SIM_SSE2
-    const __m128 v = _mm_load_ps(p);
-    _mm_store_ps(lo, _mm_min_ps(_mm_load_ps(lo), v));
-    _mm_store_ps(hi, _mm_max_ps(_mm_load_ps(hi), v));
-#else
-    for (int k = 0; k < 3; ++k) {
-      lo[k] = std::min(lo[k], p[k]);
-      hi[k] = std::max(hi[k], p[k]);
-    }
-#endif
+    const simd::F4 v = simd::load(p);
+    simd::store(lo, simd::min(simd::load(lo), v));
+    simd::store(hi, simd::max(simd::load(hi), v));
   }
   float half_area() const {
     const float dx = hi[0] - lo[0], dy = hi[1] - lo[1], dz = hi[2] - lo[2];
@@ -707,17 +691,12 @@ bool RayCaster::cast(const Eigen::Vector3f& origin, const Eigen::Vector3f& direc
     near_off[k] = k * kAxisStride + (ray.inv[k] >= 0.0f ? 0 : kHiOffset);
     far_off[k] = k * kAxisStride + (ray.inv[k] >= 0.0f ? kHiOffset : 0);
   }
-#ifdef SEGMATCH_SIM_SSE2
-  const __m128 ox = _mm_set1_ps(ray.o[0]), oy = _mm_set1_ps(ray.o[1]),
-               oz = _mm_set1_ps(ray.o[2]);
-  const __m128 ix = _mm_set1_ps(ray.inv[0]), iy = _mm_set1_ps(ray.inv[1]),
-               iz = _mm_set1_ps(ray.inv[2]);
+  const simd::F4 ox = simd::splat(ray.o[0]), oy = simd::splat(ray.o[1]), oz = simd::splat(ray.o[2]);
+  const simd::F4 ix = simd::splat(ray.inv[0]), iy = simd::splat(ray.inv[1]), iz = simd::splat(ray.inv[2]);
   // Far planes use the inverse direction widened by kFarScale (conservative culling).
-  const __m128 fix = _mm_set1_ps(ray.inv[0] * kFarScale),
-               fiy = _mm_set1_ps(ray.inv[1] * kFarScale),
-               fiz = _mm_set1_ps(ray.inv[2] * kFarScale);
-  const __m128 tmin4 = _mm_set1_ps(tmin);
-#endif
+  const simd::F4 fix = simd::splat(ray.inv[0] * kFarScale), fiy = simd::splat(ray.inv[1] * kFarScale),
+                 fiz = simd::splat(ray.inv[2] * kFarScale);
+  const simd::F4 tmin4 = simd::splat(tmin);
   float tcull = tbest * kFarScale;  // subtrees entered beyond this cannot hold the answer
   alignas(16) float tn[kWidth];
 
@@ -725,36 +704,21 @@ bool RayCaster::cast(const Eigen::Vector3f& origin, const Eigen::Vector3f& direc
     if (!(cur & kLeafBit)) {
       const Node& nd = nodes[cur];
       const char* base = reinterpret_cast<const char*>(&nd);
-#ifdef SEGMATCH_SIM_SSE2
       unsigned mask = 0;
-      for (int g = 0; g < kWidth; g += 4) {  // four children per SSE group
+      for (int g = 0; g < kWidth; g += 4) {  // four children at a time
         const char* gb = base + g * static_cast<int>(sizeof(float));
-        auto plane = [gb](int off) { return _mm_load_ps(reinterpret_cast<const float*>(gb + off)); };
-        const __m128 nx = _mm_mul_ps(_mm_sub_ps(plane(near_off[0]), ox), ix);
-        const __m128 ny = _mm_mul_ps(_mm_sub_ps(plane(near_off[1]), oy), iy);
-        const __m128 nz = _mm_mul_ps(_mm_sub_ps(plane(near_off[2]), oz), iz);
-        const __m128 fx = _mm_mul_ps(_mm_sub_ps(plane(far_off[0]), ox), fix);
-        const __m128 fy = _mm_mul_ps(_mm_sub_ps(plane(far_off[1]), oy), fiy);
-        const __m128 fz = _mm_mul_ps(_mm_sub_ps(plane(far_off[2]), oz), fiz);
-        const __m128 near4 = _mm_max_ps(_mm_max_ps(nx, ny), _mm_max_ps(nz, tmin4));
-        const __m128 far4 = _mm_min_ps(_mm_min_ps(fx, fy), _mm_min_ps(fz, _mm_set1_ps(tcull)));
-        mask |= static_cast<unsigned>(_mm_movemask_ps(_mm_cmple_ps(near4, far4))) << g;
-        _mm_store_ps(tn + g, near4);
+        auto plane = [gb](int off) { return simd::load(reinterpret_cast<const float*>(gb + off)); };
+        const simd::F4 nx = (plane(near_off[0]) - ox) * ix;
+        const simd::F4 ny = (plane(near_off[1]) - oy) * iy;
+        const simd::F4 nz = (plane(near_off[2]) - oz) * iz;
+        const simd::F4 fx = (plane(far_off[0]) - ox) * fix;
+        const simd::F4 fy = (plane(far_off[1]) - oy) * fiy;
+        const simd::F4 fz = (plane(far_off[2]) - oz) * fiz;
+        const simd::F4 near4 = simd::max(simd::max(nx, ny), simd::max(nz, tmin4));
+        const simd::F4 far4 = simd::min(simd::min(fx, fy), simd::min(fz, simd::splat(tcull)));
+        mask |= static_cast<unsigned>(simd::le_bits(near4, far4)) << g;
+        simd::store(tn + g, near4);
       }
-#else
-      unsigned mask = 0;
-      for (int c = 0; c < kWidth; ++c) {
-        float nearv = tmin, farv = tcull;
-        for (int k = 0; k < 3; ++k) {
-          const float* pn = reinterpret_cast<const float*>(base + near_off[k]);
-          const float* pf = reinterpret_cast<const float*>(base + far_off[k]);
-          nearv = std::max(nearv, (pn[c] - ray.o[k]) * ray.inv[k]);
-          farv = std::min(farv, (pf[c] - ray.o[k]) * (ray.inv[k] * kFarScale));
-        }
-        tn[c] = nearv;
-        if (nearv <= farv) mask |= 1u << c;
-      }
-#endif
       if (mask == 0) goto pop;
       // Visit the nearest hit child next; push the others, farthest first.
       {
