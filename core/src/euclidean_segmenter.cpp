@@ -97,16 +97,6 @@ struct Cells {
   int64_t x_extent = 1, y_extent = 1;
 };
 
-// GridFrame::key_of() with an inline floor (std::floor is a libm call without SSE4.1).
-uint64_t cell_key(const GridFrame& f, const Point& p) {
-  const auto coord = [&](float v, int axis) {
-    const double q = double(v) / f.cell_m;
-    const int64_t t = static_cast<int64_t>(q);
-    return t - (double(t) > q) - f.base[axis];
-  };
-  return f.pack(coord(p.x, 0), coord(p.y, 1), f.bits[2] ? coord(p.z, 2) : 0);
-}
-
 // Stable LSD sort of (key << 32 | index) words by key. All digit histograms come from one
 // read, and digits of up to 13 bits make a 60 m cloud at 0.2 m (25-bit keys) two passes
 // where radix_sort() takes three.
@@ -141,7 +131,7 @@ void sorted_keys(const PointCloud& cloud, const GridFrame& f, std::vector<uint64
   size_t n = 0;
   for (size_t i = 0; i < cloud.size(); ++i) {
     if (!is_finite(cloud[i])) continue;
-    (*keys)[n++] = f.total_bits <= 32 ? cell_key(f, cloud[i]) << 32 | i : cell_key(f, cloud[i]);
+    (*keys)[n++] = f.total_bits <= 32 ? f.fast_key(cloud[i]) << 32 | i : f.fast_key(cloud[i]);
   }
   keys->resize(n);
   order->resize(n);

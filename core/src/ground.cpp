@@ -39,15 +39,10 @@ struct ColumnCoord {
   const GridFrame& frame;
   double inv = 1.0 / frame.cell_m;
   int64_t operator()(float v, int axis) const {
-    double q = double(v) * inv;
-    int64_t t = static_cast<int64_t>(q);
-    t -= double(t) > q;
+    const double q = double(v) * inv;
+    int64_t t = detail::fast_floor(q);
     const double frac = q - double(t), eps = 1e-12 * (std::abs(q) + 1.0);
-    if (frac < eps || frac > 1.0 - eps) {
-      q = double(v) / frame.cell_m;
-      t = static_cast<int64_t>(q);
-      t -= double(t) > q;
-    }
+    if (frac < eps || frac > 1.0 - eps) t = detail::fast_floor(double(v) / frame.cell_m);
     return t - frame.base[axis];
   }
 };

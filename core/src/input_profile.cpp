@@ -1,4 +1,5 @@
 #include "segmatch/core/input_profile.h"
+#include "seg_grid.h"
 
 #include <algorithm>
 #include <cmath>
@@ -40,8 +41,8 @@ class PointGrid {
 
  private:
   int64_t key(const Eigen::Vector3f& p) const {
-    const auto c = [this](float v) { return static_cast<int64_t>(std::floor(v / cell_m_)) & 0x1FFFFF; };
-    return (c(p.x()) << 42) | (c(p.y()) << 21) | c(p.z());
+    const auto c = [this](float v) { return static_cast<int64_t>(std::floor(v / cell_m_)); };
+    return static_cast<int64_t>(detail::pack21(c(p.x()), c(p.y()), c(p.z())));  // the same cells, offset keys
   }
   const PointCloud& cloud_;
   double cell_m_;

@@ -1,4 +1,5 @@
 #include "loop_map.h"
+#include "seg_grid.h"
 
 #include <cmath>
 
@@ -10,12 +11,8 @@ LoopSegmentMap::LoopSegmentMap(const SegmentMapConfig& config, const RecencyWind
 }
 
 uint64_t LoopSegmentMap::cell_of(const Eigen::Vector3f& p) const {
-  // 21 bits per axis, offset so that negative coordinates map to positive cells.
-  auto axis = [&](float v) {
-    return static_cast<uint64_t>(static_cast<int64_t>(std::floor(v / config_.duplicate_distance_m)) + (1 << 20)) &
-           0x1FFFFF;
-  };
-  return axis(p.x()) | (axis(p.y()) << 21) | (axis(p.z()) << 42);
+  auto cell = [&](float v) { return static_cast<int64_t>(std::floor(v / config_.duplicate_distance_m)); };
+  return detail::pack21(cell(p.z()), cell(p.y()), cell(p.x()));  // x in the low bits
 }
 
 int LoopSegmentMap::find_recent_duplicate(const Eigen::Vector3f& c, const Sighting& now) const {

@@ -20,6 +20,22 @@ inline bool is_finite(const Point& p) {
   return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
 }
 
+// std::floor(q) as an integer, for |q| < 2^63, without the libm call std::floor is on
+// x86-64 without SSE4.1 (it was a measurable share of the voxel and cell keys).
+inline int64_t fast_floor(double q) {
+  const int64_t t = static_cast<int64_t>(q);
+  return t - (static_cast<double>(t) > q);
+}
+
+// Three cell coordinates in one key, 21 bits each (a in the high bits), offset by 2^20 so that
+// cells -2^20 .. 2^20 - 1 keep their order; coordinates beyond wrap (callers bound them).
+inline uint64_t pack21(int64_t a, int64_t b, int64_t c) {
+  constexpr int64_t kHalf = int64_t{1} << 20;
+  constexpr uint64_t kMask = (uint64_t{1} << 21) - 1;
+  const auto u = [&](int64_t v) { return static_cast<uint64_t>(v + kHalf) & kMask; };
+  return (u(a) << 42) | (u(b) << 21) | u(c);
+}
+
 // Stable LSD radix sort of `keys` (only the lowest `key_bits` bits are significant),
 // permuting `values` alongside. 11-bit digits: a 31-bit key (a 60 m local cloud at 0.1 m)
 // takes three passes.
@@ -85,6 +101,11 @@ struct GridFrame {
   }
   uint64_t key_of(const Point& p) const {
     return pack(coord(p.x, 0), coord(p.y, 1), bits[2] ? coord(p.z, 2) : 0);
+  }
+  // key_of() with fast_floor: the same key (the same quotient, floored the same).
+  uint64_t fast_key(const Point& p) const {
+    const auto c = [&](float v, int axis) { return fast_floor(double(v) / cell_m) - base[axis]; };
+    return pack(c(p.x, 0), c(p.y, 1), bits[2] ? c(p.z, 2) : 0);
   }
 };
 

@@ -1,4 +1,5 @@
 #include "segmatch/core/segment_map.h"
+#include "seg_grid.h"
 
 #include <cmath>
 #include <stdexcept>
@@ -13,12 +14,8 @@ void SegmentMapConfig::validate() const {
 SegmentMap::SegmentMap(const SegmentMapConfig& config) : config_(config) { config_.validate(); }
 
 SegmentMap::CellKey SegmentMap::cell_of(const Eigen::Vector3f& p) const {
-  // 21 bits per axis (offset so negative coordinates map to positive cells).
-  auto axis = [&](float v) {
-    return static_cast<uint64_t>(static_cast<int64_t>(std::floor(v / config_.duplicate_distance_m)) + (1 << 20)) &
-           0x1FFFFF;
-  };
-  return axis(p.x()) | (axis(p.y()) << 21) | (axis(p.z()) << 42);
+  auto cell = [&](float v) { return static_cast<int64_t>(std::floor(v / config_.duplicate_distance_m)); };
+  return detail::pack21(cell(p.z()), cell(p.y()), cell(p.x()));  // x in the low bits
 }
 
 int SegmentMap::find_duplicate(const Eigen::Vector3f& c) const {

@@ -1,4 +1,5 @@
 #include "segmatch/core/support.h"
+#include "seg_grid.h"
 
 #include <cmath>
 #include <limits>
@@ -21,9 +22,7 @@ CentroidIndex::CentroidIndex(const Segments& segments, float cell_m) : cell_m_(c
 }
 
 uint64_t CentroidIndex::key(int x, int y, int z) const {
-  // 21 bits per axis: +-1e6 cells, far beyond any map.
-  auto u = [](int v) { return static_cast<uint64_t>(v + (1 << 20)) & 0x1FFFFF; };
-  return (u(x) << 42) | (u(y) << 21) | u(z);
+  return detail::pack21(x, y, z);  // +-1e6 cells, far beyond any map
 }
 
 int CentroidIndex::nearest_within(const Eigen::Vector3f& p, float radius_m) const {

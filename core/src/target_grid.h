@@ -32,7 +32,7 @@ class TargetGrid {
     keys.reserve(target.size()), order.reserve(target.size());
     for (size_t i = 0; i < target.size(); ++i) {
       if (!is_finite(target[i])) continue;
-      keys.push_back(key_of(target[i]));
+      keys.push_back(frame_.fast_key(target[i]));
       order.push_back(static_cast<uint32_t>(i));
     }
     radix_sort(keys, order, frame_.total_bits);
@@ -177,17 +177,6 @@ class TargetGrid {
       if (bound2() <= r2 || r2 >= max2) return;
       prev2 = r2;
     }
-  }
-
-  // frame_.key_of(p) with an inline floor (std::floor is a libm call without SSE4.1; the
-  // quotient is the same, so the key is too).
-  uint64_t key_of(const Point& p) const {
-    const auto coord = [&](float v, int axis) {
-      const double q = double(v) / frame_.cell_m;
-      const int64_t t = static_cast<int64_t>(q);
-      return t - (double(t) > q) - frame_.base[axis];
-    };
-    return frame_.pack(coord(p.x, 0), coord(p.y, 1), coord(p.z, 2));
   }
 
   uint64_t filter_bit(uint64_t key) const { return (key * 0x9E3779B97F4A7C15ull) >> (64 - filter_bits_); }

@@ -30,8 +30,7 @@ inline bool voxelize(const Point& p, double leaf, Voxelized* out) {
   const float c[3] = {p.x, p.y, p.z};
   for (int a = 0; a < 3; ++a) {
     const double q = double(c[a]) / leaf;
-    int64_t t = static_cast<int64_t>(q);
-    t -= double(t) > q;  // floor, without the libm call
+    const int64_t t = detail::fast_floor(q);
     out->v[a] = t;
     const double fr = (q - double(t)) * kFracScale;
     out->f[a] = std::min<int64_t>(std::max<int64_t>(static_cast<int64_t>(fr), 0), int64_t{0xFFFFFFFF});

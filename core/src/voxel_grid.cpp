@@ -159,17 +159,6 @@ GridFrame GridFrame::fit(const PointCloud& cloud, double cell_m, bool planar, co
   return f;
 }
 
-// frame.key_of(p) with an inline floor (std::floor is a libm call without SSE4.1; the
-// quotient is the same, so the key is too).
-static uint64_t key_of_point(const GridFrame& f, const Point& p) {
-  const auto coord = [&](float v, int axis) {
-    const double q = double(v) / f.cell_m;
-    const int64_t t = static_cast<int64_t>(q);
-    return t - (double(t) > q) - f.base[axis];
-  };
-  return f.pack(coord(p.x, 0), coord(p.y, 1), f.bits[2] ? coord(p.z, 2) : 0);
-}
-
 CellGrid CellGrid::build(const PointCloud& cloud, double cell_m, bool planar, const char* field,
                          bool with_lookup) {
   CellGrid g;
@@ -180,7 +169,7 @@ CellGrid CellGrid::build(const PointCloud& cloud, double cell_m, bool planar, co
   g.point_cell.assign(cloud.size(), FlatHashMap::kMissing);
   for (size_t i = 0; i < cloud.size(); ++i) {
     if (!is_finite(cloud[i])) continue;
-    keys.push_back(key_of_point(g.frame, cloud[i]));
+    keys.push_back(g.frame.fast_key(cloud[i]));
     g.order.push_back(static_cast<uint32_t>(i));
   }
   radix_sort(keys, g.order, g.frame.total_bits);
@@ -264,8 +253,7 @@ struct VoxelKeyer {
     for (int a = 0; a < 3; ++a) {
       const double d = double(v[a]) * inv - centre[a];
       if (!(std::abs(d) < double(kAxisHalf - 2))) return false;  // also guards the cast
-      int64_t t = static_cast<int64_t>(d);
-      t -= double(t) > d;
+      int64_t t = detail::fast_floor(d);
       double f = d - double(t);
       if (f < eps[a] || f > 1.0 - eps[a]) {
         const double q = double(v[a]) / leaf, c = std::floor(q);
