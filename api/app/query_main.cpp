@@ -57,6 +57,9 @@ int main(int argc, char** argv) {
   CLI::App* localize = app.add_subcommand("localize", "localize one cloud (.bin/.pcd/.ply, local frame)");
   localize->add_option("cloud", cloud_path, "point cloud file")->required();
   localize->add_option("--sensor", sensor, "sensor position x,y,z in the cloud's frame")->capture_default_str();
+  bool refusal_code = false;
+  localize->add_flag("--refusal-code", refusal_code,
+                     "ask for the reply's typed refusal code (revision 5; older servers answer MALFORMED)");
   CLI::App* rep = app.add_subcommand("replay", "replay a sequence folder like a vehicle");
   rep->add_option("sequence", replay.folder, "KITTI sequence folder or PCD keyframe folder")->required();
   rep->add_option("--every-m", replay.every_m, "query every this many metres")->capture_default_str()->check(CLI::PositiveNumber);
@@ -91,6 +94,7 @@ int main(int argc, char** argv) {
       api::LocalizeRequest request;
       request.sensor_position_local = parse_xyz(sensor);
       request.points = io::read_cloud(cloud_path).points;
+      if (refusal_code) request.flags |= api::kFlagRefusalCode;
       const auto sent = std::chrono::steady_clock::now();
       const api::LocalizeReply reply = client.localize(request);
       query::print_reply(reply, ms_since(sent));

@@ -17,9 +17,11 @@ void print_reply(const api::LocalizeReply& r, double round_trip_ms) {
   const Eigen::Quaterniond q(r.T_map_local.linear());
   const Eigen::Vector3d t = r.T_map_local.translation();
   std::printf("%-13s inliers %3u support %3u conf %.2f  T_map_local t=(%.3f %.3f %.3f) q=(%.5f %.5f %.5f %.5f)  "
-              "%.1f ms (server %.1f)%s%s\n",
+              "%.1f ms (server %.1f)%s%s%s%s\n",
               api::to_string(r.status), r.inliers, r.support, r.confidence, t.x(), t.y(), t.z(), q.w(), q.x(), q.y(),
-              q.z(), round_trip_ms, r.timings.server_total, r.reason.empty() ? "" : "  ", r.reason.c_str());
+              q.z(), round_trip_ms, r.timings.server_total, r.refusal == api::RefusalCode::kNone ? "" : "  ",
+              r.refusal == api::RefusalCode::kNone ? "" : api::to_string(r.refusal), r.reason.empty() ? "" : r.refusal == api::RefusalCode::kNone ? "  " : ": ",
+              r.reason.c_str());
 }
 
 namespace {

@@ -138,7 +138,7 @@ std::vector<uint8_t> encode(const LocalizeReply& m) {
   wire::Writer w;
   w.u64(m.request_id);
   w.u16(static_cast<uint16_t>(m.status));
-  w.u16(0);  // reserved
+  w.u16(static_cast<uint16_t>(m.refusal));
   w.str(m.reason);
   put_pose(w, m.T_map_local);
   w.u32(m.inliers);
@@ -156,7 +156,7 @@ DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, L
   LocalizeReply m;
   m.request_id = r.u64();
   const uint16_t status = r.u16();
-  const uint16_t reserved = r.u16();
+  m.refusal = static_cast<RefusalCode>(r.u16());  // any value: a later revision's code too
   m.reason = r.str(limits.max_string_bytes);
   const DecodeStatus s_pose = get_pose(r, m.T_map_local);
   m.inliers = r.u32();
@@ -169,7 +169,7 @@ DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, L
   for (uint64_t& id : m.matched_segment_ids) id = r.u64();
   for (float* f : timing_fields(m.timings)) *f = r.f32();
   DecodeStatus s = first_error({s_pose, detail::finish(r)});
-  if (s == DecodeStatus::kOk && (reserved != 0 || status > 2)) s = DecodeStatus::kBadField;
+  if (s == DecodeStatus::kOk && status > 2) s = DecodeStatus::kBadField;
   if (s == DecodeStatus::kOk && !std::isfinite(m.confidence)) s = DecodeStatus::kNonFinite;
   if (s != DecodeStatus::kOk) return s;
   m.status = static_cast<LocalizeStatus>(status);

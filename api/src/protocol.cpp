@@ -63,6 +63,21 @@ const char* to_string(LocalizeStatus status) {
   return "unknown";
 }
 
+const char* to_string(RefusalCode code) {
+  switch (code) {
+    case RefusalCode::kNone: return "NONE";
+    case RefusalCode::kEmptyMap: return "EMPTY_MAP";
+    case RefusalCode::kTooFewSegments: return "TOO_FEW_SEGMENTS";
+    case RefusalCode::kNoConsistentMatches: return "NO_CONSISTENT_MATCHES";
+    case RefusalCode::kOutsidePrior: return "OUTSIDE_PRIOR";
+    case RefusalCode::kLowSupport: return "LOW_SUPPORT";
+    case RefusalCode::kAmbiguous: return "AMBIGUOUS";
+    case RefusalCode::kSurfacesDisagree: return "SURFACES_DISAGREE";
+    case RefusalCode::kLowConfidence: return "LOW_CONFIDENCE";
+  }
+  return "UNKNOWN";
+}
+
 ErrorCode error_code_for(DecodeStatus status) {
   switch (status) {
     case DecodeStatus::kBadMagic: return ErrorCode::kBadMagic;

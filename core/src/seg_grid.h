@@ -2,7 +2,7 @@
 // grid keys, a stable LSD radix sort of 64-bit keys, a flat open-addressing hash map and a
 // sparse 3D cell grid for fixed-radius neighbour queries. Nothing here allocates per point
 // beyond a few flat arrays, which is what keeps the pipeline inside its time budget.
-// Implemented in voxel_grid.cpp.
+// Implemented in seg_grid.cpp.
 #pragma once
 
 #include <cmath>

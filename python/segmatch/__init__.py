@@ -15,10 +15,10 @@ from .client import Client, Prior
 from .errors import (ClientTimeout, ConnectError, ConnectionLost, DecodeError, DecodeStatus, ErrorCode, ProtocolError,
                      SegmatchError, ServerError)
 from .pose import Pose, ros_xyzw_from_wxyz, wxyz_from_ros_xyzw
-from .protocol import InfoReply, LocalizeReply, LocalizeStatus, Timings
+from .protocol import InfoReply, LocalizeReply, LocalizeStatus, RefusalCode, Timings
 
 __version__ = "0.1.0"
 
-__all__ = ["Client", "Prior", "Pose", "InfoReply", "LocalizeReply", "LocalizeStatus", "Timings", "ErrorCode",
+__all__ = ["Client", "Prior", "Pose", "InfoReply", "LocalizeReply", "LocalizeStatus", "RefusalCode", "Timings", "ErrorCode",
            "DecodeStatus", "SegmatchError", "ConnectError", "ClientTimeout", "ConnectionLost", "ProtocolError",
            "DecodeError", "ServerError", "wxyz_from_ros_xyzw", "ros_xyzw_from_wxyz", "protocol"]

@@ -7,7 +7,7 @@ import enum
 
 MAGIC = b"SGMQ"
 VERSION = 1  # the frame header's version
-REVISION = 4  # the document's revision: additions since version 1 (docs/protocol.md 8)
+REVISION = 5  # the document's revision: additions since version 1 (docs/protocol.md 8)
 HEADER_BYTES = 12
 MAX_PAYLOAD_BYTES = 64 << 20  # the server's default --max-frame-mb
 
@@ -15,7 +15,8 @@ MAX_PAYLOAD_BYTES = 64 << 20  # the server's default --max-frame-mb
 FLAG_HAS_PRIOR = 1 << 0
 FLAG_VOXELIZED = 1 << 1  # the points are centroids of the map's voxel grid
 FLAG_PRIOR_HEADING = 1 << 2  # revision 2: the prior's heading tolerance follows the points
-KNOWN_FLAGS = FLAG_HAS_PRIOR | FLAG_VOXELIZED | FLAG_PRIOR_HEADING
+FLAG_REFUSAL_CODE = 1 << 3  # revision 5: the reply carries a RefusalCode (servers of revision <= 4: MALFORMED)
+KNOWN_FLAGS = FLAG_HAS_PRIOR | FLAG_VOXELIZED | FLAG_PRIOR_HEADING | FLAG_REFUSAL_CODE
 LOCALIZE_FIXED_BYTES = 140  # payload bytes before the points
 
 
@@ -30,6 +31,21 @@ class MessageType(enum.IntEnum):
     INFO_REPLY = 0x8003
     LOCALIZE_REPLY = 0x8004
     ERROR = 0x80FF
+
+
+class RefusalCode(enum.IntEnum):
+    """Why not localized (revision 5, docs/protocol.md 6.4); 0 unless the request set its
+    refusal-code bit. A reply may carry a later revision's code: LocalizeReply.refusal is an int."""
+
+    NONE = 0
+    EMPTY_MAP = 1
+    TOO_FEW_SEGMENTS = 2
+    NO_CONSISTENT_MATCHES = 3
+    OUTSIDE_PRIOR = 4
+    LOW_SUPPORT = 5
+    AMBIGUOUS = 6
+    SURFACES_DISAGREE = 7
+    LOW_CONFIDENCE = 8
 
 
 class LocalizeStatus(enum.IntEnum):

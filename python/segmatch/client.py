@@ -96,7 +96,7 @@ class Client:
 
     def localize(self, points, sensor_position: Sequence[float] = (0.0, 0.0, 0.0),
                  sensor_orientation=(1.0, 0.0, 0.0, 0.0), prior: Optional[Prior] = None, voxelized: bool = False,
-                 request_id: Optional[int] = None, T_local_sensor=None) -> p.LocalizeReply:
+                 request_id: Optional[int] = None, T_local_sensor=None, refusal_code: bool = False) -> p.LocalizeReply:
         """Localizes a local cloud; returns the LOCALIZE_REPLY (.status, .reason, .T_map_local
         4x4, .inliers, .confidence, .support, .matched_segment_ids, .timings).
 
@@ -107,6 +107,8 @@ class Client:
             segmatch.wxyz_from_ros_xyzw) or a 3x3 rotation matrix. Or give T_local_sensor (4x4).
         prior: a Prior (T_map_local guess, radius, heading tolerance) or None for a global search.
         request_id: u64 echoed in the reply; by default 1, 2, 3, ... per client.
+        refusal_code: ask for the reply's RefusalCode (.refusal, .refusal_name; revision 5). A
+            server of revision 4 or older answers ServerError MALFORMED to it.
         """
         m = p.Localize(request_id=next(self._ids) if request_id is None else _check_u64(request_id, "request_id"))
         if T_local_sensor is not None:
@@ -118,6 +120,8 @@ class Client:
         m.points = _points(points)
         if voxelized:
             m.flags |= p.FLAG_VOXELIZED
+        if refusal_code:
+            m.flags |= p.FLAG_REFUSAL_CODE
         if prior is not None:
             if not isinstance(prior, Prior):
                 raise TypeError(f"prior must be a segmatch.Prior, got {type(prior).__name__}")

@@ -12,7 +12,7 @@ from typing import ClassVar, List, Optional, Tuple
 
 import numpy as np
 
-from ._constants import FLAG_PRIOR_HEADING, KNOWN_FLAGS, LOCALIZE_FIXED_BYTES, LocalizeStatus, MessageType
+from ._constants import FLAG_PRIOR_HEADING, KNOWN_FLAGS, LOCALIZE_FIXED_BYTES, LocalizeStatus, MessageType, RefusalCode
 from ._wire import Reader, Writer, all_finite
 from .errors import DecodeError, DecodeStatus
 from .pose import QUATERNION_NORM_TOLERANCE, Pose, unit_quaternion
@@ -172,6 +172,15 @@ class LocalizeReply:
     support: int = 0  # query segments that land on a map segment under the pose
     matched_segment_ids: List[int] = field(default_factory=list)  # map segment ids of the inliers
     timings: Timings = field(default_factory=Timings)
+    refusal: int = 0  # revision 5: a RefusalCode when the request set its refusal-code bit, else 0
+
+    @property
+    def refusal_name(self) -> str:
+        """The refusal code's name (RefusalCode), "UNKNOWN" for a later revision's code."""
+        try:
+            return RefusalCode(self.refusal).name
+        except ValueError:
+            return "UNKNOWN"
 
     @property
     def T_map_local(self) -> np.ndarray:
@@ -184,7 +193,7 @@ class LocalizeReply:
     def _put(self, w: Writer) -> None:
         w.u64(self.request_id)
         w.u16(int(self.status))
-        w.u16(0)  # reserved
+        w.u16(self.refusal)
         w.str(self.reason)
         _put_pose(w, self.pose)
         w.u32(self.inliers)
@@ -198,7 +207,7 @@ class LocalizeReply:
 
     @classmethod
     def _get(cls, r: Reader) -> "LocalizeReply":
-        request_id, status, reserved, reason = r.u64(), r.u16(), r.u16(), r.str()
+        request_id, status, refusal, reason = r.u64(), r.u16(), r.u16(), r.str()  # any refusal code
         pose = Pose(r.f64s(4), r.f64s(3))
         inliers, confidence, support, ids = r.u32(), r.f32(), r.u32(), r.u32()
         if ids * 8 + len(TIMING_NAMES) * 4 != r.remaining():
@@ -208,8 +217,9 @@ class LocalizeReply:
         pose_status = _pose_status(pose)
         if pose_status:
             raise DecodeError(pose_status, "T_map_local")
-        if reserved != 0 or status > 2:
-            raise DecodeError(DecodeStatus.BAD_FIELD, f"status {status}, reserved {reserved}")
+        if status > 2:
+            raise DecodeError(DecodeStatus.BAD_FIELD, f"status {status}")
         if not math.isfinite(confidence):
             raise DecodeError(DecodeStatus.NON_FINITE, "confidence")
-        return cls(request_id, LocalizeStatus(status), reason, pose, inliers, confidence, support, matched, timings)
+        return cls(request_id, LocalizeStatus(status), reason, pose, inliers, confidence, support, matched, timings,
+                   refusal)

@@ -101,30 +101,32 @@ void copy_timings(const ModuleTimings& t, api::ModuleTimingsMs& out) {
   out.total = static_cast<float>(t.total_ms);
 }
 
-// The prior fields of both request kinds.
-struct PriorFields {
+// The prior fields of both request kinds, and whether the reply should carry a refusal code.
+struct RequestFields {
   bool given = false;
   Pose3d T_map_local = Pose3d::Identity();
   double radius_m = 0.0;
   std::optional<double> heading_tolerance_deg;
   Eigen::Vector3d sensor_local = Eigen::Vector3d::Zero();
+  bool refusal_code = false;  // revision 5: LOCALIZE bit 3, LOCALIZE_SEGMENTS bit 2
 };
 
-PriorFields prior_fields(const api::LocalizeRequest& r) {
-  PriorFields p{(r.flags & api::kFlagHasPrior) != 0, r.T_map_local_prior, r.prior_radius_m, std::nullopt,
+RequestFields request_fields(const api::LocalizeRequest& r) {
+  RequestFields p{(r.flags & api::kFlagHasPrior) != 0, r.T_map_local_prior, r.prior_radius_m, std::nullopt,
                 r.sensor_position_local};
   if (r.flags & api::kFlagPriorHeading) p.heading_tolerance_deg = r.prior_heading_tolerance_deg;
+  p.refusal_code = (r.flags & api::kFlagRefusalCode) != 0;
   return p;
 }
 
-PriorFields prior_fields(const api::LocalizeSegmentsRequest& r) {
+RequestFields request_fields(const api::LocalizeSegmentsRequest& r) {
   return {(r.flags & api::kSegmentsFlagHasPrior) != 0, r.T_map_local_prior, r.prior_radius_m,
-          r.prior_heading_tolerance_deg, r.sensor_position_local};
+          r.prior_heading_tolerance_deg, r.sensor_position_local, (r.flags & api::kSegmentsFlagRefusalCode) != 0};
 }
 
 // A prior with a radius narrows the search (docs/protocol.md 5.4); radius 0 keeps revision 1's
 // reject-only meaning (check_prior below).
-std::optional<PosePrior> pose_prior_of(const PriorFields& f) {
+std::optional<PosePrior> pose_prior_of(const RequestFields& f) {
   if (!f.given || !(f.radius_m > 0.0)) return std::nullopt;
   PosePrior prior;
   prior.T_map_query = f.T_map_local;
@@ -134,23 +136,43 @@ std::optional<PosePrior> pose_prior_of(const PriorFields& f) {
 }
 
 // With a prior: kOutsidePrior when the localized sensor is too far from the prior's guess.
-void check_prior(const PriorFields& f, api::LocalizeReply& reply) {
+void check_prior(const RequestFields& f, api::LocalizeReply& reply) {
   if (!f.given || reply.status != api::LocalizeStatus::kLocalized) return;
   const double distance_m = (reply.T_map_local * f.sensor_local - f.T_map_local * f.sensor_local).norm();
   if (distance_m <= f.radius_m) return;
   reply.status = api::LocalizeStatus::kOutsidePrior;
+  if (f.refusal_code) reply.refusal = api::RefusalCode::kOutsidePrior;
   reply.reason = "localized " + std::to_string(distance_m) + " m from the prior (search radius " +
                  std::to_string(f.radius_m) + " m)";
 }
 
+// The core's refusal as its wire code (docs/protocol.md 6.4). A passed deadline is answered
+// with ERROR REQUEST_TIMEOUT before a reply is built.
+api::RefusalCode refusal_code_of(Refusal r) {
+  switch (r) {
+    case Refusal::kNone: return api::RefusalCode::kNone;
+    case Refusal::kEmptyMap: return api::RefusalCode::kEmptyMap;
+    case Refusal::kTooFewSegments: return api::RefusalCode::kTooFewSegments;
+    case Refusal::kNoConsistentMatches: return api::RefusalCode::kNoConsistentMatches;
+    case Refusal::kOutsidePrior: return api::RefusalCode::kOutsidePrior;
+    case Refusal::kLowSupport: return api::RefusalCode::kLowSupport;
+    case Refusal::kAmbiguous: return api::RefusalCode::kAmbiguous;
+    case Refusal::kSurfacesDisagree: return api::RefusalCode::kSurfacesDisagree;
+    case Refusal::kLowConfidence: return api::RefusalCode::kLowConfidence;
+    case Refusal::kDeadlinePassed: break;
+  }
+  return api::RefusalCode::kNone;
+}
+
 api::LocalizeReply reply_of(const LoadedMap& map, const LocalizationResult& r, uint64_t request_id,
-                            const PriorFields& prior, std::chrono::steady_clock::time_point start) {
+                            const RequestFields& prior, std::chrono::steady_clock::time_point start) {
   api::LocalizeReply reply;
   reply.request_id = request_id;
   reply.status = r.localized()                            ? api::LocalizeStatus::kLocalized
                  : r.refusal == Refusal::kOutsidePrior ? api::LocalizeStatus::kOutsidePrior
                                                        : api::LocalizeStatus::kNotLocalized;
   reply.reason = r.reason;
+  if (prior.refusal_code) reply.refusal = refusal_code_of(r.refusal);
   reply.T_map_local = r.T_map_query;
   reply.inliers = static_cast<uint32_t>(r.inliers.size());
   reply.confidence = r.confidence;
@@ -174,12 +196,12 @@ LocalizationResult localize_cloud(const LoadedMap& map, const api::LocalizeReque
   const PointCloud cloud =
       crop_cylinder(request.points, request.sensor_position_local, map.config.local_cloud.radius_m);
   const CloudKind kind = (request.flags & api::kFlagVoxelized) ? CloudKind::kVoxelized : CloudKind::kRaw;
-  const std::optional<PosePrior> prior = pose_prior_of(prior_fields(request));
+  const std::optional<PosePrior> prior = pose_prior_of(request_fields(request));
   return map.localizer->localize(cloud, request.sensor_position_local.cast<float>(), kind, prior ? &*prior : nullptr,
                                  deadline);
 }
 
-Outcome outcome_of(const LoadedMap& map, const LocalizationResult& r, uint64_t request_id, const PriorFields& prior,
+Outcome outcome_of(const LoadedMap& map, const LocalizationResult& r, uint64_t request_id, const RequestFields& prior,
                    std::chrono::steady_clock::time_point start) {
   if (r.refusal == Refusal::kDeadlinePassed)
     return api::ErrorReply{api::ErrorCode::kRequestTimeout, "request timed out: " + r.reason};
@@ -190,12 +212,12 @@ Outcome outcome_of(const LoadedMap& map, const LocalizationResult& r, uint64_t r
 
 api::LocalizeReply localize_request(const LoadedMap& map, const api::LocalizeRequest& request) {
   const auto start = std::chrono::steady_clock::now();
-  return reply_of(map, localize_cloud(map, request, Deadline::never()), request.request_id, prior_fields(request), start);
+  return reply_of(map, localize_cloud(map, request, Deadline::never()), request.request_id, request_fields(request), start);
 }
 
 Outcome serve_localize(const LoadedMap& map, const api::LocalizeRequest& request, const Deadline& deadline) {
   const auto start = std::chrono::steady_clock::now();
-  return outcome_of(map, localize_cloud(map, request, deadline), request.request_id, prior_fields(request), start);
+  return outcome_of(map, localize_cloud(map, request, deadline), request.request_id, request_fields(request), start);
 }
 
 std::optional<api::ErrorReply> refuse_segments(const LoadedMap& map, const api::LocalizeSegmentsRequest& request) {
@@ -216,7 +238,7 @@ std::optional<api::ErrorReply> refuse_segments(const LoadedMap& map, const api::
 
 Outcome serve_localize_segments(const LoadedMap& map, api::LocalizeSegmentsRequest request, const Deadline& deadline) {
   const auto start = std::chrono::steady_clock::now();
-  const PriorFields fields = prior_fields(request);
+  const RequestFields fields = request_fields(request);
   const std::optional<PosePrior> prior = pose_prior_of(fields);
   const LocalizationResult r = map.localizer->localize_segments(
       std::move(request.segments), request.sensor_position_local.cast<float>(), prior ? &*prior : nullptr, {}, deadline);

@@ -81,7 +81,7 @@ const std::set<std::string> kFiles = {
     "hello.bin", "hello_ok.bin", "ping.bin", "pong.bin", "info.bin", "info_reply.bin",
     "localize_global.bin", "localize_prior_voxelized.bin", "localize_segments.bin",
     "localize_reply_localized.bin", "localize_reply_not_localized.bin", "localize_reply_outside_prior.bin",
-    "error.bin"};
+    "localize_refusal_code.bin", "localize_reply_refused.bin", "error.bin"};
 
 }  // namespace
 
@@ -128,6 +128,11 @@ TEST(ProtocolData, LocalizeGlobal) {
     ASSERT_EQ(m.points.size(), 4u);
     EXPECT_EQ(m.points[3].x, 0.1f);
   });
+  // Revision 5: the same, asking for the reply's refusal code (bit 3).
+  r.request_id = 12;
+  r.flags = kFlagRefusalCode;
+  check_file<LocalizeRequest>("localize_refusal_code.bin", r,
+                              [](const LocalizeRequest& m) { EXPECT_EQ(m.flags, 8u); });
 }
 
 TEST(ProtocolData, LocalizeWithPriorVoxelizedAndHeading) {
@@ -208,6 +213,13 @@ TEST(ProtocolData, LocalizeReplies) {
   outside.matched_segment_ids = {1, 2, 3};
   check_file<LocalizeReply>("localize_reply_outside_prior.bin", outside,
                             [](const LocalizeReply& m) { EXPECT_EQ(m.status, LocalizeStatus::kOutsidePrior); });
+
+  LocalizeReply refused = no;  // revision 5: the answer to localize_refusal_code.bin
+  refused.request_id = 12;
+  refused.refusal = RefusalCode::kAmbiguous;
+  refused.reason = "ambiguous: two distinct poses are supported by 16 and 15 query segments";
+  check_file<LocalizeReply>("localize_reply_refused.bin", refused,
+                            [](const LocalizeReply& m) { EXPECT_EQ(static_cast<int>(m.refusal), 6); });
 }
 
 TEST(ProtocolData, Error) {

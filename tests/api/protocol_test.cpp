@@ -128,14 +128,35 @@ TEST(Protocol, LocalizeReplyRoundTrips) {
   in.inliers = 9, in.support = 14, in.confidence = 0.8125f;
   in.matched_segment_ids = {3, 99, 1ull << 40};
   in.timings.voxel = 1.5f, in.timings.total = 80.25f, in.timings.server_total = 81.f;
+  in.refusal = RefusalCode::kOutsidePrior;
   const LocalizeReply out = round_trip(in);
   EXPECT_EQ(out.request_id, 77u);
   EXPECT_EQ(out.status, LocalizeStatus::kOutsidePrior);
+  EXPECT_EQ(out.refusal, RefusalCode::kOutsidePrior);
   EXPECT_EQ(out.reason, in.reason);
   EXPECT_TRUE(out.T_map_local.isApprox(in.T_map_local, 1e-12));
   EXPECT_EQ(out.inliers, 9u); EXPECT_EQ(out.support, 14u); EXPECT_EQ(out.confidence, 0.8125f);
   EXPECT_EQ(out.matched_segment_ids, in.matched_segment_ids);
   EXPECT_EQ(out.timings.voxel, 1.5f); EXPECT_EQ(out.timings.total, 80.25f); EXPECT_EQ(out.timings.server_total, 81.f);
+}
+
+// Revision 5: the former reserved field of LOCALIZE_REPLY is the refusal code. Every value
+// decodes (a later revision's code too) and re-encodes to the same bytes.
+TEST(Protocol, LocalizeReplyCarriesAnyRefusalCode) {
+  LocalizeReply in;
+  in.request_id = 5;
+  in.reason = "ambiguous";
+  for (const uint16_t code : {uint16_t(0), uint16_t(6), uint16_t(8), uint16_t(999)}) {
+    in.refusal = static_cast<RefusalCode>(code);
+    const std::vector<uint8_t> f = encode(in);
+    EXPECT_EQ(f[kHeaderBytes + 10] | f[kHeaderBytes + 11] << 8, code) << "offset 10, u16 little-endian";
+    LocalizeReply out;
+    ASSERT_EQ(decode_frame(f, kLimits, out), DecodeStatus::kOk) << code;
+    EXPECT_EQ(static_cast<uint16_t>(out.refusal), code);
+    EXPECT_EQ(encode(out), f);
+  }
+  EXPECT_STREQ(to_string(RefusalCode::kAmbiguous), "AMBIGUOUS");
+  EXPECT_STREQ(to_string(static_cast<RefusalCode>(999)), "UNKNOWN");
 }
 
 TEST(Protocol, RejectsBadMagicVersionTypeAndSize) {
@@ -253,8 +274,10 @@ TEST(Protocol, RejectsReservedFlagsAndOverlongStrings) {
   std::vector<uint8_t> f = encode(some_request());
   put_u32(f, kOffFlags, 0x80000001u);
   EXPECT_EQ(decode_request(f), DecodeStatus::kBadField);
-  put_u32(f, kOffFlags, 1u << 3);  // the first bit not defined by revision 2 (docs/protocol.md 8)
+  put_u32(f, kOffFlags, 1u << 4);  // the first bit not defined by revision 5 (docs/protocol.md 8)
   EXPECT_EQ(decode_request(f), DecodeStatus::kBadField);
+  put_u32(f, kOffFlags, kFlagRefusalCode);  // revision 5's bit 3, no trailer
+  EXPECT_EQ(decode_request(f), DecodeStatus::kOk);
   put_u32(f, kOffFlags, kFlagPriorHeading);  // bit 2 announces 8 more bytes that are not there
   EXPECT_EQ(decode_request(f), DecodeStatus::kBadPointCount);
   put_u32(f, kOffFlags, kFlagHasPrior | kFlagVoxelized);

@@ -160,7 +160,11 @@ class EndToEnd(unittest.TestCase):
         far[:3, 3] += [150.0, 0.0, 0.0]
         r = self.client.localize(self.points, T_local_sensor=self.T_local_sensor, prior=Prior(far, 0.0))
         self.assertEqual(r.status, LocalizeStatus.OUTSIDE_PRIOR, r.reason)
-        self.assertIn("prior", r.reason)
+        self.assertEqual(r.refusal, 0, "not asked for")
+        r = self.client.localize(self.points, T_local_sensor=self.T_local_sensor, prior=Prior(far, 0.0),
+                                 refusal_code=True)
+        self.assertEqual(r.status, LocalizeStatus.OUTSIDE_PRIOR, r.reason)
+        self.assertEqual((r.refusal, r.refusal_name), (p.RefusalCode.OUTSIDE_PRIOR, "OUTSIDE_PRIOR"))
         self.assertLess(pose_error(r.T_map_local, self.T_map_local_true)[0], 0.2)
 
     def test_bad_frames_get_the_error_the_codec_predicts_and_keep_the_connection(self):

@@ -57,6 +57,11 @@ EXPECTED = {
     "localize_reply_outside_prior.bin": localized_reply(request_id=9, status=p.LocalizeStatus.OUTSIDE_PRIOR,
                                                         reason="pose 152.3 m from the prior (radius 0 m)",
                                                         matched_segment_ids=[1, 2, 3]),
+    "localize_refusal_code.bin": p.Localize(12, p.FLAG_REFUSAL_CODE, (0.25, -1.5, 1.75), (0.5, 0.5, -0.5, 0.5),
+                                            points=pts([[1, 2, 3], [-4.5, 0.25, 10], [12.125, -7, 0.5], [0.1, 0.2, 0.3]])),
+    "localize_reply_refused.bin": p.LocalizeReply(
+        12, p.LocalizeStatus.NOT_LOCALIZED, "ambiguous: two distinct poses are supported by 16 and 15 query segments",
+        Pose(), 0, 0.0, 0, [], TIMINGS, refusal=p.RefusalCode.AMBIGUOUS),
     "error.bin": p.Error(ErrorCode.NON_FINITE, "NaN or Inf value"),
 }
 
@@ -188,7 +193,7 @@ class MalformedFrames(unittest.TestCase):
         struct.pack_into("<d", f, H + 124, math.inf)
         self.assertEqual(status_of(f), DecodeStatus.NON_FINITE, "radius")
         f = localize_frame()
-        struct.pack_into("<I", f, H + 8, 1 << 3)
+        struct.pack_into("<I", f, H + 8, 1 << 4)  # the first bit revision 5 does not define
         self.assertEqual(status_of(f), DecodeStatus.BAD_FIELD, "unknown flag bit")
         f = localize_frame(prior_heading_tolerance_deg=-1.0, flags=p.FLAG_PRIOR_HEADING)
         self.assertEqual(status_of(f), DecodeStatus.BAD_FIELD, "negative heading tolerance")
@@ -206,11 +211,18 @@ class MalformedFrames(unittest.TestCase):
     def test_reply_fields(self):
         base = bytearray(stored("localize_reply_localized.bin"))
         for offset, fmt, value, status in ((H + 8, "<H", 3, DecodeStatus.BAD_FIELD),  # unknown status
-                                           (H + 10, "<H", 1, DecodeStatus.BAD_FIELD),  # reserved
                                            (H + 76, "<f", math.nan, DecodeStatus.NON_FINITE)):  # confidence: after id, status, reason "", pose, inliers
             f = bytearray(base)
             struct.pack_into(fmt, f, offset, value)
             self.assertEqual(status_of(f), status)
+        # Revision 5: the former reserved field is the refusal code; every value decodes, a
+        # later revision's code included.
+        for code, name in ((6, "AMBIGUOUS"), (4, "OUTSIDE_PRIOR"), (999, "UNKNOWN")):
+            f = bytearray(base)
+            struct.pack_into("<H", f, H + 10, code)
+            reply = p.decode_frame(bytes(f))
+            self.assertEqual((reply.refusal, reply.refusal_name), (code, name))
+            self.assertEqual(p.encode(reply), bytes(f), "re-encoded byte for byte")
         info = bytearray(stored("info_reply.bin"))
         struct.pack_into("<H", info, H + 2, 1)
         self.assertEqual(status_of(info), DecodeStatus.BAD_FIELD, "INFO_REPLY reserved")

@@ -80,7 +80,12 @@ TEST(ServerLocalization, PosePriorIsEnforced) {
     with_prior.prior_radius_m = 0.0;
     const api::LocalizeReply reject_only = c.localize(with_prior);
     EXPECT_EQ(reject_only.status, api::LocalizeStatus::kOutsidePrior);
-    EXPECT_NE(reject_only.reason.find("prior"), std::string::npos) << reject_only.reason;
+    EXPECT_EQ(reject_only.refusal, api::RefusalCode::kNone) << "not asked for (revision 5, rule 2)";
+    EXPECT_FALSE(reject_only.reason.empty());
+    with_prior.flags |= api::kFlagRefusalCode;
+    const api::LocalizeReply coded = c.localize(with_prior);
+    EXPECT_EQ(coded.status, api::LocalizeStatus::kOutsidePrior);
+    EXPECT_EQ(coded.refusal, api::RefusalCode::kOutsidePrior) << coded.reason;
     EXPECT_LT((reject_only.T_map_local.translation() - free.T_map_local.translation()).norm(), 0.2);
     return;
   }
@@ -98,4 +103,9 @@ TEST(ServerLocalization, OnlyPointsInTheLocalCylinderAreUsed) {
   const api::LocalizeReply r = c.localize(far);
   EXPECT_EQ(r.status, api::LocalizeStatus::kNotLocalized);
   EXPECT_FALSE(r.reason.empty());
+  EXPECT_EQ(r.refusal, api::RefusalCode::kNone) << "not asked for";
+  far.flags |= api::kFlagRefusalCode;
+  const api::LocalizeReply coded = c.localize(far);
+  EXPECT_EQ(coded.refusal, api::RefusalCode::kTooFewSegments) << coded.reason;
+  EXPECT_EQ(coded.reason, r.reason) << "the words stay";
 }

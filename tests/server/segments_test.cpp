@@ -97,6 +97,23 @@ TEST(ServerSegments, SegmentsOverTheWireGetTheCloudPathsStatusAndPose) {
   EXPECT_EQ(s.server->counters().errors, 0u);
 }
 
+// Revision 5: LOCALIZE_SEGMENTS bit 2 asks for the reply's refusal code.
+TEST(ServerSegments, TheRefusalCodeComesWhenAskedFor) {
+  const TestWorld& w = test_world();
+  RunningServer s;
+  api::Client c = s.client();
+  const vehicle::SegmentQuery v = vehicle::SegmentQuery::from_info(c.info());
+  api::LocalizeSegmentsRequest none = v.make_request(w.queries.front().request);
+  none.segments.clear();  // nothing to match
+  const api::LocalizeReply plain = c.localize_segments(none);
+  EXPECT_EQ(plain.status, api::LocalizeStatus::kNotLocalized);
+  EXPECT_EQ(plain.refusal, api::RefusalCode::kNone) << "not asked for";
+  none.flags |= api::kSegmentsFlagRefusalCode;
+  const api::LocalizeReply coded = c.localize_segments(none);
+  EXPECT_EQ(coded.status, api::LocalizeStatus::kNotLocalized);
+  EXPECT_EQ(coded.refusal, api::RefusalCode::kTooFewSegments) << coded.reason;
+}
+
 TEST(ServerSegments, WrongDigestIsRefusedByNameAndServingGoesOn) {
   RunningServer s;
   api::Client c = s.client();

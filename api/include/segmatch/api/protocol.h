@@ -23,7 +23,7 @@ constexpr std::array<uint8_t, 4> kMagic = {'S', 'G', 'M', 'Q'};
 constexpr uint16_t kProtocolVersion = 1;
 // The protocol document's revision (docs/protocol.md, History): messages, flag bits and error
 // codes added compatibly since version 1. The frame header still says kProtocolVersion.
-constexpr int kProtocolRevision = 4;
+constexpr int kProtocolRevision = 5;
 constexpr size_t kHeaderBytes = 12;
 
 enum class MessageType : uint16_t {
@@ -125,7 +125,10 @@ constexpr uint32_t kFlagHasPrior = 1u << 0;
 constexpr uint32_t kFlagVoxelized = 1u << 1;
 // Revision 2 (docs/protocol.md 8): the prior's heading tolerance follows the points.
 constexpr uint32_t kFlagPriorHeading = 1u << 2;
-constexpr uint32_t kKnownFlags = kFlagHasPrior | kFlagVoxelized | kFlagPriorHeading;
+// Revision 5: the reply carries a RefusalCode (docs/protocol.md 6.4). A server of revision 4
+// or older answers MALFORMED to it.
+constexpr uint32_t kFlagRefusalCode = 1u << 3;
+constexpr uint32_t kKnownFlags = kFlagHasPrior | kFlagVoxelized | kFlagPriorHeading | kFlagRefusalCode;
 
 struct LocalizeRequest {
   uint64_t request_id = 0;
@@ -152,7 +155,8 @@ struct LocalizeRequest {
 // the segment's reach: 0.07 mm on a car, 1 mm on a facade 32 m long).
 constexpr uint32_t kSegmentsFlagHasPrior = 1u << 0;  // as LOCALIZE bit 0 (heading tolerance always sent)
 constexpr uint32_t kSegmentsFlagEsf = 1u << 1;       // every segment carries its ESF histogram
-constexpr uint32_t kKnownSegmentsFlags = kSegmentsFlagHasPrior | kSegmentsFlagEsf;
+constexpr uint32_t kSegmentsFlagRefusalCode = 1u << 2;  // revision 5, as LOCALIZE bit 3
+constexpr uint32_t kKnownSegmentsFlags = kSegmentsFlagHasPrior | kSegmentsFlagEsf | kSegmentsFlagRefusalCode;
 constexpr int kPointStepExponentMin = -16;  // finest point step 2^-16 m (15 um)
 constexpr int kPointStepExponentMax = 10;
 constexpr int kEsfExponentMin = -64;
@@ -184,6 +188,22 @@ constexpr size_t kBytesPerSegmentPoint = 6;
 enum class LocalizeStatus : uint16_t { kLocalized = 0, kNotLocalized = 1, kOutsidePrior = 2 };
 const char* to_string(LocalizeStatus status);
 
+// Why not localized, on the wire (revision 5, docs/protocol.md 6.4). Sent only to a request
+// that sets its refusal-code bit; kNone otherwise. A decoded reply may hold a value this build
+// does not name (a later revision's): to_string gives "UNKNOWN".
+enum class RefusalCode : uint16_t {
+  kNone = 0,
+  kEmptyMap = 1,
+  kTooFewSegments = 2,
+  kNoConsistentMatches = 3,
+  kOutsidePrior = 4,
+  kLowSupport = 5,
+  kAmbiguous = 6,
+  kSurfacesDisagree = 7,
+  kLowConfidence = 8,
+};
+const char* to_string(RefusalCode code);
+
 struct ModuleTimingsMs {
   float voxel = 0, ground = 0, segment = 0, describe = 0, retrieve = 0, classify = 0, verify = 0,
         refine = 0, total = 0, server_total = 0;  // server_total: receipt to reply, crop included
@@ -193,6 +213,7 @@ constexpr size_t kTimingCount = 10;
 struct LocalizeReply {
   uint64_t request_id = 0;
   LocalizeStatus status = LocalizeStatus::kNotLocalized;
+  RefusalCode refusal = RefusalCode::kNone;  // with the request's refusal-code bit (revision 5)
   std::string reason;                    // empty when localized
   Pose3d T_map_local = Pose3d::Identity();  // on the wire: quaternion w x y z + translation
   uint32_t inliers = 0;
