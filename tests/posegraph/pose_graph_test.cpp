@@ -18,20 +18,7 @@ namespace {
 
 Pose3d pose(double x, double y, double z, double yaw_deg) { return test::pose_at(x, y, z, yaw_deg); }
 
-// Around a 100 m x 60 m block twice (1 m steps, turning at the corners): 640 poses.
-Poses block_loop() {
-  Poses out;
-  Pose3d T = Pose3d::Identity();
-  for (int lap = 0; lap < 2; ++lap)
-    for (double side : {100.0, 60.0, 100.0, 60.0}) {
-      for (int k = 0; k < static_cast<int>(side); ++k) {
-        out.push_back(T);
-        T = T * pose(1.0, 0, 0, 0);
-      }
-      T = T * pose(0, 0, 0, 90);
-    }
-  return out;
-}
+using test::block_loop;
 
 // The odometry of the loop test (tests/loop/loop_closure_test.cpp): 0.2 deg per 100 m too
 // much yaw and 2 mm climb per metre; every step 0.3 % too long with scale_error. Loops back

@@ -92,20 +92,7 @@ TEST(ScanMatchConfig, RejectsBadValues) {
   EXPECT_THROW(g.validate(), std::invalid_argument);
 }
 
-// Twice around a 100 m x 60 m block in 1 m steps.
-Poses block_loop() {
-  Poses out;
-  Pose3d T = Pose3d::Identity();
-  for (int lap = 0; lap < 2; ++lap)
-    for (double side : {100.0, 60.0, 100.0, 60.0}) {
-      for (int k = 0; k < static_cast<int>(side); ++k) {
-        out.push_back(T);
-        T = T * pose(1.0, 0, 0, 0);
-      }
-      T = T * pose(0, 0, 0, 90);
-    }
-  return out;
-}
+using test::block_loop;
 
 struct ScaleCase {
   Poses truth = block_loop(), odom;
