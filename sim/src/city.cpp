@@ -22,13 +22,13 @@ Segments segments_along(const World& world, const Traversal& traversal, const Li
   const RayCaster caster(world.scene());
   SegmentMap map(config.segment_map);
   Segments all;
-  for_each_local_cloud(caster, model, traversal, config.local_cloud, config.schedule,
-                       [&](const SimulatedLocalCloud& lc) {
-                         Segments s = extract_segments(lc.cloud, lc.T_world_sensor.translation().cast<float>(),
-                                                       config.segmentation, &lc.labels);
-                         if (config.merge) map.add(std::move(s));
-                         else std::move(s.begin(), s.end(), std::back_inserter(all));
-                       });
+  for_each_voxelized_cloud(caster, model, traversal, config.local_cloud, config.segmentation.voxel, config.schedule,
+                           [&](const SimulatedLocalCloud& lc) {
+                             Segments s = extract_segments_from_voxels(
+                                 lc.cloud, lc.T_world_sensor.translation().cast<float>(), config.segmentation, &lc.labels);
+                             if (config.merge) map.add(std::move(s));
+                             else std::move(s.begin(), s.end(), std::back_inserter(all));
+                           });
   return config.merge ? map.segments() : all;
 }
 

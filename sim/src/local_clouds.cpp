@@ -1,5 +1,7 @@
 #include "segmatch/sim/local_clouds.h"
 
+#include "segmatch/core/voxel_accumulator.h"
+
 #include <algorithm>
 #include <atomic>
 #include <thread>
@@ -49,10 +51,14 @@ void for_each_kept_scan(const RayCaster& caster, const LidarModel& model, const 
   }
 }
 
-void for_each_local_cloud(const RayCaster& caster, const LidarModel& model, const Traversal& traversal,
-                          const LocalCloudConfig& local_config, const LocalCloudSchedule& schedule,
-                          const std::function<void(const SimulatedLocalCloud&)>& visit) {
-  LocalCloud local(local_config);
+namespace {
+
+// The schedule of for_each_local_cloud over any accumulator with LocalCloud's add_scan/crop.
+template <class Accumulator>
+void visit_local_clouds(Accumulator& local, const RayCaster& caster, const LidarModel& model,
+                        const Traversal& traversal, const LocalCloudConfig& local_config,
+                        const LocalCloudSchedule& schedule,
+                        const std::function<void(const SimulatedLocalCloud&)>& visit) {
   double next_cloud_at = traversal.odometer_m[schedule.first_frame] + schedule.warmup_m;
   for_each_kept_scan(caster, model, traversal, local_config, schedule, [&](size_t f, const SimulatedScan& scan) {
     local.add_scan(scan.points, traversal.T_world_lidar[f], &scan.labels);
@@ -64,6 +70,23 @@ void for_each_local_cloud(const RayCaster& caster, const LidarModel& model, cons
     out.cloud = local.crop(out.T_world_sensor, &out.labels);
     visit(out);
   });
+}
+
+}  // namespace
+
+void for_each_local_cloud(const RayCaster& caster, const LidarModel& model, const Traversal& traversal,
+                          const LocalCloudConfig& local_config, const LocalCloudSchedule& schedule,
+                          const std::function<void(const SimulatedLocalCloud&)>& visit) {
+  LocalCloud local(local_config);
+  visit_local_clouds(local, caster, model, traversal, local_config, schedule, visit);
+}
+
+void for_each_voxelized_cloud(const RayCaster& caster, const LidarModel& model, const Traversal& traversal,
+                              const LocalCloudConfig& local_config, const VoxelGridConfig& voxel,
+                              const LocalCloudSchedule& schedule,
+                              const std::function<void(const SimulatedLocalCloud&)>& visit) {
+  VoxelAccumulator local(local_config, voxel);
+  visit_local_clouds(local, caster, model, traversal, local_config, schedule, visit);
 }
 
 }  // namespace segmatch::sim

@@ -4,15 +4,13 @@
 #include "segmatch/core/localizer.h"
 #include "segmatch/core/segment_map.h"
 #include "segmatch/core/training.h"
-#include "segmatch/sim/dataset.h"
-#include "segmatch/sim/local_clouds.h"
+#include "segmatch/sim/city.h"
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <iterator>
 #include <memory>
 
 using namespace segmatch;
@@ -20,57 +18,28 @@ using namespace segmatch::sim;
 
 namespace {
 
-struct City {
-  World world, changed;
-  Traversal first, second;
-};
-
-City make_city(uint64_t seed) {
-  const DatasetConfig c = dataset_preset("tiny", seed);
-  City city{generate_world(c.world), {}, {}, {}};
-  city.changed = change_world(city.world, c.change);
-  Rng rng(mix_seed(seed, 0x7a5e));
-  const Route first = plan_route(city.world.streets, c.first_length_m, rng);
-  const Route second = plan_revisit_route(city.world.streets, first, c.second_length_m, rng);
-  city.first = drive(city.world, first, c.drive_first);
-  city.second = drive(city.changed, second, c.drive_second);
-  return city;
-}
-
-
-// Segments of local clouds every `every_m` along a traversal, in the world frame, labelled;
-// with `merge`, views of one object are merged as in a map.
-Segments segments_along(const World& world, const Traversal& t, double every_m, const SegmentationConfig& config,
-                        uint64_t seed, bool merge = true) {
-  const RayCaster caster(world.scene());
-  SegmentMap map;
-  Segments all;
-  LocalCloudSchedule schedule;
-  schedule.every_m = every_m;
-  schedule.seed = seed;
-  for_each_local_cloud(caster, hdl64e(), t, LocalCloudConfig{}, schedule, [&](const SimulatedLocalCloud& lc) {
-    Segments s = extract_segments(lc.cloud, lc.T_world_sensor.translation().cast<float>(), config, &lc.labels);
-    if (merge) map.add(std::move(s));
-    else std::move(s.begin(), s.end(), std::back_inserter(all));
-  });
-  return merge ? map.segments() : all;
+// Segments of the voxelized local clouds (as the map builder keeps them) every `every_m` along
+// a traversal, in the world frame, labelled; views of one object merged as in a map.
+Segments map_along(const World& world, const Traversal& t, double every_m, const SegmentationConfig& config,
+                   uint64_t seed) {
+  SegmentsAlongConfig along;
+  along.schedule.every_m = every_m;
+  along.schedule.seed = seed;
+  along.segmentation = config;
+  return segments_along(world, t, hdl64e(), along);
 }
 
 // The classifier learns from other cities than the one it is tested on, as a user's model
 // trained on one recording must work on another.
 std::shared_ptr<RandomForestMatcher> train_on(const std::vector<uint64_t>& seeds, const LocalizerConfig& config) {
-  std::vector<Segments> targets, queries;
+  std::vector<std::unique_ptr<LabelledCity>> cities;  // the pairs point into these
   std::vector<std::pair<const Segment*, const Segment*>> pairs;
   std::vector<bool> same_object;
-  targets.reserve(seeds.size());  // pairs point into these: no reallocation
-  queries.reserve(seeds.size());
+  SegmentsAlongConfig along;
+  along.segmentation = config.segmentation;
   for (uint64_t seed : seeds) {
-    const City city = make_city(seed);
-    targets.push_back(segments_along(city.world, city.first, 5.0, config.segmentation, 11));
-    queries.push_back(segments_along(city.changed, city.second, 10.0, config.segmentation, 12, false));
-    FeatureIndex index;
-    index.build(targets.back());
-    const TrainingPairs p = label_pairs_by_instance(queries.back(), targets.back(), index, TrainingPairConfig{});
+    cities.push_back(labelled_city(dataset_preset("tiny", seed), hdl64e(), along, TrainingPairConfig{}));
+    const TrainingPairs& p = cities.back()->pairs;
     pairs.insert(pairs.end(), p.pairs.begin(), p.pairs.end());
     same_object.insert(same_object.end(), p.same_object.begin(), p.same_object.end());
   }
@@ -86,8 +55,9 @@ struct Outcome {
   std::vector<double> errors_m, errors_deg;
 };
 
-// Queries the map with local clouds along a traversal, expressed in the vehicle's odometry
-// frame (its first pose), and scores them against the ground truth.
+// Queries the map with voxelized local clouds along a traversal (a vehicle's VoxelAccumulator,
+// CloudKind::kVoxelized), expressed in the vehicle's odometry frame (its first pose), and
+// scores them against the ground truth.
 Outcome query_along(const Localizer& localizer, const World& world, const Traversal& t, uint64_t seed) {
   const RayCaster caster(world.scene());
   const Pose3d T_query_world = t.T_world_lidar.front().inverse();
@@ -95,14 +65,16 @@ Outcome query_along(const Localizer& localizer, const World& world, const Traver
   LocalCloudSchedule schedule;
   schedule.every_m = 10.0;
   schedule.seed = seed;
-  for_each_local_cloud(caster, hdl64e(), t, LocalCloudConfig{}, schedule, [&](const SimulatedLocalCloud& lc) {
+  for_each_voxelized_cloud(caster, hdl64e(), t, LocalCloudConfig{}, localizer.config().segmentation.voxel, schedule,
+                           [&](const SimulatedLocalCloud& lc) {
     PointCloud cloud = lc.cloud;
     for (Point& p : cloud) {
       const Eigen::Vector3f q = T_query_world.cast<float>() * p.xyz();
       p.x = q.x(), p.y = q.y(), p.z = q.z();
     }
     const Pose3d T_query_sensor = T_query_world * lc.T_world_sensor;
-    const LocalizationResult r = localizer.localize(cloud, T_query_sensor.translation().cast<float>());
+    const LocalizationResult r =
+        localizer.localize(cloud, T_query_sensor.translation().cast<float>(), CloudKind::kVoxelized);
     ++o.queries;
     std::printf("[e2e]   frame %4zu: %3zu segments, %5zu candidates, %4zu matches, %2zu inliers, support %2zu/%2zu: %s %s\n",
                 lc.frame, r.query_segments, r.candidates, r.matches, r.inliers.size(), r.support, r.runner_up_support,
@@ -124,11 +96,11 @@ Outcome query_along(const Localizer& localizer, const World& world, const Traver
 class EndToEnd : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    city_ = std::make_unique<City>(make_city(3));
+    city_ = std::make_unique<City>(make_city(dataset_preset("tiny", 3)));
     classifier_ = train_on({101, 102, 103}, config_);
-    other_city_ = std::make_unique<City>(make_city(104));
+    other_city_ = std::make_unique<City>(make_city(dataset_preset("tiny", 104)));
     localizer_ = std::make_unique<Localizer>(
-        config_, segments_along(city_->world, city_->first, 5.0, config_.segmentation, 21), classifier_);
+        config_, map_along(city_->world, city_->first, 5.0, config_.segmentation, 21), classifier_);
     std::printf("[e2e] map: %zu segments\n", localizer_->targets().size());
   }
   static void TearDownTestSuite() {

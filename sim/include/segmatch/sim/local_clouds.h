@@ -3,6 +3,7 @@
 #pragma once
 
 #include "segmatch/core/local_cloud.h"
+#include "segmatch/core/preprocess.h"
 #include "segmatch/sim/lidar.h"
 #include "segmatch/sim/traversal.h"
 
@@ -13,8 +14,8 @@ namespace segmatch::sim {
 struct SimulatedLocalCloud {
   size_t frame = 0;                 // traversal scan index at which the cloud was taken
   Pose3d T_world_sensor;            // sensor pose at that scan
-  PointCloud cloud;                 // world frame
-  std::vector<uint32_t> labels;     // per point, SemanticKITTI
+  PointCloud cloud;                 // world frame (voxels for for_each_voxelized_cloud)
+  std::vector<uint32_t> labels;     // per point (voxel), SemanticKITTI
 };
 
 struct LocalCloudSchedule {
@@ -37,5 +38,16 @@ void for_each_kept_scan(const RayCaster& caster, const LidarModel& model, const 
 void for_each_local_cloud(const RayCaster& caster, const LidarModel& model, const Traversal& traversal,
                           const LocalCloudConfig& local_config, const LocalCloudSchedule& schedule,
                           const std::function<void(const SimulatedLocalCloud&)>& visit);
+
+// The same with the local cloud kept voxelized as the map builder and a vehicle keep it
+// (VoxelAccumulator): `cloud` is voxel_filter(crop) with `voxel` and `labels` each voxel's
+// majority label, for extract_segments_from_voxels or CloudKind::kVoxelized. Equal to
+// voxel_filter of for_each_local_cloud's clouds up to the rounding of the centroid sums, and
+// it does not crop and voxelize millions of points at every cloud (the end-to-end tests' time
+// went mostly there).
+void for_each_voxelized_cloud(const RayCaster& caster, const LidarModel& model, const Traversal& traversal,
+                              const LocalCloudConfig& local_config, const VoxelGridConfig& voxel,
+                              const LocalCloudSchedule& schedule,
+                              const std::function<void(const SimulatedLocalCloud&)>& visit);
 
 }  // namespace segmatch::sim
