@@ -66,5 +66,6 @@ include(CPack)
 # The installed product as a user gets it: install, a consumer project, the two packages.
 if(SEGMATCH_BUILD_TESTS)
   add_test(NAME InstallAndPackage COMMAND bash ${PROJECT_SOURCE_DIR}/tests/install/run.sh ${PROJECT_BINARY_DIR} ${PROJECT_SOURCE_DIR})
-  set_tests_properties(InstallAndPackage PROPERTIES LABELS install TIMEOUT 900)
+  # Slow (~17 s): labelled and costed like the slow entries of tests/CMakeLists.txt.
+  set_tests_properties(InstallAndPackage PROPERTIES LABELS "install;slow" COST 17 TIMEOUT 900)
 endif()

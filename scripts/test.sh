@@ -11,8 +11,9 @@ jobs="$(nproc 2>/dev/null || echo 2)"
 if [ "${1:-}" = "--sanitize" ]; then
   shift
   bash "$root/scripts/configure-sanitize.sh"
-  # segmatch-server too: a server test runs it as its own process (SIGHUP reload).
-  targets=(test_core test_io test_api test_storage test_server segmatch-server)
+  # segmatch-server too: a server test runs it as its own process (SIGHUP reload); make_server_world
+  # builds the server suites' shared world.
+  targets=(test_core test_io test_api test_storage test_server make_server_world segmatch-server)
   cmake --build "$root/build-sanitize" -j "$jobs" $(printf -- '--target %s ' "${targets[@]}")
   cd "$root/build-sanitize"
   # Only the suites built above: the others' whole-suite entries and *_NOT_BUILT placeholders

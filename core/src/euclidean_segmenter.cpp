@@ -97,33 +97,6 @@ struct Cells {
   int64_t x_extent = 1, y_extent = 1;
 };
 
-// Stable LSD sort of (key << 32 | index) words by key. All digit histograms come from one
-// read, and digits of up to 13 bits make a 60 m cloud at 0.2 m (25-bit keys) two passes
-// where radix_sort() takes three.
-void sort_packed(std::vector<uint64_t>* words, int key_bits) {
-  if (key_bits == 0) return;
-  const int passes = (key_bits + 12) / 13, digit = (key_bits + passes - 1) / passes;
-  const uint64_t mask = (uint64_t{1} << digit) - 1;
-  std::vector<uint32_t> count(static_cast<size_t>(passes) << digit, 0);
-  for (uint64_t w : *words) {
-    for (int p = 0; p < passes; ++p) {
-      ++count[(static_cast<size_t>(p) << digit) + ((w >> (32 + p * digit)) & mask)];
-    }
-  }
-  std::vector<uint64_t> tmp(words->size());
-  for (int p = 0; p < passes; ++p) {
-    uint32_t* c = &count[static_cast<size_t>(p) << digit];
-    uint32_t sum = 0;
-    for (uint64_t b = 0; b <= mask; ++b) {
-      const uint32_t n = c[b];
-      c[b] = sum;
-      sum += n;
-    }
-    for (uint64_t w : *words) tmp[c[(w >> (32 + p * digit)) & mask]++] = w;
-    words->swap(tmp);
-  }
-}
-
 // Cell keys of the finite points, sorted, with the points' input indices alongside.
 void sorted_keys(const PointCloud& cloud, const GridFrame& f, std::vector<uint64_t>* keys,
                  std::vector<uint32_t>* order) {
@@ -142,7 +115,7 @@ void sorted_keys(const PointCloud& cloud, const GridFrame& f, std::vector<uint64
     radix_sort(*keys, *order, f.total_bits);
     return;
   }
-  sort_packed(keys, f.total_bits);
+  sort_packed(*keys, f.total_bits);
   for (size_t s = 0; s < n; ++s) {
     (*order)[s] = static_cast<uint32_t>((*keys)[s]);
     (*keys)[s] >>= 32;

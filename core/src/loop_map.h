@@ -5,12 +5,12 @@
 // revisit with drifted odometry never fuses with, or refreshes, the view it should match.
 #pragma once
 
+#include "segmatch/core/centroid_grid.h"
 #include "segmatch/core/segment.h"
 #include "segmatch/core/segment_map.h"
 
 #include <cstddef>
 #include <cstdint>
-#include <unordered_map>
 #include <vector>
 
 namespace segmatch {
@@ -53,7 +53,6 @@ class LoopSegmentMap {
   size_t size() const { return segments_.size(); }
 
  private:
-  uint64_t cell_of(const Eigen::Vector3f& p) const;
   int find_recent_duplicate(const Eigen::Vector3f& centroid, const Sighting& now) const;
   void refile(int index, const Eigen::Vector3f& old_centroid);
 
@@ -62,7 +61,7 @@ class LoopSegmentMap {
   Segments segments_;
   std::vector<Sighting> sightings_;               // parallel to segments_
   std::vector<size_t> view_frames_;               // parallel to segments_
-  std::unordered_multimap<uint64_t, int> grid_;  // centroid cell -> segment index
+  CentroidGrid grid_;                             // segment centroids -> indices
   uint64_t next_id_ = 0;
 };
 

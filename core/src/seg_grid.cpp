@@ -36,22 +36,45 @@ void radix_pass(const std::vector<uint64_t>& keys, std::vector<uint64_t>& out, i
 
 }  // namespace
 
+void sort_packed(std::vector<uint64_t>& words, int key_bits) {
+  if (key_bits == 0) return;
+  // All digit histograms come from one read; digits of up to 13 bits make a 25-bit key (a 60 m
+  // cloud at 0.2 m) two passes.
+  const int passes = (key_bits + 12) / 13, digit = (key_bits + passes - 1) / passes;
+  const uint64_t mask = (uint64_t{1} << digit) - 1;
+  std::vector<uint32_t> count(static_cast<size_t>(passes) << digit, 0);
+  for (uint64_t w : words) {
+    for (int p = 0; p < passes; ++p) {
+      ++count[(static_cast<size_t>(p) << digit) + ((w >> (32 + p * digit)) & mask)];
+    }
+  }
+  std::vector<uint64_t> tmp(words.size());
+  for (int p = 0; p < passes; ++p) {
+    uint32_t* c = &count[static_cast<size_t>(p) << digit];
+    uint32_t sum = 0;
+    for (uint64_t b = 0; b <= mask; ++b) {
+      const uint32_t n = c[b];
+      c[b] = sum;
+      sum += n;
+    }
+    for (uint64_t w : words) tmp[c[(w >> (32 + p * digit)) & mask]++] = w;
+    words.swap(tmp);
+  }
+}
+
 void radix_sort(std::vector<uint64_t>& keys, std::vector<uint32_t>& values, int key_bits) {
   const size_t n = keys.size();
-  std::vector<uint32_t> count(kBuckets);
-  std::vector<uint64_t> tmp(n);
   if (key_bits <= 32) {  // pack key and value into one word: half the memory traffic
     for (size_t i = 0; i < n; ++i) keys[i] = (keys[i] << 32) | values[i];
-    for (int shift = 32; shift < 32 + key_bits; shift += kDigitBits) {
-      radix_pass(keys, tmp, shift, count, [](size_t, uint32_t) {});
-      keys.swap(tmp);
-    }
+    sort_packed(keys, key_bits);
     for (size_t i = 0; i < n; ++i) {
       values[i] = static_cast<uint32_t>(keys[i]);
       keys[i] >>= 32;
     }
     return;
   }
+  std::vector<uint32_t> count(kBuckets);
+  std::vector<uint64_t> tmp(n);
   std::vector<uint32_t> values_tmp(n);
   for (int shift = 0; shift < key_bits; shift += kDigitBits) {
     radix_pass(keys, tmp, shift, count,
@@ -85,35 +108,6 @@ std::vector<uint32_t> neighbour_table(const CellGrid& grid) {
     }
   }
   return table;
-}
-
-void FlatHashMap::reserve(size_t expected_size) {
-  size_t capacity = 16;
-  while (capacity < 2 * expected_size) capacity <<= 1;
-  keys_.assign(capacity, 0);
-  values_.assign(capacity, kMissing);
-  mask_ = capacity - 1;
-  size_ = 0;
-}
-
-uint32_t FlatHashMap::insert(uint64_t key, uint32_t value) {
-  if (2 * (size_ + 1) > keys_.size()) {  // grow, keep load factor <= 1/2
-    std::vector<uint64_t> old_keys = std::move(keys_);
-    std::vector<uint32_t> old_values = std::move(values_);
-    reserve(old_keys.size());
-    for (size_t i = 0; i < old_keys.size(); ++i) {
-      if (old_values[i] != kMissing) insert(old_keys[i], old_values[i]);
-    }
-  }
-  size_t slot = hash(key) & mask_;
-  while (values_[slot] != kMissing) {
-    if (keys_[slot] == key) return values_[slot];
-    slot = (slot + 1) & mask_;
-  }
-  keys_[slot] = key;
-  values_[slot] = value;
-  ++size_;
-  return value;
 }
 
 static int bits_for(int64_t extent) {

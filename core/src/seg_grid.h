@@ -1,5 +1,5 @@
 // Private helpers shared by the voxel grid, ground removal and the segmenters: integer
-// grid keys, a stable LSD radix sort of 64-bit keys, a flat open-addressing hash map and a
+// grid keys, a stable LSD radix sort of 64-bit keys, a flat hash map (open_table.h) and a
 // sparse 3D cell grid for fixed-radius neighbour queries. Nothing here allocates per point
 // beyond a few flat arrays, which is what keeps the pipeline inside its time budget.
 // Implemented in seg_grid.cpp.
@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "open_table.h"
 #include "segmatch/core/types.h"
 
 namespace segmatch {
@@ -29,51 +30,65 @@ inline int64_t fast_floor(double q) {
 
 // Three cell coordinates in one key, 21 bits each (a in the high bits), offset by 2^20 so that
 // cells -2^20 .. 2^20 - 1 keep their order; coordinates beyond wrap (callers bound them).
+constexpr int kPack21Bits = 21;
+constexpr uint64_t kPack21Mask = (uint64_t{1} << kPack21Bits) - 1;
+constexpr int64_t kPack21Half = int64_t{1} << (kPack21Bits - 1);
 inline uint64_t pack21(int64_t a, int64_t b, int64_t c) {
-  constexpr int64_t kHalf = int64_t{1} << 20;
-  constexpr uint64_t kMask = (uint64_t{1} << 21) - 1;
-  const auto u = [&](int64_t v) { return static_cast<uint64_t>(v + kHalf) & kMask; };
-  return (u(a) << 42) | (u(b) << 21) | u(c);
+  const auto u = [&](int64_t v) { return static_cast<uint64_t>(v + kPack21Half) & kPack21Mask; };
+  return (u(a) << (2 * kPack21Bits)) | (u(b) << kPack21Bits) | u(c);
 }
+// Field 0 (a), 1 (b) or 2 (c) of a pack21() key, still offset (0 .. 2^21 - 1, in cell order).
+inline uint64_t field21(uint64_t key, int field) { return (key >> (kPack21Bits * (2 - field))) & kPack21Mask; }
+// The cell coordinate pack21() stored in field 0, 1 or 2.
+inline int64_t unpack21(uint64_t key, int field) { return static_cast<int64_t>(field21(key, field)) - kPack21Half; }
+
+// Two coordinates in one key, x in the high 32 bits: for y in [0, 2^32) the keys of one x are
+// contiguous and ordered by y, and x + dx is key + (dx << 32).
+inline uint64_t pack_xy(int64_t x, int64_t y) {
+  return static_cast<uint64_t>(x) << 32 ^ static_cast<uint32_t>(y);
+}
+// The x and y of a pack_xy() key, for -2^31 <= x, y < 2^31.
+inline int64_t unpack_x(uint64_t key) { return static_cast<int64_t>(key) >> 32; }  // arithmetic shift
+inline int64_t unpack_y(uint64_t key) { return static_cast<int32_t>(static_cast<uint32_t>(key)); }
+
+// Stable LSD radix sort of (key << 32 | value) words by key, the lowest `key_bits` (<= 32) bits
+// of the high half.
+void sort_packed(std::vector<uint64_t>& words, int key_bits);
 
 // Stable LSD radix sort of `keys` (only the lowest `key_bits` bits are significant),
-// permuting `values` alongside. 11-bit digits: a 31-bit key (a 60 m local cloud at 0.1 m)
-// takes three passes.
+// permuting `values` alongside: sort_packed() for keys of up to 32 bits, 11-bit digits beyond.
 void radix_sort(std::vector<uint64_t>& keys, std::vector<uint32_t>& values, int key_bits);
 
-// Maps 64-bit keys to 32-bit values. Linear probing, power-of-two capacity, no erase.
+// Maps 64-bit keys to 32-bit values (an OpenTable of key-value slots). No erase.
 class FlatHashMap {
  public:
   static constexpr uint32_t kMissing = std::numeric_limits<uint32_t>::max();
 
-  explicit FlatHashMap(size_t expected_size = 0) { reserve(expected_size); }
-  void reserve(size_t expected_size);
-  // Inserts key -> value unless present; returns the stored value.
-  uint32_t insert(uint64_t key, uint32_t value);
-  uint32_t find(uint64_t key) const {
-    size_t slot = hash(key) & mask_;
-    while (true) {
-      const uint32_t v = values_[slot];
-      if (v == kMissing) return kMissing;
-      if (keys_[slot] == key) return v;
-      slot = (slot + 1) & mask_;
-    }
+  explicit FlatHashMap(size_t expected_size = 0) : table_(expected_size) {}
+  // Empties the map and sizes it for `expected_size` keys.
+  void reserve(size_t expected_size) { table_ = OpenTable<Entry>(expected_size); }
+  // Inserts key -> value (value != kMissing) unless present; returns the stored value.
+  uint32_t insert(uint64_t key, uint32_t value) {
+    bool claimed = false;
+    size_t s;
+    while ((s = table_.find_or_claim(key, &claimed)) == OpenTable<Entry>::kNone) table_.grow();
+    if (claimed) table_[s].value = value;
+    return table_[s].value;
   }
-  size_t size() const { return size_; }
+  uint32_t find(uint64_t key) const {
+    const size_t s = table_.find(key);
+    return s == OpenTable<Entry>::kNone ? kMissing : table_[s].value;
+  }
+  size_t size() const { return table_.used(); }
 
  private:
-  static uint64_t hash(uint64_t k) {  // MurmurHash3 fmix64: every key bit reaches the slot
-    k ^= k >> 33;
-    k *= 0xff51afd7ed558ccdull;
-    k ^= k >> 33;
-    k *= 0xc4ceb9fe1a85ec53ull;
-    k ^= k >> 33;
-    return k;
-  }
-  std::vector<uint64_t> keys_;
-  std::vector<uint32_t> values_;
-  size_t mask_ = 0;
-  size_t size_ = 0;
+  struct Entry {
+    uint64_t key;
+    uint32_t value;  // kMissing: a free slot
+    static Entry free_slot() { return {0, kMissing}; }
+    bool is_free() const { return value == kMissing; }
+  };
+  OpenTable<Entry> table_;
 };
 
 // Integer cell coordinates of points on a regular grid aligned with the world origin

@@ -5,6 +5,7 @@
 // from every seed (or max_iterations seeds), then fitted with Umeyama (rigid, no scale).
 #include "segmatch/core/verification.h"
 #include "segmatch/core/random.h"
+#include "seg_grid.h"
 
 #include <Eigen/Geometry>
 
@@ -136,13 +137,13 @@ void build_consistency(const Points& q, const Points& t, const Matches& candidat
   // with a margin for rounding; pairs farther apart in xy than that never agree.
   const double cell_m = (q_hi - q_lo).norm() + 2.0 * res + 1e-3;
   // Cell numbers offset to stay positive and clamped (a clamped cell only gets more pairs
-  // tested), packed x << 32 | y so that cells (x, y - 1 .. y + 1) are one key range.
+  // tested), packed by pack_xy() so that cells (x, y - 1 .. y + 1) are one key range.
   auto cell = [&](double v) {
     const double c = std::floor(v / cell_m);
-    return static_cast<uint64_t>(std::isfinite(c) ? std::clamp(c, -1e6, 1e6) + 1048576.0 : 1048576.0);
+    return static_cast<int64_t>(std::isfinite(c) ? std::clamp(c, -1e6, 1e6) + 1048576.0 : 1048576.0);
   };
   std::vector<uint64_t> key(n);
-  for (size_t i = 0; i < n; ++i) key[i] = cell(t[i].x() - t_mean.x()) << 32 | cell(t[i].y() - t_mean.y());
+  for (size_t i = 0; i < n; ++i) key[i] = detail::pack_xy(cell(t[i].x() - t_mean.x()), cell(t[i].y() - t_mean.y()));
   std::vector<int> order(n);  // candidates in cell order
   std::iota(order.begin(), order.end(), 0);
   std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return key[a] < key[b]; });

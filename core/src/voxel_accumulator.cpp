@@ -116,10 +116,6 @@ class TileClasses {
   std::vector<uint8_t> cls_;
 };
 
-inline uint64_t tile_key(int64_t x, int64_t y) {
-  return static_cast<uint64_t>(x) << 32 ^ static_cast<uint32_t>(y);
-}
-
 }  // namespace
 
 // The voxels are kept per tile (a small table each), so that a crop visits only the tiles near
@@ -142,7 +138,7 @@ struct VoxelAccumulator::Impl {
   // Adds (+1) or subtracts (-1) a scan's points, tile by tile.
   void sum_scan(const Scan& s, int sign) {
     for (size_t t = 0; t + 1 < s.tiles.size(); ++t) {
-      const uint64_t key = tile_key(s.tiles[t].x, s.tiles[t].y);
+      const uint64_t key = detail::pack_xy(s.tiles[t].x, s.tiles[t].y);
       const uint32_t b = s.tiles[t].begin, e = s.tiles[t + 1].begin;
       VoxelTable* table;
       if (sign > 0) {
@@ -280,7 +276,7 @@ PointCloud VoxelAccumulator::crop(const Pose3d& T_world_sensor, std::vector<uint
         if (labels_out) ring_labels.push_back(s.labels.empty() ? 0u : s.labels[i]);
       }
       if (!ring.empty())
-        sum_points(ring, ring_labels, 0, ring.size(), leaf, +1, &boundary[tile_key(s.tiles[t].x, s.tiles[t].y)]);
+        sum_points(ring, ring_labels, 0, ring.size(), leaf, +1, &boundary[detail::pack_xy(s.tiles[t].x, s.tiles[t].y)]);
     }
   }
 
@@ -288,12 +284,11 @@ PointCloud VoxelAccumulator::crop(const Pose3d& T_world_sensor, std::vector<uint
   std::vector<KeptTile>& kept = m.kept;
   kept.clear();
   for (const auto& [key, table] : m.tiles) {
-    const int64_t x = static_cast<int64_t>(key) >> 32;  // arithmetic shift undoes tile_key's
-    const int64_t y = static_cast<int32_t>(static_cast<uint32_t>(key));
+    const int64_t x = detail::unpack_x(key), y = detail::unpack_y(key);
     if (classes.at(x, y) == 1) kept.push_back({x, y, &table});
   }
   for (const auto& [key, table] : boundary)
-    kept.push_back({static_cast<int64_t>(key) >> 32, static_cast<int32_t>(static_cast<uint32_t>(key)), &table});
+    kept.push_back({detail::unpack_x(key), detail::unpack_y(key), &table});
   const int64_t centre_z = static_cast<int64_t>(std::floor(T_world_sensor.translation().z() / leaf));
   return emit_in_key_order(kept, centre_z, leaf, static_cast<uint32_t>(m.voxel.min_points_per_voxel), labels_out,
                            &m.scratch);

@@ -29,9 +29,8 @@ namespace {
 
 // Voxel coordinates relative to a reference voxel near the first finite point, 21 bits per
 // axis (+-2^20 voxels, +-104 km at 0.1 m); clouds reaching farther take the sorting path.
-constexpr int kAxisBits = 21;
-constexpr int64_t kAxisHalf = int64_t{1} << (kAxisBits - 1);
-constexpr uint64_t kAxisMask = (uint64_t{1} << kAxisBits) - 1;
+using detail::kPack21Half;
+using detail::kPack21Mask;
 constexpr uint64_t kEmpty = ~uint64_t{0};
 
 // Packs the voxel of a point, relative to `centre` (a voxel near the first finite point). The
@@ -44,10 +43,10 @@ struct VoxelKeyer {
   // False if the point is not finite or beyond the key range.
   bool key(const Point& p, uint64_t* key, float frac[3]) const {
     const float v[3] = {p.x, p.y, p.z};
-    uint64_t k = 0;
+    int64_t cell[3];
     for (int a = 0; a < 3; ++a) {
       const double d = double(v[a]) * inv - centre[a];
-      if (!(std::abs(d) < double(kAxisHalf - 2))) return false;  // also guards the cast
+      if (!(std::abs(d) < double(kPack21Half - 2))) return false;  // also guards the cast
       int64_t t = detail::fast_floor(d);
       double f = d - double(t);
       if (f < eps[a] || f > 1.0 - eps[a]) {
@@ -56,69 +55,34 @@ struct VoxelKeyer {
         f = std::min(std::max(q - c, 0.0), 0.99999994);
       }
       frac[a] = static_cast<float>(f);
-      k = (k << kAxisBits) | static_cast<uint64_t>(t + kAxisHalf);
+      cell[a] = t;
     }
-    *key = k;
+    *key = detail::pack21(cell[0], cell[1], cell[2]);
     return true;
   }
   // Coordinate of the voxel's corner (low side) on `axis`.
   double corner(uint64_t key, int axis) const {
-    const int64_t t = static_cast<int64_t>((key >> (kAxisBits * (2 - axis))) & kAxisMask);
-    return (double(t - kAxisHalf) + centre[axis]) * leaf;
+    return (double(detail::unpack21(key, axis)) + centre[axis]) * leaf;
   }
 };
 
 // One voxel, two per cache line. The sums are of offsets from the voxel's corner (< leaf),
 // where float keeps ~1e-9 m; absolute coordinates summed in float would lose millimetres.
 struct alignas(32) VoxelSlot {
-  uint64_t key;
+  uint64_t key;  // kEmpty: a free slot (pack21 keys use 63 bits)
   uint32_t n;
   float x, y, z, i;
+  static VoxelSlot free_slot() { return {kEmpty, 0, 0.f, 0.f, 0.f, 0.f}; }
+  bool is_free() const { return key == kEmpty; }
 };
+using VoxelTable = detail::OpenTable<VoxelSlot>;
 
-// Open addressing with linear probing, at most 70 % full.
-class VoxelTable {
- public:
-  explicit VoxelTable(size_t capacity) : slots_(std::max<size_t>(capacity, 64), kFree) {}
-  size_t capacity() const { return slots_.size(); }
-  const VoxelSlot& slot(size_t s) const { return slots_[s]; }
-  // Multiplicative hash, reduced to [0, capacity) by a multiply instead of a modulo.
-  size_t home(uint64_t key) const {
-    return static_cast<size_t>((((key * 0x9E3779B97F4A7C15ull) >> 32) * slots_.size()) >> 32);
-  }
-  VoxelSlot& find_or_insert(uint64_t key) {
-    size_t s = home(key);
-    while (slots_[s].key != key) {
-      if (slots_[s].key == kEmpty) {
-        slots_[s].key = key;
-        ++size_;
-        break;
-      }
-      if (++s == slots_.size()) s = 0;
-    }
-    return slots_[s];
-  }
-  size_t find(uint64_t key) const {  // the key must be present
-    size_t s = home(key);
-    while (slots_[s].key != key) s = s + 1 == slots_.size() ? 0 : s + 1;
-    return s;
-  }
-  // Room for `more` insertions without exceeding the load limit.
-  void reserve_more(size_t more) {
-    if (10 * (size_ + more) <= 7 * slots_.size()) return;
-    std::vector<VoxelSlot> old(2 * slots_.size() + more, kFree);
-    old.swap(slots_);
-    size_ = 0;
-    for (const VoxelSlot& o : old) {
-      if (o.key != kEmpty) find_or_insert(o.key) = o;
-    }
-  }
-
- private:
-  static constexpr VoxelSlot kFree = {kEmpty, 0, 0.f, 0.f, 0.f, 0.f};
-  std::vector<VoxelSlot> slots_;
-  size_t size_ = 0;
-};
+VoxelSlot& find_or_insert(VoxelTable& table, uint64_t key) {
+  bool claimed = false;
+  size_t s;
+  while ((s = table.find_or_claim(key, &claimed)) == VoxelTable::kNone) table.grow();
+  return table[s];
+}
 
 // Reference voxel for the keys; false if the first finite point is too far from the origin.
 bool make_keyer(const PointCloud& cloud, double leaf, VoxelKeyer* k) {
@@ -131,7 +95,7 @@ bool make_keyer(const PointCloud& cloud, double leaf, VoxelKeyer* k) {
     k->centre[a] = std::floor(double(v) * k->inv);
     if (!(std::abs(k->centre[a]) < 1e15)) return false;
     // Far above the few-ulp error of the product at the largest |v / leaf| in range.
-    k->eps[a] = 1e-12 * (std::abs(k->centre[a]) + double(kAxisHalf) + 1.0);
+    k->eps[a] = 1e-12 * (std::abs(k->centre[a]) + double(kPack21Half) + 1.0);
   }
   return true;
 }
@@ -144,7 +108,6 @@ bool accumulate_voxels(const PointCloud& cloud, const VoxelKeyer& keyer, VoxelTa
   float frac[kBatch][4];
   for (size_t start = 0; start < cloud.size(); start += kBatch) {
     const size_t end = std::min(cloud.size(), start + kBatch);
-    table->reserve_more(kBatch);
     size_t m = 0;
     for (size_t i = start; i < end; ++i) {
       if (!keyer.key(cloud[i], &keys[m], frac[m])) {
@@ -152,10 +115,10 @@ bool accumulate_voxels(const PointCloud& cloud, const VoxelKeyer& keyer, VoxelTa
         continue;
       }
       frac[m][3] = cloud[i].intensity;
-      __builtin_prefetch(&table->slot(table->home(keys[m++])));
+      table->prefetch(keys[m++]);
     }
     for (size_t k = 0; k < m; ++k) {
-      VoxelSlot& s = table->find_or_insert(keys[k]);
+      VoxelSlot& s = find_or_insert(*table, keys[k]);
       ++s.n;
       s.x += frac[k][0];
       s.y += frac[k][1];
@@ -169,13 +132,13 @@ bool accumulate_voxels(const PointCloud& cloud, const VoxelKeyer& keyer, VoxelTa
 // Slots of the voxels with at least min_points points, sorted by key (x, then y, then z).
 std::vector<uint32_t> occupied_in_key_order(const VoxelTable& table, int min_points) {
   std::vector<uint32_t> slots;
-  uint64_t lo[3] = {kAxisMask, kAxisMask, kAxisMask}, hi[3] = {0, 0, 0};
+  uint64_t lo[3] = {kPack21Mask, kPack21Mask, kPack21Mask}, hi[3] = {0, 0, 0};
   for (size_t s = 0; s < table.capacity(); ++s) {
-    const VoxelSlot& v = table.slot(s);
-    if (v.key == kEmpty || static_cast<int>(v.n) < min_points) continue;
+    const VoxelSlot& v = table[s];
+    if (v.is_free() || static_cast<int>(v.n) < min_points) continue;
     slots.push_back(static_cast<uint32_t>(s));
     for (int a = 0; a < 3; ++a) {
-      const uint64_t c = (v.key >> (kAxisBits * (2 - a))) & kAxisMask;
+      const uint64_t c = detail::field21(v.key, a);
       lo[a] = std::min(lo[a], c);
       hi[a] = std::max(hi[a], c);
     }
@@ -189,7 +152,7 @@ std::vector<uint32_t> occupied_in_key_order(const VoxelTable& table, int min_poi
   for (size_t k = 0; k < slots.size(); ++k) {
     uint64_t packed = 0;
     for (int a = 0; a < 3; ++a) {
-      const uint64_t c = (table.slot(slots[k]).key >> (kAxisBits * (2 - a))) & kAxisMask;
+      const uint64_t c = detail::field21(table[slots[k]].key, a);
       packed = (packed << bits[a]) | (c - lo[a]);
     }
     keys[k] = packed;
@@ -206,7 +169,7 @@ std::vector<uint32_t> voxel_labels(const PointCloud& cloud, const VoxelKeyer& ke
   std::vector<uint32_t> out_of_slot(table.capacity(), kNone), begin(slots.size() + 1, 0);
   for (size_t k = 0; k < slots.size(); ++k) {
     out_of_slot[slots[k]] = static_cast<uint32_t>(k);
-    begin[k + 1] = begin[k] + table.slot(slots[k]).n;
+    begin[k + 1] = begin[k] + table[slots[k]].n;
   }
   std::vector<uint32_t> members(begin.back()), fill(begin.begin(), begin.end() - 1);
   for (size_t i = 0; i < cloud.size(); ++i) {
@@ -264,7 +227,7 @@ PointCloud voxel_filter(const PointCloud& cloud, const VoxelGridConfig& config,
   if (cloud.empty()) return {};
   VoxelKeyer keyer;
   // A local cloud has ~16 points per voxel; the table grows if there are more voxels.
-  VoxelTable table(cloud.size() / 10 + 1);
+  VoxelTable table(cloud.size() / 20 + 1);
   if (!make_keyer(cloud, config.leaf_m, &keyer) || !accumulate_voxels(cloud, keyer, &table)) {
     return voxel_filter_sorted(cloud, config, labels, labels_out);
   }
@@ -272,7 +235,7 @@ PointCloud voxel_filter(const PointCloud& cloud, const VoxelGridConfig& config,
   PointCloud out;
   out.reserve(slots.size());
   for (uint32_t s : slots) {
-    const VoxelSlot& v = table.slot(s);
+    const VoxelSlot& v = table[s];
     const double n = v.n;
     out.push_back({float(keyer.corner(v.key, 0) + double(v.x) / n * keyer.leaf),
                    float(keyer.corner(v.key, 1) + double(v.y) / n * keyer.leaf),

@@ -5,13 +5,15 @@
 #include <cstdint>
 #include <vector>
 
+#include "seg_grid.h"
 #include "segmatch/core/types.h"
 
 namespace segmatch::voxel_table {
 
-constexpr int kAxisBits = 21;
-constexpr uint64_t kAxisMask = (uint64_t{1} << kAxisBits) - 1;
-constexpr int64_t kAxisHalf = int64_t{1} << (kAxisBits - 1);
+// z wraps to pack21()'s field width.
+constexpr int kAxisBits = detail::kPack21Bits;
+constexpr uint64_t kAxisMask = detail::kPack21Mask;
+constexpr int64_t kAxisHalf = detail::kPack21Half;
 constexpr int kTileShift = 4;  // a tile is 16 x 16 voxel columns (1.6 m at 0.1 m)
 constexpr uint32_t kNoVote = ~uint32_t{0};
 constexpr double kFracScale = 4294967296.0;  // 2^32: position inside the voxel, 32.32 fixed point
@@ -41,8 +43,10 @@ inline int64_t unwrap_z(uint32_t key, int64_t centre) {
 // A voxel's slot, in three arrays: the heads (key, count) are what a crop scans, the sums are
 // read only for the voxels it keeps, the label votes only when labels are asked for.
 struct Head {
-  uint32_t key;
+  uint32_t key;  // kEmpty: a free slot
   uint32_t n;
+  static Head free_slot() { return {kEmpty, 0}; }
+  bool is_free() const { return key == kEmpty; }
 };
 struct Sums {
   int64_t s[3];  // sums of the fixed-point positions inside the voxel
@@ -52,40 +56,26 @@ struct Vote {
   uint32_t label, count, next;
 };
 
-// Open addressing, linear probing, power-of-two capacity, 25..70 % used: it grows when a new
-// voxel would fill it beyond 70 %. A voxel whose count drops to 0 keeps its slot until the
-// next rebuild, which keeps only live voxels; compact() rebuilds once such slots outnumber
-// the live ones, so that a crop does not scan tables mostly dead.
+// The heads in an OpenTable, the sums and votes in arrays beside it. A voxel whose count drops
+// to 0 keeps its slot until the next rebuild, which keeps only live voxels; compact() rebuilds
+// once such slots outnumber the live ones, so that a crop does not scan tables mostly dead.
 class VoxelTable {
  public:
-  VoxelTable() { allocate(0); }
-  size_t capacity() const { return heads_.size(); }
+  VoxelTable() : heads_(kInitialVoxels), sums_(heads_.capacity(), Sums{}) {}
+  size_t capacity() const { return heads_.capacity(); }
   size_t live() const { return live_; }
   const Head& head(size_t s) const { return heads_[s]; }
   const Sums& sums(size_t s) const { return sums_[s]; }
-  size_t home(uint32_t key) const { return static_cast<size_t>((key * 0x9E3779B97F4A7C15ull) >> shift_); }
   void prefetch(uint32_t key) const {
-    const size_t s = home(key);
-    __builtin_prefetch(&heads_[s]);
-    __builtin_prefetch(&sums_[s]);
+    heads_.prefetch(key);
+    __builtin_prefetch(&sums_[heads_.home(key)]);
   }
 
   // Adds (sign +1) or removes (-1) one point.
   void add(uint32_t key, const int64_t f[3], float intensity, uint32_t label, int sign) {
-    size_t s = home(key);
-    while (heads_[s].key != key) {
-      if (heads_[s].key == kEmpty) {
-        if (10 * (used_ + 1) > 7 * heads_.size()) {  // full: rebuild (larger), probe again
-          rebuild(live_ + 1);
-          s = home(key);
-          continue;
-        }
-        heads_[s].key = key;
-        ++used_;
-        break;
-      }
-      s = (s + 1) & mask_;
-    }
+    bool claimed = false;
+    size_t s;
+    while ((s = heads_.find_or_claim(key, &claimed)) == detail::OpenTable<Head>::kNone) rebuild(live_ + 1);
     Head& h = heads_[s];
     Sums& v = sums_[s];
     if (sign > 0) {
@@ -102,7 +92,7 @@ class VoxelTable {
 
   // After removals: rebuilds once dead slots (count 0) outnumber the live voxels.
   void compact() {
-    if (used_ - live_ > live_ && heads_.size() > 64) rebuild(live_);
+    if (heads_.used() - live_ > live_ && heads_.capacity() > 4 * kInitialVoxels) rebuild(live_);
   }
 
   // Majority non-zero label of slot s (ties: the smaller label; 0 if none), as
@@ -121,8 +111,10 @@ class VoxelTable {
   }
 
  private:
+  static constexpr size_t kInitialVoxels = 16;
+
   void vote(size_t s, uint32_t label, int sign) {
-    if (first_vote_.empty()) first_vote_.assign(heads_.size(), kNoVote);
+    if (first_vote_.empty()) first_vote_.assign(heads_.capacity(), kNoVote);
     for (uint32_t u = first_vote_[s]; u != kNoVote; u = votes_[u].next)
       if (votes_[u].label == label) {
         votes_[u].count += sign;
@@ -132,47 +124,38 @@ class VoxelTable {
     votes_.push_back({label, 1u, first_vote_[s]});
     first_vote_[s] = static_cast<uint32_t>(votes_.size() - 1);
   }
-  void allocate(size_t expected) {
-    size_t capacity = 64;
-    while (2 * expected > capacity) capacity <<= 1;  // <= 50 % used after (re)allocation
-    heads_.assign(capacity, Head{kEmpty, 0});
-    sums_.assign(capacity, Sums{{0, 0, 0}, 0.0});
-    first_vote_.clear();
-    votes_.clear();
-    mask_ = capacity - 1;
-    shift_ = 64;
-    while ((size_t{1} << (64 - shift_)) < capacity) --shift_;
-    used_ = live_ = 0;
-  }
+  // Keeps the live voxels (and their live votes) in a table sized for `expected`.
   void rebuild(size_t expected) {
-    const std::vector<Head> old = std::move(heads_);
     const std::vector<Sums> old_sums = std::move(sums_);
     const std::vector<uint32_t> old_first = std::move(first_vote_);
     const std::vector<Vote> old_votes = std::move(votes_);
-    allocate(expected);
-    if (!old_first.empty()) first_vote_.assign(heads_.size(), kNoVote);
-    for (size_t o = 0; o < old.size(); ++o) {
-      if (old[o].key == kEmpty || old[o].n == 0) continue;
-      size_t s = home(old[o].key);
-      while (heads_[s].key != kEmpty) s = (s + 1) & mask_;
-      heads_[s] = old[o];
-      sums_[s] = old_sums[o];
-      ++used_, ++live_;
-      if (old_first.empty()) continue;
-      for (uint32_t u = old_first[o]; u != kNoVote; u = old_votes[u].next) {
-        if (old_votes[u].count == 0) continue;
-        votes_.push_back({old_votes[u].label, old_votes[u].count, first_vote_[s]});
-        first_vote_[s] = static_cast<uint32_t>(votes_.size() - 1);
-      }
-    }
+    sums_.clear();
+    first_vote_.clear();
+    votes_.clear();
+    heads_.rebuild(
+        expected, [](const Head& h) { return h.n != 0; },
+        [&](size_t o, size_t s) {
+          if (sums_.empty()) {  // the first move: the new capacity is known
+            sums_.assign(heads_.capacity(), Sums{});
+            if (!old_first.empty()) first_vote_.assign(heads_.capacity(), kNoVote);
+          }
+          sums_[s] = old_sums[o];
+          if (old_first.empty()) return;
+          for (uint32_t u = old_first[o]; u != kNoVote; u = old_votes[u].next) {
+            if (old_votes[u].count == 0) continue;
+            votes_.push_back({old_votes[u].label, old_votes[u].count, first_vote_[s]});
+            first_vote_[s] = static_cast<uint32_t>(votes_.size() - 1);
+          }
+        });
+    if (sums_.empty()) sums_.assign(heads_.capacity(), Sums{});  // nothing was live
+    live_ = heads_.used();
   }
 
-  std::vector<Head> heads_;
-  std::vector<Sums> sums_;
+  detail::OpenTable<Head> heads_;
+  std::vector<Sums> sums_;            // parallel to the heads
   std::vector<uint32_t> first_vote_;  // per slot, head of its vote list; empty until a label comes
   std::vector<Vote> votes_;
-  size_t mask_ = 0, used_ = 0, live_ = 0;
-  int shift_ = 58;
+  size_t live_ = 0;
 };
 
 // A tile of 16 x 16 voxel columns (tile coordinates = voxel column >> kTileShift) whose

@@ -173,13 +173,15 @@ int build_map(const BuildOptions& o, const volatile std::sig_atomic_t* stop_sign
   so.poses_path = o.odometry_path;
   const io::Sequence seq = io::Sequence::open(o.input, so);
   const ScanRange range = scan_range(o, seq);
+  // Read before the recording is measured (seconds): a wrong model file fails at once.
+  const std::optional<storage::ClassifierBlob> classifier =
+      o.print_config ? std::nullopt : load_classifier(o);
   const io::PipelineConfig config = load_config(o, seq, range.first, range.last, range.stride);
   MapBuilder builder(builder_config(config, o.map_every_m));
   if (o.print_config) {
     std::printf("%s\n", io::to_json(config).c_str());
     return 0;
   }
-  const std::optional<storage::ClassifierBlob> classifier = load_classifier(o);
   const std::vector<size_t> frames = frames_of(range);
   warn_far_from_origin(seq, frames);
   std::optional<LoopCorrectedPoses> corrected;

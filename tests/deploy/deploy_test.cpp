@@ -31,7 +31,7 @@ struct Answer {
 const std::vector<api::LocalizeRequest>& vehicle_requests() {
   static const std::vector<api::LocalizeRequest> requests = [] {
     std::vector<api::LocalizeRequest> out;
-    for (const Query& q : test_world().queries) {
+    for (const Query& q : test_world().queries()) {
       api::LocalizeRequest r = q.request;
       r.points = voxel_filter(r.points, test_world().config.localizer.segmentation.voxel);
       r.flags |= api::kFlagVoxelized;
@@ -163,7 +163,7 @@ TEST(Deploy, QueryLocalizeExitsByStatus) {
   const std::string token = write_token(dir + "/token", "query-token");
   Replica replica(dir, "r1");
   ASSERT_FALSE(::testing::Test::HasFatalFailure());
-  const Query& fix = test_world().queries.front();  // localized by the server tests
+  const Query& fix = test_world().queries().front();  // localized by the server tests
   io::write_kitti_bin(dir + "/fix.bin", fix.request.points);
   io::write_kitti_bin(dir + "/nothing.bin", PointCloud{Point{1.f, 2.f, 3.f, 0.f}, Point{4.f, 5.f, 6.f, 0.f}});
   const Eigen::Vector3d& s = fix.request.sensor_position_local;

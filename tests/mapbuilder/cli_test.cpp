@@ -10,6 +10,7 @@
 
 #include <gtest/gtest.h>
 
+#include "support/fixture_cache.h"
 #include "support/run_command.h"
 
 #include <fcntl.h>
@@ -71,46 +72,30 @@ std::string trained_model_bytes() {
   return rf.save();
 }
 
-// Generated once and reused by every test process (CTest runs each test in its own), under a
-// lock for parallel runs; regenerated when the tool that made it was rebuilt since.
-const fs::path kFixture = fs::path(SEGMATCH_BIN_DIR).parent_path() / "tests" / "mapbuilder-fixture";
-
-bool newer_than(const fs::path& product, const fs::path& tool) {
-  return fs::exists(product) && fs::last_write_time(product) >= fs::last_write_time(tool);
-}
-
-struct FolderLock {
-  explicit FolderLock(const fs::path& folder) : fd(open((folder / ".lock").c_str(), O_CREAT | O_RDWR, 0644)) {
-    flock(fd, LOCK_EX);
-  }
-  ~FolderLock() { flock(fd, LOCK_UN), close(fd); }
-  int fd;
-};
-
 class MapBuilderCli : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     std::random_device rd;
     dir_ = fs::temp_directory_path() / ("segmatch_mapbuilder_test_" + std::to_string(rd()));
     fs::create_directories(dir_);
-    fs::create_directories(kFixture);
-    const FolderLock lock(kFixture);
-    const fs::path stamp = kFixture / "data/.complete", log = kFixture / "built.log";
-    if (!newer_than(stamp, kBin + "/segmatch-sim")) {
-      fs::remove_all(kFixture / "data");
+    // The dataset and the map are built once for every test process (support/fixture_cache.h).
+    const fs::path data = test::cached_fixture("mapbuilder-data", {kBin + "/segmatch-sim"}, [](const fs::path& folder) {
       const Result simulated = run(kBin + "/segmatch-sim --preset tiny --seed 3 --length-00-m 100 --length-01-m 50 "
-                                   "--no-images --out " + (kFixture / "data").string());
-      ASSERT_EQ(simulated.code, 0) << simulated.output;
-      write_all(stamp, "");
-    }
-    if (!newer_than(log, kBin + "/segmatch-mapbuilder") || !newer_than(log, stamp)) {
-      fs::remove_all(kFixture / "maps");
-      fs::create_directories(kFixture / "maps");
-      write_all(kFixture / "model.yml", trained_model_bytes());
-      const Result built = run(builder() + " --classifier " + (kFixture / "model.yml").string() +
-                               " --name tiny-00 --output " + map_path().string());
-      write_all(log, std::to_string(built.code) + "\n" + built.output);
-    }
+                                   "--no-images --out " + folder.string());
+      if (simulated.code != 0) throw std::runtime_error("segmatch-sim failed: " + simulated.output);
+    });
+    sequence_ = data / "sequences/00";
+    const fs::path maps = test::cached_fixture(
+        "mapbuilder-map", {kBin + "/segmatch-mapbuilder", data / ".complete"}, [](const fs::path& folder) {
+          write_all(folder / "model.yml", trained_model_bytes());
+          fs::create_directories(folder / "map");  // the map alone, to see that no temporary file is left
+          const Result built = run(builder() + " --classifier " + (folder / "model.yml").string() +
+                                   " --name tiny-00 --output " + (folder / "map/tiny.sqlite").string());
+          write_all(folder / "built.log", std::to_string(built.code) + "\n" + built.output);
+        });
+    map_path_ = maps / "map/tiny.sqlite";
+    model_path_ = maps / "model.yml";
+    const fs::path log = maps / "built.log";
     const std::string text = read_all(log);
     built_.code = std::stoi(text.substr(0, text.find('\n')));
     built_.output = text.substr(text.find('\n') + 1);
@@ -118,8 +103,8 @@ class MapBuilderCli : public ::testing::Test {
   }
   static void TearDownTestSuite() { fs::remove_all(dir_); }
 
-  static fs::path sequence() { return kFixture / "data/sequences/00"; }
-  static fs::path map_path() { return kFixture / "maps/tiny.sqlite"; }
+  static fs::path sequence() { return sequence_; }
+  static fs::path map_path() { return map_path_; }
   static std::string builder(int last = kLast) {
     return kBin + "/segmatch-mapbuilder --input " + sequence().string() + " --last " + std::to_string(last);
   }
@@ -129,13 +114,23 @@ class MapBuilderCli : public ::testing::Test {
     return names;
   }
 
-  static fs::path dir_;
+  static fs::path dir_, sequence_, map_path_, model_path_;
   static Result built_;
 };
-fs::path MapBuilderCli::dir_;
+fs::path MapBuilderCli::dir_, MapBuilderCli::sequence_, MapBuilderCli::map_path_, MapBuilderCli::model_path_;
 Result MapBuilderCli::built_;
 
+// CTest's MapBuilderFixture entry builds the shared dataset and map first (the suite's
+// FIXTURES_SETUP), so that the other entries find them built instead of waiting on the lock.
+class MapBuilderFixture : public MapBuilderCli {};
+
 }  // namespace
+
+TEST_F(MapBuilderFixture, TheSharedDatasetAndMapAreBuilt) {
+  EXPECT_EQ(built_.code, 0) << built_.output;
+  EXPECT_TRUE(fs::exists(map_path()));
+  EXPECT_TRUE(fs::exists(sequence() / "poses.txt"));
+}
 
 TEST_F(MapBuilderCli, WritesAReadableMapWithTrajectoryClassifierAndParameters) {
   ASSERT_EQ(built_.code, 0) << built_.output;
@@ -149,7 +144,7 @@ TEST_F(MapBuilderCli, WritesAReadableMapWithTrajectoryClassifierAndParameters) {
   const auto classifier = map.classifier();
   ASSERT_TRUE(classifier.has_value());
   EXPECT_EQ(classifier->format, "opencv-rtrees-yaml");
-  EXPECT_EQ(classifier->bytes, read_all(kFixture / "model.yml"));
+  EXPECT_EQ(classifier->bytes, read_all(model_path_));
 
   // The trajectory is the sequence's poses; every segment refers to one of its keyframes.
   const io::Sequence seq = io::Sequence::open(sequence().string());

@@ -1,5 +1,7 @@
-# segmatch-mapbuilder / segmatch-mapinfo and core's MapBuilder. The CLI tests run the built tools.
-segmatch_test_suite(test_mapbuilder mapbuilder segmatch_core segmatch_io segmatch_storage segmatch_sim)
+# segmatch-mapbuilder / segmatch-mapinfo and core's MapBuilder. The CLI tests run the built tools
+# on a dataset and map built once (the MapBuilderFixture entry, their FIXTURES_SETUP).
+segmatch_test_suite(test_mapbuilder mapbuilder segmatch_core segmatch_io segmatch_storage segmatch_sim
+                    WHOLE_SUITES MapBuilderFixture FIXTURE mapbuilder_data FIXTURE_SETUP MapBuilderFixture)
 add_dependencies(test_mapbuilder segmatch-mapbuilder segmatch-mapinfo segmatch-sim)
 # The default classifier the builder looks for, to know which behaviour to expect.
 target_compile_definitions(test_mapbuilder PRIVATE

@@ -27,7 +27,7 @@ TEST(ServerLocalization, RevisitQueriesLocalizeAccuratelyAndNeverFalsely) {
   api::Client c = s.client();
   const size_t map_segments = c.info().segment_count;
   size_t localized = 0, accurate = 0, wrong = 0;
-  for (const Query& q : w.queries) {
+  for (const Query& q : w.queries()) {
     const api::LocalizeReply r = c.localize(q.request);
     EXPECT_EQ(r.request_id, q.request.request_id);
     std::printf("[server]   frame %4zu: %s, %u inliers, support %u, %.0f ms %s\n", q.frame, api::to_string(r.status),
@@ -45,13 +45,13 @@ TEST(ServerLocalization, RevisitQueriesLocalizeAccuratelyAndNeverFalsely) {
     wrong += err_m > 1.0 || err_deg > 3.0;
     std::printf("[server]   frame %4zu: error %.3f m %.2f deg, confidence %.2f\n", q.frame, err_m, err_deg, r.confidence);
   }
-  std::printf("[server] revisit: %zu queries, %zu localized, %zu within 0.2 m / 1 deg, %zu false\n", w.queries.size(),
+  std::printf("[server] revisit: %zu queries, %zu localized, %zu within 0.2 m / 1 deg, %zu false\n", w.queries().size(),
               localized, accurate, wrong);
-  ASSERT_GE(w.queries.size(), 8u);
+  ASSERT_GE(w.queries().size(), 8u);
   EXPECT_EQ(wrong, 0u);
-  EXPECT_GE(accurate * 2, w.queries.size()) << "most queries localize accurately";
+  EXPECT_GE(accurate * 2, w.queries().size()) << "most queries localize accurately";
   const server::ServerCounters counters = s.server->counters();
-  EXPECT_EQ(counters.localize_requests, w.queries.size() + 0);
+  EXPECT_EQ(counters.localize_requests, w.queries().size() + 0);
   EXPECT_EQ(counters.localized, localized);
   EXPECT_EQ(counters.errors, 0u);
 }
@@ -60,7 +60,7 @@ TEST(ServerLocalization, PosePriorIsEnforced) {
   const TestWorld& w = test_world();
   RunningServer s;
   api::Client c = s.client();
-  for (const Query& q : w.queries) {
+  for (const Query& q : w.queries()) {
     const api::LocalizeReply free = c.localize(q.request);
     if (free.status != api::LocalizeStatus::kLocalized) continue;
     api::LocalizeRequest with_prior = q.request;
@@ -98,7 +98,7 @@ TEST(ServerLocalization, OnlyPointsInTheLocalCylinderAreUsed) {
   const TestWorld& w = test_world();
   RunningServer s;
   api::Client c = s.client();
-  api::LocalizeRequest far = w.queries.front().request;
+  api::LocalizeRequest far = w.queries().front().request;
   far.sensor_position_local += Eigen::Vector3d(500, 0, 0);
   const api::LocalizeReply r = c.localize(far);
   EXPECT_EQ(r.status, api::LocalizeStatus::kNotLocalized);

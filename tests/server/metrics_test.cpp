@@ -37,7 +37,7 @@ TEST(ServerRobustness, MetricsCountTheFramesSent) {
     api::Client c = s.client();
     for (int i = 0; i < 3; ++i) c.ping(i);
     c.info();
-    EXPECT_EQ(c.localize(test_world().queries.front().request).status, api::LocalizeStatus::kLocalized);
+    EXPECT_EQ(c.localize(test_world().queries().front().request).status, api::LocalizeStatus::kLocalized);
     api::LocalizeRequest few;
     few.request_id = 2;
     few.points.push_back(Point{1.f, 1.f, 1.f, 0.f});

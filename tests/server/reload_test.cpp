@@ -78,7 +78,7 @@ TEST(ServerRobustness, ReplaceMapKeepsRequestsInFlightOnTheOldMap) {
   server::ServerConfig config;
   config.workers = 1;
   RunningServer s(config);
-  const api::LocalizeRequest query = test_world().queries.front().request;
+  const api::LocalizeRequest query = test_world().queries().front().request;
   api::Client c0 = s.client(), c1 = s.client();
   const api::LocalizeReply before = c1.localize(query);
   ASSERT_EQ(before.status, api::LocalizeStatus::kLocalized) << before.reason;
@@ -132,7 +132,7 @@ TEST(ServerRobustness, SighupReloadsTheMapFileOrKeepsTheOldOne) {
   ASSERT_EQ(::kill(pid, SIGHUP), 0);
   ASSERT_TRUE(wait_for_text(dir + "/log", "reload failed, still serving map 'reloaded': ")) << read_file(dir + "/log");
   EXPECT_EQ(client.info().map_name, "reloaded");
-  EXPECT_EQ(client.localize(test_world().queries.front().request).request_id, test_world().queries.front().request.request_id);
+  EXPECT_EQ(client.localize(test_world().queries().front().request).request_id, test_world().queries().front().request.request_id);
 
   ASSERT_EQ(::kill(pid, SIGTERM), 0);
   EXPECT_TRUE(wait_for_text(dir + "/log", "stopped: ")) << read_file(dir + "/log");

@@ -18,7 +18,7 @@ using Ms = std::chrono::milliseconds;
 namespace {
 
 api::LocalizeRequest small_request(uint64_t id) {
-  api::LocalizeRequest r = test_world().queries.front().request;
+  api::LocalizeRequest r = test_world().queries().front().request;
   r.request_id = id;
   r.points.resize(std::min<size_t>(r.points.size(), 3000));
   return r;
@@ -196,7 +196,7 @@ TEST(ServerRobustness, StopFinishesRequestsInFlight) {
   auto s = std::make_unique<RunningServer>();
   const uint16_t port = s->server->port();
   api::Client c = s->client();
-  const api::LocalizeRequest request = test_world().queries.front().request;  // a full local cloud
+  const api::LocalizeRequest request = test_world().queries().front().request;  // a full local cloud
   std::future<api::LocalizeReply> reply = std::async(std::launch::async, [&] { return c.localize(request); });
   // Wait until the server has the whole frame (a fixed sleep lost the race on a loaded machine:
   // the 2-core CI runs two tests at once), then stop while it localizes.
@@ -242,7 +242,7 @@ TEST(ServerRobustness, DamagedPointRowsFailOnlyTheQueriesThatReadThem) {
   options.reply_timeout_s = 60;
   api::Client client("127.0.0.1", server.port(), options);
   int errors = 0;
-  for (const Query& q : test_world().queries) {
+  for (const Query& q : test_world().queries()) {
     try {
       client.localize(q.request);  // refused before refinement: no point read
     } catch (const api::ClientError& e) {

@@ -40,7 +40,7 @@ void put_u32(std::vector<uint8_t>& f, size_t at, uint32_t v) {
 TEST(ServerSegments, UnthinnedSegmentsGiveTheCloudPathsAnswerExactly) {
   const server::LoadedMap& map = loaded_map();
   const vehicle::SegmentQuery v = vehicle_side();
-  for (const Query& q : test_world().queries) {
+  for (const Query& q : test_world().queries()) {
     api::LocalizeSegmentsRequest s;
     s.request_id = q.request.request_id;
     s.sensor_position_local = q.request.sensor_position_local;
@@ -65,7 +65,7 @@ TEST(ServerSegments, SegmentsOverTheWireGetTheCloudPathsStatusAndPose) {
   EXPECT_FALSE(v.sends_esf()) << "the test map matches eigen features with L2";
   size_t same_status = 0, both = 0, wrong = 0;
   std::vector<double> cloud_bytes, segment_bytes;
-  for (const Query& q : w.queries) {
+  for (const Query& q : w.queries()) {
     const api::LocalizeSegmentsRequest sr = v.make_request(q.request);
     cloud_bytes.push_back(static_cast<double>(api::encode(q.request).size()));
     segment_bytes.push_back(static_cast<double>(api::encode(sr).size()));
@@ -88,10 +88,10 @@ TEST(ServerSegments, SegmentsOverTheWireGetTheCloudPathsStatusAndPose) {
   std::sort(segment_bytes.begin(), segment_bytes.end());
   const double cloud_median = cloud_bytes[cloud_bytes.size() / 2], segments_median = segment_bytes[segment_bytes.size() / 2];
   std::printf("[segments] %zu queries: same status %zu, both localized %zu, false %zu; median request %.0f KB vs %.0f KB\n",
-              w.queries.size(), same_status, both, wrong, segments_median / 1024, cloud_median / 1024);
-  ASSERT_GE(w.queries.size(), 8u);
-  EXPECT_GE(same_status * 100, w.queries.size() * 98) << "the issue's floor: 98 % of queries";
-  EXPECT_GE(both * 2, w.queries.size());
+              w.queries().size(), same_status, both, wrong, segments_median / 1024, cloud_median / 1024);
+  ASSERT_GE(w.queries().size(), 8u);
+  EXPECT_GE(same_status * 100, w.queries().size() * 98) << "the issue's floor: 98 % of queries";
+  EXPECT_GE(both * 2, w.queries().size());
   EXPECT_EQ(wrong, 0u);
   EXPECT_LE(segments_median, 300.0 * 1024);
   EXPECT_EQ(s.server->counters().errors, 0u);
@@ -103,7 +103,7 @@ TEST(ServerSegments, TheRefusalCodeComesWhenAskedFor) {
   RunningServer s;
   api::Client c = s.client();
   const vehicle::SegmentQuery v = vehicle::SegmentQuery::from_info(c.info());
-  api::LocalizeSegmentsRequest none = v.make_request(w.queries.front().request);
+  api::LocalizeSegmentsRequest none = v.make_request(w.queries().front().request);
   none.segments.clear();  // nothing to match
   const api::LocalizeReply plain = c.localize_segments(none);
   EXPECT_EQ(plain.status, api::LocalizeStatus::kNotLocalized);
@@ -118,7 +118,7 @@ TEST(ServerSegments, WrongDigestIsRefusedByNameAndServingGoesOn) {
   RunningServer s;
   api::Client c = s.client();
   const vehicle::SegmentQuery v = vehicle::SegmentQuery::from_info(c.info());
-  api::LocalizeSegmentsRequest r = v.make_request(test_world().queries.front().request);
+  api::LocalizeSegmentsRequest r = v.make_request(test_world().queries().front().request);
   r.parameters_digest ^= 1;
   try {
     c.localize_segments(r);
@@ -138,7 +138,7 @@ TEST(ServerSegments, MalformedPayloadsGetTheirCodesAndServingGoesOn) {
   RunningServer s;
   api::Client c = s.client();
   const vehicle::SegmentQuery v = vehicle::SegmentQuery::from_info(c.info());
-  const std::vector<uint8_t> good = api::encode(v.make_request(test_world().queries.front().request));
+  const std::vector<uint8_t> good = api::encode(v.make_request(test_world().queries().front().request));
   auto answer = [&](const std::vector<uint8_t>& frame) {
     c.send_raw(frame);
     return error_code_of(c.read_frame());
@@ -160,8 +160,8 @@ TEST(ServerSegments, MalformedPayloadsGetTheirCodesAndServingGoesOn) {
   put_u32(tiny, 8, 20);
   EXPECT_EQ(answer(tiny), api::ErrorCode::kMalformed);
   EXPECT_EQ(c.ping(4), 4u);
-  EXPECT_EQ(c.localize_segments(v.make_request(test_world().queries.front().request)).request_id,
-            test_world().queries.front().request.request_id);
+  EXPECT_EQ(c.localize_segments(v.make_request(test_world().queries().front().request)).request_id,
+            test_world().queries().front().request.request_id);
   EXPECT_EQ(s.server->counters().errors, 5u);
 }
 

@@ -2,9 +2,9 @@
 // cloud that sees it; the map keeps one segment per object, the most complete view.
 #pragma once
 
+#include "segmatch/core/centroid_grid.h"
 #include "segmatch/core/segment.h"
 
-#include <unordered_map>
 #include <vector>
 
 namespace segmatch {
@@ -38,8 +38,6 @@ class SegmentMap {
   size_t size() const { return segments_.size(); }
 
  private:
-  using CellKey = uint64_t;
-  CellKey cell_of(const Eigen::Vector3f& p) const;
   int find_duplicate(const Eigen::Vector3f& centroid) const;
   // Indices of the segments other than `self` within the duplicate distance of `self`.
   std::vector<int> neighbours_of(int self) const;
@@ -47,7 +45,7 @@ class SegmentMap {
 
   SegmentMapConfig config_;
   Segments segments_;
-  std::unordered_multimap<CellKey, int> grid_;  // centroid cell -> segment index
+  CentroidGrid grid_;  // segment centroids -> indices
   uint64_t next_id_ = 0;
 };
 
