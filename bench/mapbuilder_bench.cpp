@@ -54,6 +54,42 @@ std::vector<size_t> kept_frames(const sim::Traversal& t, double route_m, double 
   return frames;
 }
 
+// The same scans through the reference (LocalCloud + voxel_filter) and the accumulator, with
+// labels, cropped at the scans where the builder segmented. Exit code 0 if they agree.
+int compare_voxels(const MapBuilderConfig& config, const sim::Traversal& t, const std::vector<size_t>& frames,
+                   const std::vector<sim::SimulatedScan>& scans) {
+  LocalCloud reference(config.local_cloud);
+  VoxelAccumulator accumulator(config.local_cloud, config.segmentation.voxel);
+  size_t clouds = 0, voxels = 0, size_mismatches = 0, label_mismatches = 0;
+  double max_diff_m = 0.0, odometer = 0.0, segmented_at = 0.0;
+  for (size_t k = 0; k < frames.size(); ++k) {
+    const Pose3d& T = t.T_world_lidar[frames[k]];
+    if (k > 0) odometer += (T.translation() - t.T_world_lidar[frames[k - 1]].translation()).norm();
+    reference.add_scan(scans[k].points, T, &scans[k].labels);
+    accumulator.add_scan(scans[k].points, T, &scans[k].labels);
+    if (odometer - segmented_at < config.map_every_m && k + 1 < frames.size()) continue;
+    segmented_at = odometer;
+    std::vector<uint32_t> cropped_labels, expected_labels, got_labels;
+    const PointCloud cropped = reference.crop(T, &cropped_labels);
+    const PointCloud expected = voxel_filter(cropped, config.segmentation.voxel, &cropped_labels, &expected_labels);
+    const PointCloud got = accumulator.crop(T, &got_labels);
+    ++clouds;
+    voxels += expected.size();
+    if (got.size() != expected.size()) {
+      ++size_mismatches;
+      continue;
+    }
+    for (size_t i = 0; i < got.size(); ++i) {
+      max_diff_m = std::max({max_diff_m, double(std::abs(got[i].x - expected[i].x)),
+                             double(std::abs(got[i].y - expected[i].y)), double(std::abs(got[i].z - expected[i].z))});
+      label_mismatches += got_labels[i] != expected_labels[i];
+    }
+  }
+  std::printf("voxel check:      %zu local clouds, %zu voxels: %zu with another voxel count, max |diff| %.2g m, "
+              "%zu labels differ\n", clouds, voxels, size_mismatches, max_diff_m, label_mismatches);
+  return size_mismatches == 0 && label_mismatches == 0 && max_diff_m < 1e-4 ? 0 : 1;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -131,36 +167,5 @@ int main(int argc, char** argv) {
   std::printf("map file:         %.2f MB, %.2f MB/km, written in %.2f s\n", mb, km > 0 ? mb / km : 0.0, write_s);
   if (!check_voxels) return 0;
 
-  // The same scans through the reference (LocalCloud + voxel_filter) and the accumulator, with
-  // labels, cropped at the scans where the builder segmented.
-  LocalCloud reference(config.local_cloud);
-  VoxelAccumulator accumulator(config.local_cloud, config.segmentation.voxel);
-  size_t clouds = 0, voxels = 0, size_mismatches = 0, label_mismatches = 0;
-  double max_diff_m = 0.0, odometer = 0.0, segmented_at = 0.0;
-  for (size_t k = 0; k < frames.size(); ++k) {
-    const Pose3d& T = t.T_world_lidar[frames[k]];
-    if (k > 0) odometer += (T.translation() - t.T_world_lidar[frames[k - 1]].translation()).norm();
-    reference.add_scan(scans[k].points, T, &scans[k].labels);
-    accumulator.add_scan(scans[k].points, T, &scans[k].labels);
-    if (odometer - segmented_at < config.map_every_m && k + 1 < frames.size()) continue;
-    segmented_at = odometer;
-    std::vector<uint32_t> cropped_labels, expected_labels, got_labels;
-    const PointCloud cropped = reference.crop(T, &cropped_labels);
-    const PointCloud expected = voxel_filter(cropped, config.segmentation.voxel, &cropped_labels, &expected_labels);
-    const PointCloud got = accumulator.crop(T, &got_labels);
-    ++clouds;
-    voxels += expected.size();
-    if (got.size() != expected.size()) {
-      ++size_mismatches;
-      continue;
-    }
-    for (size_t i = 0; i < got.size(); ++i) {
-      max_diff_m = std::max({max_diff_m, double(std::abs(got[i].x - expected[i].x)),
-                             double(std::abs(got[i].y - expected[i].y)), double(std::abs(got[i].z - expected[i].z))});
-      label_mismatches += got_labels[i] != expected_labels[i];
-    }
-  }
-  std::printf("voxel check:      %zu local clouds, %zu voxels: %zu with another voxel count, max |diff| %.2g m, "
-              "%zu labels differ\n", clouds, voxels, size_mismatches, max_diff_m, label_mismatches);
-  return size_mismatches == 0 && label_mismatches == 0 && max_diff_m < 1e-4 ? 0 : 1;
+  return compare_voxels(config, t, frames, scans);
 }

@@ -7,12 +7,14 @@
 // calling thread; the CPU column shows whether a query used more than one core.
 #include "pcl_stages.h"
 #include "query_log.h"
+#include "query_plan.h"
 #include "segmatch/cli/progress.h"
 #include "segmatch/core/localizer.h"
 #include "segmatch/core/segment_map.h"
 #include "segmatch/core/training.h"
 #include "segmatch/core/voxel_accumulator.h"
 #include "segmatch/io/sequence.h"
+#include "segmatch/sim/city.h"
 #include "segmatch/sim/dataset.h"
 #include "segmatch/sim/local_clouds.h"
 
@@ -40,13 +42,12 @@ using bench::median;
 using bench::ms_since;
 using bench::quantile;
 using bench::QueryLog;
+using bench::kQueryWarmupM;
+using bench::spread;
 
 namespace {
 
 constexpr double kTargetMs = 100.0;
-// Queries only after this much driving (the simulator's and the end-to-end test's warm-up).
-constexpr double kQueryWarmupM = 30.0;
-
 struct Options {
   std::string preset = "demo";
   uint64_t seed = 1;
@@ -64,15 +65,6 @@ double cpu_ms() {
   timespec ts{};
   clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
   return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
-
-// n indices spread evenly over 0..count-1 (all of them if count <= n).
-std::vector<size_t> spread(size_t count, size_t n) {
-  std::vector<size_t> out;
-  if (count == 0 || n == 0) return out;
-  if (count <= n) n = count;
-  for (size_t k = 0; k < n; ++k) out.push_back(n == 1 ? count / 2 : (k * (count - 1) + (n - 1) / 2) / (n - 1));
-  return out;
 }
 
 // Up to --queries of `eligible` frames spread evenly, and --pcl-clouds of those for PCL.
@@ -95,23 +87,6 @@ PointCloud transformed(PointCloud cloud, const Pose3d& T) {
 
 // ---------------------------------------------------------------------------------------------
 // Simulated city.
-
-struct City {
-  sim::World world, changed;
-  sim::Traversal first, second;
-};
-
-// The world and traversals segmatch-sim generates for the same configuration.
-City make_city(const sim::DatasetConfig& c) {
-  City city{sim::generate_world(c.world), {}, {}, {}};
-  city.changed = sim::change_world(city.world, c.change);
-  Rng rng(mix_seed(c.world.seed, 0x7a5e));
-  const sim::Route first = sim::plan_route(city.world.streets, c.first_length_m, rng);
-  const sim::Route second = sim::plan_revisit_route(city.world.streets, first, c.second_length_m, rng);
-  city.first = sim::drive(city.world, first, c.drive_first);
-  city.second = sim::drive(city.changed, second, c.drive_second);
-  return city;
-}
 
 // World-frame segments of local clouds every `every_m` along `t` (merged as a map, or all).
 Segments segments_along(const sim::World& world, const sim::Traversal& t, double every_m,
@@ -141,7 +116,7 @@ Segments segments_along(const sim::World& world, const sim::Traversal& t, double
 // Trained as the end-to-end test does, on another (tiny) city than the one queried.
 std::shared_ptr<RandomForestMatcher> train_classifier(uint64_t seed, const LocalizerConfig& config, int threads) {
   const auto start = Clock::now();
-  const City city = make_city(sim::dataset_preset("tiny", seed));
+  const sim::City city = sim::make_city(sim::dataset_preset("tiny", seed));
   const Segments targets =
       segments_along(city.world, city.first, 5.0, config.segmentation, 11, true, true, threads, "training map");
   const Segments queries =
@@ -154,27 +129,6 @@ std::shared_ptr<RandomForestMatcher> train_classifier(uint64_t seed, const Local
   std::printf("classifier: random forest trained on tiny city seed %llu: %zu positives, %zu negatives (%.1f s)\n",
               static_cast<unsigned long long>(seed), p.positives, p.negatives, ms_since(start) / 1000.0);
   return rf;
-}
-
-// Frames at which sim::for_each_local_cloud hands out a local cloud (mirrors its schedule).
-std::vector<size_t> scheduled_frames(const sim::Traversal& t, const LocalCloudConfig& lc,
-                                     const sim::LocalCloudSchedule& s) {
-  std::vector<size_t> out;
-  if (t.size() == 0) return out;
-  size_t last_kept = 0;
-  bool any = false;
-  double next = t.odometer_m[s.first_frame] + s.warmup_m;
-  for (size_t i = s.first_frame; i <= std::min(s.last_frame, t.size() - 1); ++i) {
-    if (any && (t.T_world_lidar[i].translation() - t.T_world_lidar[last_kept].translation()).norm() <
-                   lc.min_travel_between_scans_m)
-      continue;
-    any = true;
-    last_kept = i;
-    if (t.odometer_m[i] < next) continue;
-    next = t.odometer_m[i] + s.every_m;
-    out.push_back(i);
-  }
-  return out;
 }
 
 // The preset, its first traversal cut to --map-km. Throws std::invalid_argument.
@@ -192,7 +146,7 @@ double run_sim(const Options& o, double* voxelized_ms) {
   std::printf("== simulated: preset %s, seed %llu, HDL-64E, local cloud radius %.0f m\n", o.preset.c_str(),
               static_cast<unsigned long long>(o.seed), LocalCloudConfig{}.radius_m);
   auto start = Clock::now();
-  const City city = make_city(c);
+  const sim::City city = sim::make_city(c);
   std::printf("world: %.1f km of streets, %zu objects; first traversal %.2f km (map), second %.2f km (queries)\n",
               city.world.streets.total_length_m() / 1000.0, city.world.objects.size(), city.first.length_m() / 1000.0,
               city.second.length_m() / 1000.0);
@@ -206,30 +160,9 @@ double run_sim(const Options& o, double* voxelized_ms) {
   const Localizer localizer(config, std::move(map), classifier);
 
   // Queries: local clouds of the revisit (changed world, other lane) on mapped streets.
-  const std::vector<sim::RevisitMatch> revisits = sim::match_revisits(city.first, city.second);
-  std::vector<double> to_map(city.second.size(), INFINITY);
-  for (const sim::RevisitMatch& m : revisits) to_map[m.frame] = m.distance_m;
-  // One local cloud every 10 m (as the end-to-end test), closer on short revisits so that
-  // there are about 1.5 candidates per requested query.
-  double revisit_m = 0;
-  for (size_t f = 1; f < city.second.size(); ++f)
-    if (to_map[f] <= 5.0 && city.second.odometer_m[f] >= kQueryWarmupM)
-      revisit_m += city.second.odometer_m[f] - city.second.odometer_m[f - 1];
-  sim::LocalCloudSchedule schedule;
-  schedule.every_m = std::clamp(revisit_m / (1.5 * o.queries), 1.0, 10.0);
-  schedule.warmup_m = kQueryWarmupM;
-  schedule.seed = mix_seed(o.seed, 31);
-  schedule.threads = o.threads;
-  std::vector<size_t> eligible;
-  for (size_t f : scheduled_frames(city.second, LocalCloudConfig{}, schedule))
-    if (to_map[f] <= 5.0) eligible.push_back(f);
-  std::set<size_t> selected, compared;
-  pick_queries(eligible, o, &selected, &compared);
-  std::printf("queries: %zu local clouds of the second traversal within 5 m of the first (%.0f m of it), one "
-              "every %.1f m after >= %.0f m of driving (%zu candidates), in the odometry frame of its first pose\n",
-              selected.size(), revisit_m, schedule.every_m, kQueryWarmupM, eligible.size());
-  if (selected.size() < static_cast<size_t>(o.queries))
-    std::printf("note: fewer queries than the %d requested: the second traversal is too short\n", o.queries);
+  const bench::QueryPlan plan = bench::plan_queries(city, o.queries, o.skip_pcl ? 0 : o.pcl_clouds, o.seed, o.threads);
+  const std::set<size_t>& selected = plan.selected;
+  const std::set<size_t>& compared = plan.compared;
 
   QueryLog log, voxel_log;
   std::vector<double> upkeep_ms;  // per kept scan: VoxelAccumulator::add_scan + evict
@@ -243,7 +176,7 @@ double run_sim(const Options& o, double* voxelized_ms) {
   LocalCloud raw(LocalCloudConfig{});
   VoxelAccumulator voxels(LocalCloudConfig{}, config.segmentation.voxel);
   cli::Progress bar("queries", city.second.size(), "scans");
-  sim::for_each_kept_scan(caster, sim::hdl64e(), city.second, LocalCloudConfig{}, schedule,
+  sim::for_each_kept_scan(caster, sim::hdl64e(), city.second, LocalCloudConfig{}, plan.schedule,
                           [&](size_t frame, const sim::SimulatedScan& scan) {
     bar.update(frame + 1);
     const Pose3d T_world_sensor = city.second.T_world_lidar[frame];

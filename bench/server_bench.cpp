@@ -243,94 +243,109 @@ nlohmann::json run_kind(uint16_t port, const Kind& kind, double request_bytes_me
   return j;
 }
 
+// The command line: what to set up and which levels to run.
+struct Options {
+  int workers = 0;
+  BenchOptions bench;
+  uint64_t seed = 3;
+  double subsample_leaf_m = 0.0;
+  bool raw = false, l2 = false, soak = false;
+  std::string model_path = SEGMATCH_SOURCE_DIR "/maps/models/default-rf.yml", json_path, map_points = "lazy";
+  bench::SoakConfig soak_config;
+};
+
+void add_options(CLI::App& app, Options& o) {
+  app.add_option("--workers", o.workers, "server localization threads (0 = cores)");
+  app.add_option("--queries", o.bench.queries_per_level, "queries per level, spread over its clients (at least one each)");
+  app.add_option("--seed", o.seed, "city seed");
+  app.add_option("--subsample-leaf-m", o.subsample_leaf_m, "per-scan subsampling of the local cloud (0 = full scans)");
+  app.add_flag("--raw", o.raw, "send raw points (60-230 MB clouds: use with --subsample-leaf-m 0.1) instead of voxels");
+  app.add_flag("--l2", o.l2, "L2 matcher on eigen features instead of the shipped RF_eigen+shapes");
+  app.add_option("--model", o.model_path, "RF model file");
+  app.add_option("--fleet-rate", o.bench.fleet_rate, "fleet level: queries/s offered in total (0: skip the level)");
+  app.add_option("--fleet-vehicles", o.bench.fleet_vehicles, "fleet level: vehicles, each on its own schedule")->check(CLI::Range(1, 256));
+  app.add_option("--fleet-seconds", o.bench.fleet_seconds, "fleet level: duration")->check(CLI::Range(1.0, 3600.0));
+  app.add_option("--map-points", o.map_points, "the server's map points: lazy (read on demand) or memory")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"lazy", "memory"}));
+  app.add_flag("--soak", o.soak, "soak run: segmatch-server as its own process, clients x queries, its RSS watched");
+  app.add_option("--soak-clients", o.soak_config.clients, "soak: concurrent clients")->capture_default_str()->check(CLI::Range(1, 64));
+  app.add_option("--soak-queries", o.soak_config.queries_per_client, "soak: queries per client")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1000000));
+  app.add_option("--server-binary", o.soak_config.server_binary, "soak: segmatch-server to run (default: next to this program)");
+  app.add_option("--json", o.json_path, "write the figures as JSON: {\"cloud\": {...}, \"segments\": {...}}");
+}
+
+// The soak run: segmatch-server as its own process, cloud and segments requests alternately,
+// each client through the revisit in its own order. Exit code 0 if it passed.
+int soak(Options o, const std::string& map_path, const std::vector<api::LocalizeRequest>& requests,
+         const std::vector<api::LocalizeSegmentsRequest>& segment_requests) {
+  bench::SoakConfig& config = o.soak_config;
+  if (config.server_binary.empty())
+    config.server_binary = (std::filesystem::read_symlink("/proc/self/exe").parent_path() / "segmatch-server").string();
+  config.map_path = map_path;
+  config.workers = o.workers;
+  const bench::SoakResult r = bench::run_soak(config, [&](api::Client& c, size_t client, size_t i) {
+    const size_t q = client * 7 + i / 2;
+    return i % 2 == 0 ? c.localize(requests[q % requests.size()])
+                      : c.localize_segments(segment_requests[q % segment_requests.size()]);
+  });
+  std::filesystem::remove(map_path);
+  if (!o.json_path.empty()) std::ofstream(o.json_path) << nlohmann::json{{"soak", r.to_json()}}.dump(2) << "\n";
+  return r.passed(config) ? 0 : 1;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{"segmatch-bench-server: loopback throughput and latency of segmatch-server, cloud and segments queries"};
-  int workers = 0;
-  BenchOptions o;
-  uint64_t seed = 3;
-  double subsample_leaf_m = 0.0;
-  bool raw = false, l2 = false;
-  std::string model_path = SEGMATCH_SOURCE_DIR "/maps/models/default-rf.yml", json_path;
-  app.add_option("--workers", workers, "server localization threads (0 = cores)");
-  app.add_option("--queries", o.queries_per_level, "queries per level, spread over its clients (at least one each)");
-  app.add_option("--seed", seed, "city seed");
-  app.add_option("--subsample-leaf-m", subsample_leaf_m, "per-scan subsampling of the local cloud (0 = full scans)");
-  app.add_flag("--raw", raw, "send raw points (60-230 MB clouds: use with --subsample-leaf-m 0.1) instead of voxels");
-  app.add_flag("--l2", l2, "L2 matcher on eigen features instead of the shipped RF_eigen+shapes");
-  app.add_option("--model", model_path, "RF model file");
-  app.add_option("--fleet-rate", o.fleet_rate, "fleet level: queries/s offered in total (0: skip the level)");
-  app.add_option("--fleet-vehicles", o.fleet_vehicles, "fleet level: vehicles, each on its own schedule")->check(CLI::Range(1, 256));
-  app.add_option("--fleet-seconds", o.fleet_seconds, "fleet level: duration")->check(CLI::Range(1.0, 3600.0));
-  std::string map_points = "lazy";
-  app.add_option("--map-points", map_points, "the server's map points: lazy (read on demand) or memory")
-      ->capture_default_str()
-      ->check(CLI::IsMember({"lazy", "memory"}));
-  bool soak = false;
-  bench::SoakConfig soak_config;
-  app.add_flag("--soak", soak, "soak run: segmatch-server as its own process, clients x queries, its RSS watched");
-  app.add_option("--soak-clients", soak_config.clients, "soak: concurrent clients")->capture_default_str()->check(CLI::Range(1, 64));
-  app.add_option("--soak-queries", soak_config.queries_per_client, "soak: queries per client")
-      ->capture_default_str()
-      ->check(CLI::Range(1, 1000000));
-  app.add_option("--server-binary", soak_config.server_binary, "soak: segmatch-server to run (default: next to this program)");
-  app.add_option("--json", json_path, "write the figures as JSON: {\"cloud\": {...}, \"segments\": {...}}");
+  Options o;
+  add_options(app, o);
   CLI11_PARSE(app, argc, argv);
   io::PipelineConfig config = io::pipeline_preset("kitti-hdl64");
   std::string model;
-  if (l2) {
+  if (o.l2) {
     config.localizer.matcher.type = MatcherType::kL2;
     config.localizer.matcher.use_shapes = false;
   } else {
-    std::ifstream f(model_path, std::ios::binary);
+    std::ifstream f(o.model_path, std::ios::binary);
     if (!f) {
-      std::fprintf(stderr, "segmatch-bench-server: cannot read %s (give --model or --l2)\n", model_path.c_str());
+      std::fprintf(stderr, "segmatch-bench-server: cannot read %s (give --model or --l2)\n", o.model_path.c_str());
       return 1;
     }
     model.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
   }
-  config.local_cloud.subsample_leaf_m = subsample_leaf_m;
-  std::printf("matcher %s, %s queries\n", l2 ? "L2 (eigen)" : "RF_eigen+shapes", raw ? "raw" : "voxelized");
+  config.local_cloud.subsample_leaf_m = o.subsample_leaf_m;
+  std::printf("matcher %s, %s queries\n", o.l2 ? "L2 (eigen)" : "RF_eigen+shapes", o.raw ? "raw" : "voxelized");
   const auto t0 = Clock::now();
-  const sim::City city = sim::make_city(sim::dataset_preset("tiny", seed));
+  const sim::City city = sim::make_city(sim::dataset_preset("tiny", o.seed));
   const std::string map_path = build_map(city, config, model);
   const VoxelGridConfig& voxel = config.localizer.segmentation.voxel;
-  const std::vector<api::LocalizeRequest> requests = revisit_requests(city, config.local_cloud, raw ? nullptr : &voxel, 10.0);
+  const std::vector<api::LocalizeRequest> requests =
+      revisit_requests(city, config.local_cloud, o.raw ? nullptr : &voxel, 10.0);
   size_t points = 0;
   for (const auto& r : requests) points += r.points.size();
   std::printf("set-up %.0f s: %zu revisit local clouds, %.0f points on average\n",
               std::chrono::duration<double>(Clock::now() - t0).count(), requests.size(), double(points) / requests.size());
   server::ServerConfig sc;
   sc.port = 0;
-  sc.workers = workers;
+  sc.workers = o.workers;
   sc.log_requests = false;
   sc.stats_interval_s = 0;
   server::MapLoadOptions load;
-  load.points = map_points == "lazy" ? server::MapPoints::kLazy : server::MapPoints::kMemory;
+  load.points = o.map_points == "lazy" ? server::MapPoints::kLazy : server::MapPoints::kMemory;
   server::Server server(sc, server::load_map(map_path, load));
-  std::printf("map points: %s\n", map_points.c_str());
+  std::printf("map points: %s\n", o.map_points.c_str());
   server.start();
   std::printf("server on %s, %u cores\n", server.address().c_str(), std::thread::hardware_concurrency());
 
   std::vector<double> client_ms;
   const std::vector<api::LocalizeSegmentsRequest> segment_requests = segment_like_a_vehicle(server.port(), requests, client_ms);
   const double client_ms_median = percentile(client_ms, 0.5);
-  if (soak) {
+  if (o.soak) {
     server.stop();
-    if (soak_config.server_binary.empty())
-      soak_config.server_binary = (std::filesystem::read_symlink("/proc/self/exe").parent_path() / "segmatch-server").string();
-    soak_config.map_path = map_path;
-    soak_config.workers = workers;
-    // Cloud and segments requests alternately, each client through the revisit in its own order.
-    const bench::SoakResult r = bench::run_soak(soak_config, [&](api::Client& c, size_t client, size_t i) {
-      const size_t q = client * 7 + i / 2;
-      return i % 2 == 0 ? c.localize(requests[q % requests.size()])
-                        : c.localize_segments(segment_requests[q % segment_requests.size()]);
-    });
-    std::filesystem::remove(map_path);
-    if (!json_path.empty()) std::ofstream(json_path) << nlohmann::json{{"soak", r.to_json()}}.dump(2) << "\n";
-    return r.passed(soak_config) ? 0 : 1;
+    return soak(o, map_path, requests, segment_requests);
   }
 
   std::printf("closed loop: each client sends its next query as soon as it has the answer\n");
@@ -339,18 +354,18 @@ int main(int argc, char** argv) {
                       [&](api::Client& c, size_t i) { return c.localize_segments(segment_requests[i]); },
                       segment_requests.size()};
   nlohmann::json out;
-  out["cloud"] = run_kind(server.port(), cloud, median_bytes(requests), o);
-  out["segments"] = run_kind(server.port(), segments, median_bytes(segment_requests), o);
+  out["cloud"] = run_kind(server.port(), cloud, median_bytes(requests), o.bench);
+  out["segments"] = run_kind(server.port(), segments, median_bytes(segment_requests), o.bench);
   out["segments"]["client_segmenting_ms_median"] = client_ms_median;
   out["setup"] = {{"queries", requests.size()}, {"points_mean", double(points) / requests.size()},
-                  {"cores", std::thread::hardware_concurrency()}, {"matcher", l2 ? "L2" : "RF_eigen+shapes"}};
+                  {"cores", std::thread::hardware_concurrency()}, {"matcher", o.l2 ? "L2" : "RF_eigen+shapes"}};
   server.stop();
   std::filesystem::remove(map_path);
-  if (!json_path.empty()) {
-    std::ofstream f(json_path);
+  if (!o.json_path.empty()) {
+    std::ofstream f(o.json_path);
     f << out.dump(2) << "\n";
     if (!f) {
-      std::fprintf(stderr, "segmatch-bench-server: cannot write %s\n", json_path.c_str());
+      std::fprintf(stderr, "segmatch-bench-server: cannot write %s\n", o.json_path.c_str());
       return 1;
     }
   }

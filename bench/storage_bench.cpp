@@ -224,6 +224,37 @@ void report_serving(const std::string& path, bool drop_caches) {
   }
 }
 
+// Opens, fully loads and queries the written map `runs` times; prints the medians. False if a
+// load does not give back every segment.
+bool time_reads(const std::string& path, const WriteResult& written, int segments, int runs, float radius_m) {
+  std::vector<double> open_s, load_s, load_cpu_s, near_s;
+  std::vector<size_t> near_counts;
+  std::mt19937 rng(7);
+  for (int run = 0; run < runs; ++run) {
+    auto t = Clock::now();
+    const storage::MapReader reader = storage::MapReader::open(path);
+    open_s.push_back(seconds_since(t));
+    t = Clock::now();
+    const double cpu = cpu_seconds();
+    const Segments all = reader.load_segments();
+    load_s.push_back(seconds_since(t));
+    load_cpu_s.push_back(cpu_seconds() - cpu);
+    if (all.size() != size_t(segments)) return false;
+    const Eigen::Vector3f center = written.centroids[rng() % written.centroids.size()];
+    t = Clock::now();
+    near_counts.push_back(reader.segments_near(center, radius_m).size());
+    near_s.push_back(seconds_since(t));
+  }
+  std::printf("open: median %.2f ms\n", median(open_s) * 1e3);
+  std::printf("full load_segments(): median %.3f s over %d runs (min %.3f, max %.3f) [page cache warm]\n",
+              median(load_s), runs, *std::min_element(load_s.begin(), load_s.end()),
+              *std::max_element(load_s.begin(), load_s.end()));
+  std::printf("full load CPU time (all threads): median %.3f s\n", median(load_cpu_s));
+  std::printf("segments_near(r = %.0f m): median %.2f ms, %zu segments on median\n", radius_m,
+              median(near_s) * 1e3, size_t(median(std::vector<double>(near_counts.begin(), near_counts.end()))));
+  return true;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -279,31 +310,7 @@ int main(int argc, char** argv) {
               "(COMMIT + fsync + rename) %.2f s\n",
               written.seconds, written.commit_seconds);
 
-  std::vector<double> open_s, load_s, load_cpu_s, near_s;
-  std::vector<size_t> near_counts;
-  std::mt19937 rng(7);
-  for (int run = 0; run < runs; ++run) {
-    auto t = Clock::now();
-    const storage::MapReader reader = storage::MapReader::open(path);
-    open_s.push_back(seconds_since(t));
-    t = Clock::now();
-    const double cpu = cpu_seconds();
-    const Segments all = reader.load_segments();
-    load_s.push_back(seconds_since(t));
-    load_cpu_s.push_back(cpu_seconds() - cpu);
-    if (all.size() != size_t(segments)) return 1;
-    const Eigen::Vector3f center = written.centroids[rng() % written.centroids.size()];
-    t = Clock::now();
-    near_counts.push_back(reader.segments_near(center, radius_m).size());
-    near_s.push_back(seconds_since(t));
-  }
-  std::printf("open: median %.2f ms\n", median(open_s) * 1e3);
-  std::printf("full load_segments(): median %.3f s over %d runs (min %.3f, max %.3f) [page cache warm]\n",
-              median(load_s), runs, *std::min_element(load_s.begin(), load_s.end()),
-              *std::max_element(load_s.begin(), load_s.end()));
-  std::printf("full load CPU time (all threads): median %.3f s\n", median(load_cpu_s));
-  std::printf("segments_near(r = %.0f m): median %.2f ms, %zu segments on median\n", radius_m,
-              median(near_s) * 1e3, size_t(median(std::vector<double>(near_counts.begin(), near_counts.end()))));
+  if (!time_reads(path, written, segments, runs, radius_m)) return 1;
   report_serving(path, drop_caches);
   std::error_code ec;
   if (!keep) fs::remove_all(folder, ec);

@@ -60,18 +60,12 @@ bool LocalCloud::add_scan(const PointCloud& scan_sensor, const Pose3d& T_world_s
   scan.points.reserve(keep.size());
   if (labels) scan.labels.reserve(keep.size());
   const Eigen::Matrix3d R = T_world_sensor.linear();
-  scan.min_xy[0] = scan.min_xy[1] = std::numeric_limits<float>::max();
-  scan.max_xy[0] = scan.max_xy[1] = std::numeric_limits<float>::lowest();
+  detail::reset_xy_bounds(scan.min_xy, scan.max_xy);
   for (uint32_t i : keep) {
-    const Point& p = scan_sensor[i];
-    const Eigen::Vector3d w = R * Eigen::Vector3d(p.x, p.y, p.z) + position;
-    const Point q{float(w.x()), float(w.y()), float(w.z()), p.intensity};
+    const Point q = detail::world_point(scan_sensor[i], R, position);
     scan.points.push_back(q);
     if (labels) scan.labels.push_back((*labels)[i]);
-    scan.min_xy[0] = std::min(scan.min_xy[0], q.x);
-    scan.min_xy[1] = std::min(scan.min_xy[1], q.y);
-    scan.max_xy[0] = std::max(scan.max_xy[0], q.x);
-    scan.max_xy[1] = std::max(scan.max_xy[1], q.y);
+    detail::grow_xy_bounds(q, scan.min_xy, scan.max_xy);
   }
   scans_.push_back(std::move(scan));
   return true;

@@ -5,6 +5,7 @@
 // Implemented in seg_grid.cpp.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -50,6 +51,26 @@ inline uint64_t pack_xy(int64_t x, int64_t y) {
 // The x and y of a pack_xy() key, for -2^31 <= x, y < 2^31.
 inline int64_t unpack_x(uint64_t key) { return static_cast<int64_t>(key) >> 32; }  // arithmetic shift
 inline int64_t unpack_y(uint64_t key) { return static_cast<int32_t>(static_cast<uint32_t>(key)); }
+
+// A sensor point in the world frame: rotated and translated in double, stored in float. LocalCloud
+// and VoxelAccumulator both admit scans through this and subsample_indices(), so that they hold
+// the same points.
+inline Point world_point(const Point& p, const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
+  const Eigen::Vector3d w = R * Eigen::Vector3d(p.x, p.y, p.z) + t;
+  return {float(w.x()), float(w.y()), float(w.z()), p.intensity};
+}
+
+// A scan's horizontal bounding box (for dropping whole scans), empty until grown.
+inline void reset_xy_bounds(float min_xy[2], float max_xy[2]) {
+  min_xy[0] = min_xy[1] = std::numeric_limits<float>::max();
+  max_xy[0] = max_xy[1] = std::numeric_limits<float>::lowest();
+}
+inline void grow_xy_bounds(const Point& q, float min_xy[2], float max_xy[2]) {
+  min_xy[0] = std::min(min_xy[0], q.x);
+  min_xy[1] = std::min(min_xy[1], q.y);
+  max_xy[0] = std::max(max_xy[0], q.x);
+  max_xy[1] = std::max(max_xy[1], q.y);
+}
 
 // Stable LSD radix sort of (key << 32 | value) words by key, the lowest `key_bits` (<= 32) bits
 // of the high half.

@@ -187,23 +187,17 @@ bool VoxelAccumulator::add_scan(const PointCloud& scan_sensor, const Pose3d& T_w
   if (labels) world_labels.reserve(keep.size());
   const Eigen::Matrix3d R = T_world_sensor.linear();
   Scan scan;
-  scan.min_xy[0] = scan.min_xy[1] = std::numeric_limits<float>::max();
-  scan.max_xy[0] = scan.max_xy[1] = std::numeric_limits<float>::lowest();
+  detail::reset_xy_bounds(scan.min_xy, scan.max_xy);
   for (uint32_t i : keep) {
-    const Point& p = scan_sensor[i];
-    const Eigen::Vector3d w = R * Eigen::Vector3d(p.x, p.y, p.z) + position;
-    const Point q{float(w.x()), float(w.y()), float(w.z()), p.intensity};
+    const Point q = detail::world_point(scan_sensor[i], R, position);
     if (!detail::is_finite(q)) continue;  // LocalCloud keeps these, but voxel_filter ignores them
-    if (std::abs(w.x() - position.x()) > kMaxRangeM || std::abs(w.y() - position.y()) > kMaxRangeM ||
-        std::abs(w.z() - position.z()) > kMaxRangeM) {
+    if (std::abs(q.x - position.x()) > kMaxRangeM || std::abs(q.y - position.y()) > kMaxRangeM ||
+        std::abs(q.z - position.z()) > kMaxRangeM) {
       throw std::invalid_argument("VoxelAccumulator::add_scan: a point lies more than 20 km from the sensor");
     }
     world.push_back(q);
     if (labels) world_labels.push_back((*labels)[i]);
-    scan.min_xy[0] = std::min(scan.min_xy[0], q.x);
-    scan.min_xy[1] = std::min(scan.min_xy[1], q.y);
-    scan.max_xy[0] = std::max(scan.max_xy[0], q.x);
-    scan.max_xy[1] = std::max(scan.max_xy[1], q.y);
+    detail::grow_xy_bounds(q, scan.min_xy, scan.max_xy);
   }
   m.has_last = true;
   m.last_position = position;

@@ -14,6 +14,44 @@ namespace {
 
 bool finite3(const Eigen::Vector3f& v) { return v.allFinite(); }
 
+// Pads a primitive's box slightly so that float rounding in the node slab test (and the
+// barycentric tolerance of triangles) can never cull a true hit; false if it is not finite.
+bool pad_box(Aabb* box) {
+  float extent = 0.0f, mag = 0.0f;
+  for (int k = 0; k < 3; ++k) {
+    if (!std::isfinite(box->lo[k]) || !std::isfinite(box->hi[k])) return false;
+    extent = std::max(extent, box->hi[k] - box->lo[k]);
+    mag = std::max(mag, std::max(std::fabs(box->lo[k]), std::fabs(box->hi[k])));
+  }
+  const float pad = 4.0f * kBaryEps * extent + 1e-6f * mag + 1e-6f;
+  for (int k = 0; k < 3; ++k) {
+    box->lo[k] -= pad;
+    box->hi[k] += pad;
+  }
+  return true;
+}
+
+// A yawed box: centre, half extents, cos and sin of the yaw; its AABB.
+bool pack_box(const Primitive& in, PackedPrim* out, Aabb* box) {
+  const Eigen::Vector3f& a = in.a;
+  const Eigen::Vector3f& h = in.b;
+  if (!finite3(h) || !std::isfinite(in.yaw)) return false;
+  if (h.minCoeff() < 0.0f) return false;
+  if ((h.array() > 0.0f).count() < 2) return false;  // no area
+  const float c = std::cos(in.yaw), s = std::sin(in.yaw);
+  const float ex = std::fabs(c) * h.x() + std::fabs(s) * h.y();
+  const float ey = std::fabs(s) * h.x() + std::fabs(c) * h.y();
+  for (int k = 0; k < 3; ++k) out->f[k] = a[k];
+  for (int k = 0; k < 3; ++k) out->f[3 + k] = h[k];
+  out->f[6] = c;
+  out->f[7] = s;
+  *box = Aabb();
+  box->lo[0] = a.x() - ex, box->hi[0] = a.x() + ex;
+  box->lo[1] = a.y() - ey, box->hi[1] = a.y() + ey;
+  box->lo[2] = a.z() - h.z(), box->hi[2] = a.z() + h.z();
+  return true;
+}
+
 // Converts a scene primitive into packed form and its world AABB; false if degenerate.
 bool pack_primitive(const Primitive& in, uint32_t index, PackedPrim* out, Aabb* box) {
   std::memset(out, 0, sizeof(*out));
@@ -25,24 +63,9 @@ bool pack_primitive(const Primitive& in, uint32_t index, PackedPrim* out, Aabb* 
   if (!finite3(in.a)) return false;
   const Eigen::Vector3f& a = in.a;
   switch (in.shape) {
-    case Shape::kBox: {
-      const Eigen::Vector3f& h = in.b;
-      if (!finite3(h) || !std::isfinite(in.yaw)) return false;
-      if (h.minCoeff() < 0.0f) return false;
-      if ((h.array() > 0.0f).count() < 2) return false;  // no area
-      const float c = std::cos(in.yaw), s = std::sin(in.yaw);
-      const float ex = std::fabs(c) * h.x() + std::fabs(s) * h.y();
-      const float ey = std::fabs(s) * h.x() + std::fabs(c) * h.y();
-      for (int k = 0; k < 3; ++k) out->f[k] = a[k];
-      for (int k = 0; k < 3; ++k) out->f[3 + k] = h[k];
-      out->f[6] = c;
-      out->f[7] = s;
-      *box = Aabb();
-      box->lo[0] = a.x() - ex, box->hi[0] = a.x() + ex;
-      box->lo[1] = a.y() - ey, box->hi[1] = a.y() + ey;
-      box->lo[2] = a.z() - h.z(), box->hi[2] = a.z() + h.z();
+    case Shape::kBox:
+      if (!pack_box(in, out, box)) return false;
       break;
-    }
     case Shape::kCylinder: {
       const float r = in.b.x(), height = in.b.z();
       if (!std::isfinite(r) || !std::isfinite(height) || !(r > 0.0f) || !(height >= 0.0f)) {
@@ -88,20 +111,7 @@ bool pack_primitive(const Primitive& in, uint32_t index, PackedPrim* out, Aabb* 
     default:
       return false;
   }
-  // Pad slightly so that float rounding in the node slab test (and the barycentric
-  // tolerance of triangles) can never cull a true hit.
-  float extent = 0.0f, mag = 0.0f;
-  for (int k = 0; k < 3; ++k) {
-    if (!std::isfinite(box->lo[k]) || !std::isfinite(box->hi[k])) return false;
-    extent = std::max(extent, box->hi[k] - box->lo[k]);
-    mag = std::max(mag, std::max(std::fabs(box->lo[k]), std::fabs(box->hi[k])));
-  }
-  const float pad = 4.0f * kBaryEps * extent + 1e-6f * mag + 1e-6f;
-  for (int k = 0; k < 3; ++k) {
-    box->lo[k] -= pad;
-    box->hi[k] += pad;
-  }
-  return true;
+  return pad_box(box);
 }
 
 // Binned SAH builder producing a binary tree, which is then collapsed into kWidth-wide nodes.
@@ -172,61 +182,70 @@ class Builder {
     return static_cast<uint32_t>(bnodes_.size() - 1);
   }
 
+  // The binned SAH split of prims_[begin, end) into nb bins per axis (axis -1: none, all
+  // centroids coincide).
+  struct Split {
+    int axis = -1, bin = 0;
+    float cost = std::numeric_limits<float>::infinity();
+    float scale[3] = {0.0f, 0.0f, 0.0f};  // bins per metre on each axis
+  };
+  Split sah_split(uint32_t begin, uint32_t end, const Aabb& cb, int nb) const {
+    Split best;
+    // One pass bins all three axes.
+    Aabb bins[3][kNumBins];
+    uint32_t counts[3][kNumBins] = {};
+    for (int axis = 0; axis < 3; ++axis) {
+      const float ext = cb.hi[axis] - cb.lo[axis];
+      best.scale[axis] = ext > 0.0f ? static_cast<float>(nb) / ext : 0.0f;
+    }
+    for (uint32_t i = begin; i < end; ++i) {
+      const BuildPrim& p = prims_[i];
+      for (int axis = 0; axis < 3; ++axis) {
+        const int bi = bin_of(p.centre[axis], cb.lo[axis], best.scale[axis], nb);
+        bins[axis][bi].grow(p.box);
+        ++counts[axis][bi];
+      }
+    }
+    for (int axis = 0; axis < 3; ++axis) {
+      if (!(best.scale[axis] > 0.0f)) continue;
+      float right_area[kNumBins];
+      uint32_t right_count[kNumBins];
+      Aabb acc;
+      uint32_t cnt = 0;
+      for (int i = nb - 1; i > 0; --i) {
+        acc.grow(bins[axis][i]);
+        cnt += counts[axis][i];
+        right_area[i] = acc.half_area();
+        right_count[i] = cnt;
+      }
+      acc = Aabb();
+      cnt = 0;
+      for (int i = 1; i < nb; ++i) {
+        acc.grow(bins[axis][i - 1]);
+        cnt += counts[axis][i - 1];
+        if (cnt == 0 || right_count[i] == 0) continue;
+        const float cost = acc.half_area() * static_cast<float>(cnt) +
+                           right_area[i] * static_cast<float>(right_count[i]);
+        if (cost < best.cost) {
+          best.cost = cost;
+          best.axis = axis;
+          best.bin = i;
+        }
+      }
+    }
+    return best;
+  }
+
   // Subtree over prims_[begin, end) with the given bounds and centroid bounds.
   uint32_t build(uint32_t begin, uint32_t end, const Aabb& bounds, const Aabb& cb, int depth) {
     const uint32_t n = end - begin;
     if (n == 1) return make_leaf(begin, end, bounds);
-
-    int best_axis = -1;
-    int best_split = 0;
-    float best_cost = std::numeric_limits<float>::infinity();
-    float scale[3] = {0.0f, 0.0f, 0.0f};
     // Fewer bins for small nodes: the sweep would cost more than the binning.
     const int nb = static_cast<int>(std::min<uint32_t>(kNumBins, std::max<uint32_t>(4, n)));
-    if (depth < kMaxSahDepth) {
-      // One pass bins all three axes.
-      Aabb bins[3][kNumBins];
-      uint32_t counts[3][kNumBins] = {};
-      for (int axis = 0; axis < 3; ++axis) {
-        const float ext = cb.hi[axis] - cb.lo[axis];
-        scale[axis] = ext > 0.0f ? static_cast<float>(nb) / ext : 0.0f;
-      }
-      for (uint32_t i = begin; i < end; ++i) {
-        const BuildPrim& p = prims_[i];
-        for (int axis = 0; axis < 3; ++axis) {
-          const int bi = bin_of(p.centre[axis], cb.lo[axis], scale[axis], nb);
-          bins[axis][bi].grow(p.box);
-          ++counts[axis][bi];
-        }
-      }
-      for (int axis = 0; axis < 3; ++axis) {
-        if (!(scale[axis] > 0.0f)) continue;
-        float right_area[kNumBins];
-        uint32_t right_count[kNumBins];
-        Aabb acc;
-        uint32_t cnt = 0;
-        for (int i = nb - 1; i > 0; --i) {
-          acc.grow(bins[axis][i]);
-          cnt += counts[axis][i];
-          right_area[i] = acc.half_area();
-          right_count[i] = cnt;
-        }
-        acc = Aabb();
-        cnt = 0;
-        for (int i = 1; i < nb; ++i) {
-          acc.grow(bins[axis][i - 1]);
-          cnt += counts[axis][i - 1];
-          if (cnt == 0 || right_count[i] == 0) continue;
-          const float cost = acc.half_area() * static_cast<float>(cnt) +
-                             right_area[i] * static_cast<float>(right_count[i]);
-          if (cost < best_cost) {
-            best_cost = cost;
-            best_axis = axis;
-            best_split = i;
-          }
-        }
-      }
-    }
+    const Split sah = depth < kMaxSahDepth ? sah_split(begin, end, cb, nb) : Split{};
+    const int best_axis = sah.axis, best_split = sah.bin;
+    const float best_cost = sah.cost;
+    const float* scale = sah.scale;
 
     uint32_t mid = begin + n / 2;
     if (best_axis >= 0) {

@@ -180,6 +180,26 @@ TEST(Deploy, QueryLocalizeExitsByStatus) {
   EXPECT_NE(coded.output.find("TOO_FEW_SEGMENTS: "), std::string::npos) << coded.output;
 }
 
+// Every vehicle's answers against the single server's (a failure per unanswered or different
+// one); returns how many were unanswered and how many localized.
+static std::pair<int, int> tally_answers(const std::vector<std::vector<Answer>>& answers,
+                                         const std::vector<api::LocalizeReply>& reference) {
+  int unanswered = 0, localized = 0;
+  for (size_t v = 0; v < answers.size(); ++v)
+    for (size_t q = 0; q < reference.size(); ++q) {
+      const Answer& a = answers[v][q];
+      const std::string where = "vehicle " + std::to_string(v) + " query " + std::to_string(q);
+      if (!a.reply) {
+        ++unanswered;
+        ADD_FAILURE() << where << " was not answered: " << a.error;
+        continue;
+      }
+      localized += a.reply->status == api::LocalizeStatus::kLocalized;
+      expect_same_answer(*a.reply, reference[q], where);
+    }
+  return {unanswered, localized};
+}
+
 TEST(Deploy, SixteenVehiclesThroughHaproxySurviveAKilledReplica) {
   const std::string haproxy = haproxy_binary();
   if (haproxy.empty()) GTEST_SKIP() << "haproxy is not installed (scripts/install-deps.sh installs it)";
@@ -240,19 +260,7 @@ TEST(Deploy, SixteenVehiclesThroughHaproxySurviveAKilledReplica) {
   EXPECT_EQ(api::Client("127.0.0.1", replicas[1]->port, client_options(token)).info().map_name, "tiny-3 v2");
   EXPECT_LT(done_at_reload, total) << "the reload came after the last query";
 
-  int unanswered = 0, localized = 0;
-  for (size_t v = 0; v < answers.size(); ++v)
-    for (size_t q = 0; q < queries.size(); ++q) {
-      const Answer& a = answers[v][q];
-      const std::string where = "vehicle " + std::to_string(v) + " query " + std::to_string(q);
-      if (!a.reply) {
-        ++unanswered;
-        ADD_FAILURE() << where << " was not answered: " << a.error;
-        continue;
-      }
-      localized += a.reply->status == api::LocalizeStatus::kLocalized;
-      expect_same_answer(*a.reply, reference[q], where);
-    }
+  const auto [unanswered, localized] = tally_answers(answers, reference);
   const double served_after_restart = localize_count(replicas[0]->scrape());
   const double served_by_2 = localize_count(replicas[1]->scrape()) - static_cast<double>(queries.size());
   std::printf("[deploy] %d queries from %d vehicles through HAProxy, %d localized, %d unanswered, %d sent again "

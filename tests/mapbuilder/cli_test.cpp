@@ -14,7 +14,6 @@
 #include "support/run_command.h"
 
 #include <fcntl.h>
-#include <sys/file.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -377,7 +376,7 @@ void interrupt_build(const fs::path& sequence, const fs::path& folder, int signa
     _exit(127);
   }
   bool began = false;
-  for (int i = 0; i < 600 && !began; ++i) {
+  for (int i = 0; i < 3000 && !began; ++i) {  // up to 60 s: the recording is measured first (seconds under load)
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
     for (const auto& e : fs::directory_iterator(folder)) began = began || e.path().string().find(".tmp-") != std::string::npos;
   }
