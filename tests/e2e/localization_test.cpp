@@ -8,13 +8,13 @@
 
 #include <gtest/gtest.h>
 
-#include <fstream>
-#include <iterator>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
+#include <iterator>
 #include <memory>
+#include <stdexcept>
 
 using namespace segmatch;
 using namespace segmatch::sim;
@@ -57,6 +57,7 @@ std::shared_ptr<RandomForestMatcher> train_on(const std::vector<uint64_t>& seeds
 // cities 101-103, 105 and 106): it never saw city 3 or 104.
 std::shared_ptr<RandomForestMatcher> shipped_classifier() {
   std::ifstream in(SEGMATCH_DEFAULT_MODEL, std::ios::binary);
+  if (!in) throw std::runtime_error("cannot read the shipped classifier " SEGMATCH_DEFAULT_MODEL);
   const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   return std::make_shared<RandomForestMatcher>(RandomForestMatcher::load(bytes));
 }
