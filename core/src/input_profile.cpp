@@ -5,7 +5,6 @@
 #include <cmath>
 #include <stdexcept>
 #include <cstdint>
-#include <unordered_map>
 
 namespace segmatch {
 namespace {
@@ -17,36 +16,77 @@ double percentile(std::vector<double> v, double p) {
   return v[k];
 }
 
-// The points of a cloud hashed by cells of cell_m: the distance from a point to its nearest
-// cloud point, when that is within one cell (both measurements below only ask about short
-// distances: the spacing of a scan, and whether a point of another scan lies near).
+// The points of a cloud bucketed in cells of cell_m (the core's CellGrid): the distance from a
+// point to its nearest cloud point, when that is within one cell (both measurements below only
+// ask about short distances: the spacing of a scan, and whether a point of another scan lies
+// near). Non-finite cloud points are in no cell; they were never nearer than anything.
 class PointGrid {
  public:
-  PointGrid(const PointCloud& cloud, double cell_m) : cloud_(cloud), cell_m_(cell_m) {
-    grid_.reserve(cloud.size());
-    for (uint32_t i = 0; i < cloud.size(); ++i) grid_.emplace(key(cloud[i].xyz()), i);
-  }
-  // Distance to the nearest cloud point other than index `skip`, capped at cell_m.
+  PointGrid(const PointCloud& cloud, double cell_m)
+      : cloud_(cloud), cell_m_(cell_m), grid_(detail::CellGrid::build(cloud, cell_m, false, "input profile cell")) {}
+  // Distance to the nearest cloud point other than index `skip`, capped at cell_m. The cell of
+  // p first; a neighbour cell is read only if its box comes nearer than the best so far (the
+  // minimum is the same, dense scans hold hundreds of points per cell).
   double nearest(const Eigen::Vector3f& p, uint32_t skip = UINT32_MAX) const {
     double best = cell_m_;
-    for (int dx = -1; dx <= 1; ++dx)
-      for (int dy = -1; dy <= 1; ++dy)
-        for (int dz = -1; dz <= 1; ++dz) {
-          const auto range = grid_.equal_range(key(p + Eigen::Vector3f(dx, dy, dz) * static_cast<float>(cell_m_)));
-          for (auto it = range.first; it != range.second; ++it)
-            if (it->second != skip) best = std::min(best, static_cast<double>((cloud_[it->second].xyz() - p).norm()));
-        }
+    int64_t c[3];
+    if (!cell_of(p, c)) return best;
+    double inside[3];  // p's offset inside its cell, in metres
+    for (int a = 0; a < 3; ++a) inside[a] = double(p[a]) - double(c[a] + grid_.frame.base[a]) * cell_m_;
+    visit(c, [&](int dx, int dy, int dz, uint32_t cell) {
+      const int d[3] = {dx, dy, dz};
+      double gap2 = 0;  // squared distance from p to the neighbour cell's box
+      for (int a = 0; a < 3; ++a) {
+        const double g = d[a] < 0 ? inside[a] : d[a] > 0 ? cell_m_ - inside[a] : 0.0;
+        if (d[a] != 0) gap2 += g * g;
+      }
+      if (gap2 > best * best * (1 + 1e-5) + 1e-12) return false;  // margin: float distances, double box
+      for (uint32_t k = grid_.begin[cell]; k < grid_.begin[cell + 1]; ++k) {
+        const uint32_t i = grid_.order[k];
+        if (i != skip) best = std::min(best, static_cast<double>((cloud_[i].xyz() - p).norm()));
+      }
+      return false;
+    });
     return best;
+  }
+  // Whether a cloud point lies nearer than cell_m to p (nearest(p) < cell_m, stopping at the first).
+  bool any_within(const Eigen::Vector3f& p) const {
+    int64_t c[3];
+    if (!cell_of(p, c)) return false;
+    return visit(c, [&](int, int, int, uint32_t cell) {
+      for (uint32_t k = grid_.begin[cell]; k < grid_.begin[cell + 1]; ++k)
+        if (static_cast<double>((cloud_[grid_.order[k]].xyz() - p).norm()) < cell_m_) return true;
+      return false;
+    });
   }
 
  private:
-  int64_t key(const Eigen::Vector3f& p) const {
-    const auto c = [this](float v) { return static_cast<int64_t>(std::floor(v / cell_m_)); };
-    return static_cast<int64_t>(detail::pack21(c(p.x()), c(p.y()), c(p.z())));  // the same cells, offset keys
+  bool cell_of(const Eigen::Vector3f& p, int64_t c[3]) const {
+    for (int a = 0; a < 3; ++a) {
+      const double q = std::floor(double(p[a]) / cell_m_);
+      if (!(std::abs(q) < 1e15)) return false;  // not finite, or far outside any cloud
+      c[a] = static_cast<int64_t>(q) - grid_.frame.base[a];
+    }
+    return true;
   }
+  // Calls f(dx, dy, dz, cell) for the occupied cells around c, c itself first, until f is true.
+  template <typename F>
+  bool visit(const int64_t c[3], F&& f) const {
+    const uint32_t self = grid_.cell_at(c[0], c[1], c[2]);
+    if (self != detail::FlatHashMap::kMissing && f(0, 0, 0, self)) return true;
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dz = -1; dz <= 1; ++dz) {
+          if (dx == 0 && dy == 0 && dz == 0) continue;
+          const uint32_t cell = grid_.cell_at(c[0] + dx, c[1] + dy, c[2] + dz);
+          if (cell != detail::FlatHashMap::kMissing && f(dx, dy, dz, cell)) return true;
+        }
+    return false;
+  }
+
   const PointCloud& cloud_;
   double cell_m_;
-  std::unordered_multimap<int64_t, uint32_t> grid_;
+  detail::CellGrid grid_;
 };
 
 // Every step-th index of n things, at most `sample` of them.
@@ -74,7 +114,7 @@ double pose_agreement(const PointCloud& a, const Pose3d& T_world_a, const PointC
   const PointGrid grid(a, radius_m);
   const size_t step = stride_for(b.size(), sample);
   size_t probes = 0, near = 0;
-  for (size_t i = 0; i < b.size(); i += step, ++probes) near += grid.nearest(T_a_b * b[i].xyz()) < radius_m;
+  for (size_t i = 0; i < b.size(); i += step, ++probes) near += grid.any_within(T_a_b * b[i].xyz());
   return static_cast<double>(near) / static_cast<double>(probes);
 }
 

@@ -25,11 +25,13 @@ namespace {
 
 constexpr double kDegPerRad = 180.0 / M_PI;
 
-// Frames at least 1 m apart (the local cloud keeps no others, paper IV-A).
-std::vector<size_t> metre_frames(const Traversal& t) {
+// Frames at least 2 m apart, as a car at ~80 km/h gives them (the local cloud keeps none closer
+// than 1 m, paper IV-A; every other one of the 0.8 m-spaced frames took twice the time for the
+// same loops).
+std::vector<size_t> spaced_frames(const Traversal& t) {
   std::vector<size_t> frames;
   for (size_t i = 0; i < t.size(); ++i)
-    if (frames.empty() || (t.T_world_lidar[i].translation() - t.T_world_lidar[frames.back()].translation()).norm() >= 1.0)
+    if (frames.empty() || (t.T_world_lidar[i].translation() - t.T_world_lidar[frames.back()].translation()).norm() >= 2.0)
       frames.push_back(i);
   return frames;
 }
@@ -96,7 +98,7 @@ std::unique_ptr<SimLoop> simulate_loop(uint64_t seed) {
   s->drift_bounded = std::make_unique<LoopDetector>(bounded);
 
   const RayCaster caster(world.scene());
-  const std::vector<size_t> frames = metre_frames(t);
+  const std::vector<size_t> frames = spaced_frames(t);
   constexpr size_t kBatch = 16;
   for (size_t b = 0; b < frames.size(); b += kBatch) {
     const size_t n = std::min(kBatch, frames.size() - b);
@@ -206,16 +208,18 @@ TEST_F(SimulatedLoop, DriftedOdometryGivesTheTrueCorrection) {
     EXPECT_GT(l.T_oldodom_odom.translation().norm(), 1.0) << "the correction undoes metres of drift";
 }
 
-// A drift bound above the real drift keeps every loop (the true place is within it).
+// A drift bound above the real drift keeps every loop (the true place is within it), each as
+// accurate as without the bound. The map frame it connects to may differ: the bound changes
+// which candidates are searched, and several old frames see the same place.
 TEST_F(SimulatedLoop, ADriftBoundAboveTheDriftKeepsTheLoops) {
   const auto& free = sim_->drift->loops();
   const auto& bounded = sim_->drift_bounded->loops();
   ASSERT_EQ(bounded.size(), free.size());
   for (size_t i = 0; i < free.size(); ++i) {
     EXPECT_EQ(bounded[i].query_frame, free[i].query_frame);
-    EXPECT_EQ(bounded[i].match_frame, free[i].match_frame);
     EXPECT_LE(bounded[i].T_oldodom_odom.translation().norm(), 6.0);
   }
+  EXPECT_EQ(check_loops(*sim_->drift_bounded, sim_->drift_poses, "bounded drift"), bounded.size());
 }
 
 TEST_F(SimulatedLoop, RouteWithoutRevisitYieldsNoLoop) {
