@@ -13,7 +13,7 @@ struct ReplayOptions {
   size_t first = 0;          // first scan index
   size_t last = SIZE_MAX;    // last scan index (inclusive)
   bool track = false;        // api::Tracker: the last fix is the next query's prior
-  std::string odometry;      // poses file to accumulate with (default: the sequence's poses)
+  std::string odometry;      // poses file to accumulate with (default: odom_poses.txt, else poses.txt)
   bool segments = false;     // LOCALIZE_SEGMENTS: segment here, send the segments
 };
 

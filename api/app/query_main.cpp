@@ -68,7 +68,9 @@ int main(int argc, char** argv) {
   rep->add_flag("--track", replay.track,
                 "track between fixes: each query carries the last fix as its prior (radius growing with the distance "
                 "driven since); global at start-up and after repeated failures");
-  rep->add_option("--odometry", replay.odometry, "the vehicle's odometry poses file (default: the sequence's poses)");
+  rep->add_option("--odometry", replay.odometry,
+                  "the vehicle's odometry poses file, KITTI or TUM (default: the sequence's odom_poses.txt, else its "
+                  "poses.txt, said on the first line)");
   rep->add_flag("--segments", replay.segments,
                 "query by segments (LOCALIZE_SEGMENTS): segment and describe each local cloud here with the map's "
                 "parameters and send the segments (a few hundred KB) instead of the cloud (MB)");

@@ -8,20 +8,30 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <vector>
 
 namespace segmatch::query {
 
+namespace {
+std::string warp_of(const api::LocalizeReply& r) {
+  if (!r.detail || r.detail->window_points == 0) return "";
+  char buf[96];
+  std::snprintf(buf, sizeof buf, "  window warp %.2f m %.2f deg", r.detail->window_warp_m, r.detail->window_warp_deg);
+  return buf;
+}
+}  // namespace
+
 void print_reply(const api::LocalizeReply& r, double round_trip_ms) {
   const Eigen::Quaterniond q(r.T_map_local.linear());
   const Eigen::Vector3d t = r.T_map_local.translation();
   std::printf("%-13s inliers %3u support %3u conf %.2f  T_map_local t=(%.3f %.3f %.3f) q=(%.5f %.5f %.5f %.5f)  "
-              "%.1f ms (server %.1f)%s%s%s%s\n",
+              "%.1f ms (server %.1f)%s%s%s%s%s\n",
               api::to_string(r.status), r.inliers, r.support, r.confidence, t.x(), t.y(), t.z(), q.w(), q.x(), q.y(),
               q.z(), round_trip_ms, r.timings.server_total, r.refusal == api::RefusalCode::kNone ? "" : "  ",
               r.refusal == api::RefusalCode::kNone ? "" : api::to_string(r.refusal), r.reason.empty() ? "" : r.refusal == api::RefusalCode::kNone ? "  " : ": ",
-              r.reason.c_str());
+              r.reason.c_str(), warp_of(r).c_str());
 }
 
 namespace {
@@ -45,8 +55,13 @@ double percentile(std::vector<double> v, double p) {
 }  // namespace
 
 int replay(api::Client& client, const ReplayOptions& options) {
+  // A vehicle has only its odometry: the sequence's odom_poses.txt when it has one.
   io::SequenceOptions so;
   so.poses_path = options.odometry;
+  if (so.poses_path.empty() && std::filesystem::is_regular_file(std::filesystem::path(options.folder) / "odom_poses.txt"))
+    so.poses_path = (std::filesystem::path(options.folder) / "odom_poses.txt").string();
+  std::printf("local clouds from %s\n", so.poses_path.empty() ? "the sequence's poses.txt (it has no odom_poses.txt)"
+                                                              : so.poses_path.c_str());
   const io::Sequence seq = io::Sequence::open(options.folder, so);
   io::ReplayConfig config;
   config.every_m = options.every_m;
@@ -67,6 +82,7 @@ int replay(api::Client& client, const ReplayOptions& options) {
     api::LocalizeRequest request;
     request.request_id = q.frame;
     if (q.voxelized) request.flags |= api::kFlagVoxelized;
+    request.flags |= api::kFlagDetail;  // the window's warp, printed per reply
     request.sensor_position_local = q.T_odom_sensor.translation();
     request.sensor_orientation_local = Eigen::Quaterniond(q.T_odom_sensor.linear()).normalized();
     request.points = q.cloud_odom;

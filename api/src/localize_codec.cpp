@@ -134,6 +134,22 @@ DecodeStatus decode(const uint8_t* payload, size_t size, const Limits&, Localize
   return s;
 }
 
+// The detail block (revision 6): its length, the fields this revision knows, the rest skipped.
+DecodeStatus get_reply_detail(wire::Reader& r, LocalizeReply& m) {
+  const uint16_t bytes = r.u16();
+  if (r.failed()) return DecodeStatus::kTruncated;
+  if (bytes != r.remaining()) return bytes > r.remaining() ? DecodeStatus::kTruncated : DecodeStatus::kTrailingBytes;
+  if (bytes < kReplyDetailBytes) return DecodeStatus::kBadField;
+  ReplyDetail d;
+  d.window_warp_m = r.f32();
+  d.window_warp_deg = r.f32();
+  d.window_points = r.u32();
+  for (size_t k = kReplyDetailBytes; k < bytes; ++k) (void)r.u8();  // a later revision's fields
+  if (!std::isfinite(d.window_warp_m) || !std::isfinite(d.window_warp_deg)) return DecodeStatus::kNonFinite;
+  m.detail = d;
+  return DecodeStatus::kOk;
+}
+
 std::vector<uint8_t> encode(const LocalizeReply& m) {
   wire::Writer w;
   w.u64(m.request_id);
@@ -148,6 +164,12 @@ std::vector<uint8_t> encode(const LocalizeReply& m) {
   for (uint64_t id : m.matched_segment_ids) w.u64(id);
   ModuleTimingsMs t = m.timings;
   for (float* f : timing_fields(t)) w.f32(*f);
+  if (m.detail) {  // revision 6: a block with its own length (docs/protocol.md 6.4)
+    w.u16(static_cast<uint16_t>(kReplyDetailBytes));
+    w.f32(m.detail->window_warp_m);
+    w.f32(m.detail->window_warp_deg);
+    w.u32(m.detail->window_points);
+  }
   return detail::frame(type_of(m), w);
 }
 
@@ -164,11 +186,12 @@ DecodeStatus decode(const uint8_t* payload, size_t size, const Limits& limits, L
   m.support = r.u32();
   const uint32_t ids = r.u32();
   if (r.failed()) return r.too_long() ? DecodeStatus::kBadField : DecodeStatus::kTruncated;
-  if (static_cast<uint64_t>(ids) * 8 + kTimingCount * 4 != r.remaining()) return DecodeStatus::kTruncated;
+  if (static_cast<uint64_t>(ids) * 8 + kTimingCount * 4 > r.remaining()) return DecodeStatus::kTruncated;
   m.matched_segment_ids.resize(ids);
   for (uint64_t& id : m.matched_segment_ids) id = r.u64();
   for (float* f : timing_fields(m.timings)) *f = r.f32();
-  DecodeStatus s = first_error({s_pose, detail::finish(r)});
+  const DecodeStatus s_detail = r.remaining() > 0 ? get_reply_detail(r, m) : DecodeStatus::kOk;
+  DecodeStatus s = first_error({s_pose, s_detail, detail::finish(r)});
   if (s == DecodeStatus::kOk && status > 2) s = DecodeStatus::kBadField;
   if (s == DecodeStatus::kOk && !std::isfinite(m.confidence)) s = DecodeStatus::kNonFinite;
   if (s != DecodeStatus::kOk) return s;

@@ -126,6 +126,41 @@ float confidence_of(size_t support, int min_support, float fitness) {
   return static_cast<float>((1.0 - std::exp(-extra / 3.0)) * fitness);
 }
 
+// The sensor's pose now (RefineConfig::recent_window_m): the matched query points near the
+// sensor refined alone from the whole cloud's pose. The odometry that built the cloud drifted
+// between its oldest scans and the sensor; near the sensor that drift is small.
+// Every query segment's points near the sensor, and every map segment's near where the pose
+// puts it (a margin for segments that straddle the window's edge): the window alone has fewer
+// matched segments than the whole cloud, so it takes all it has.
+struct WindowPoints {
+  PointCloud query, targets;
+};
+WindowPoints window_points(const Segments& query, const Segments& targets, const TargetPoints* source,
+                           const Eigen::Vector3d& sensor, const Pose3d& T_map_query, size_t stride, float window_m) {
+  Matches all_query, near_targets;
+  for (size_t i = 0; i < query.size(); ++i) all_query.push_back({static_cast<int>(i), 0});
+  const Eigen::Vector3d center = T_map_query * sensor;
+  const double reach = window_m + 10.0;
+  for (size_t t = 0; t < targets.size(); ++t)
+    if ((targets[t].centroid.cast<double>() - center).head<2>().norm() <= reach) near_targets.push_back({0, static_cast<int>(t)});
+  return {crop_cylinder(gather(query, all_query, true, stride), sensor, window_m),
+          gather(targets, near_targets, false, 1, source)};
+}
+
+void refine_recent_window(const WindowPoints& points, const Eigen::Vector3f& sensor, float min_fitness,
+                          const RefineConfig& config, LocalizationResult& r) {
+  const Eigen::Vector3d s = sensor.cast<double>();
+  const PointCloud& recent = points.query;
+  if (recent.size() < static_cast<size_t>(config.min_recent_points)) return;
+  const RefineResult window = refine_alignment(recent, points.targets, r.T_map_query, config);
+  if (window.fitness < min_fitness) return;
+  r.window_points = recent.size();
+  r.window_warp_m = static_cast<float>((window.T_target_query * s - r.T_map_query * s).norm());
+  const Eigen::AngleAxisd turn(window.T_target_query.linear() * r.T_map_query.linear().transpose());
+  r.window_warp_deg = static_cast<float>(std::abs(turn.angle()) * 180.0 / M_PI);
+  r.T_map_query = window.T_target_query;
+}
+
 LocalizationResult stopped(LocalizationResult r, const char* when) {
   return refuse(std::move(r), Refusal::kDeadlinePassed, std::string("the query's deadline passed ") + when);
 }
@@ -353,9 +388,9 @@ LocalizationResult Localizer::localize_segments(Segments query, const Eigen::Vec
   if (deadline.passed()) return finish(stopped(std::move(r), "during ranking"));
   if (config_.refine_pose) {
     const size_t stride = segment_point_stride(r.query, static_cast<size_t>(config_.refine.max_segment_points));
-    const RefineResult refined = refine_alignment(gather(r.query, ranked.support.pairs, true, stride),
-                                                  gather(targets_, ranked.support.pairs, false, 1, points_.get()), r.T_map_query,
-                                                  config_.refine);
+    const PointCloud query_points = gather(r.query, ranked.support.pairs, true, stride);
+    const PointCloud target_points = gather(targets_, ranked.support.pairs, false, 1, points_.get());
+    const RefineResult refined = refine_alignment(query_points, target_points, r.T_map_query, config_.refine);
     r.timings.refine_ms = clock.lap();
     if (deadline.passed()) return finish(stopped(std::move(r), "during refinement"));
     r.refine_fitness = refined.fitness;
@@ -369,6 +404,11 @@ LocalizationResult Localizer::localize_segments(Segments query, const Eigen::Vec
                                              std::to_string(refined.rmse_m) + " m apart (RMS, at most " +
                                              std::to_string(max_rmse_m) + ")"));
     r.T_map_query = refined.T_target_query;
+    if (config_.refine.recent_window_m > 0.0f)
+      refine_recent_window(window_points(r.query, targets_, points_.get(), sensor_position.cast<double>(), r.T_map_query,
+                                         stride, config_.refine.recent_window_m),
+                           sensor_position, floors.min_fitness, config_.refine, r);
+    r.timings.refine_ms += clock.lap();
   }
   r.confidence = confidence_of(r.support, min_support, r.refine_fitness);
   const float min_confidence = floors.min_confidence;

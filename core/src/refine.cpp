@@ -36,6 +36,9 @@ void RefineConfig::validate() const {
   if (!(convergence_m > 0.f)) throw std::invalid_argument("RefineConfig.convergence_m must be > 0");
   if (max_query_points < 6) throw std::invalid_argument("RefineConfig.max_query_points must be >= 6");
   if (max_segment_points < 0) throw std::invalid_argument("RefineConfig.max_segment_points must be >= 0 (0: every point)");
+  if (!(recent_window_m >= 0.f) || !std::isfinite(recent_window_m))
+    throw std::invalid_argument("RefineConfig.recent_window_m must be finite and >= 0 (0: off)");
+  if (min_recent_points < 6) throw std::invalid_argument("RefineConfig.min_recent_points must be >= 6");
 }
 
 namespace {

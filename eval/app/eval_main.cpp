@@ -49,13 +49,13 @@ struct SegmentsSide {
 };
 
 int run_localize(const eval::LocalizationRunConfig& config, const std::string& server, const std::string& token_file,
-                 const std::string& out_dir, bool segments) {
+                 const std::string& out_dir, bool segments, const server::MapLoadOptions& load) {
   eval::LocalizeFn localize;
   std::shared_ptr<const server::LoadedMap> loaded;
   std::unique_ptr<api::Client> client;
   SegmentsSide side;
   if (server.empty()) {
-    loaded = server::load_map(config.map_path);
+    loaded = server::load_map(config.map_path, load);
     for (const std::string& w : loaded->warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
     if (segments) {
       side.query = std::make_unique<vehicle::SegmentQuery>(server::info_of(*loaded).parameters_json);
@@ -185,15 +185,26 @@ int main(int argc, char** argv) {
   loc->add_flag("!--quiet", lc.print_each, "no line per query");
   loc->add_flag("--track", lc.track,
                 "track between fixes (api::Tracker): each query's prior is the last fix, its radius grows with the distance "
-                "driven since; with --query the vehicle's odometry is the sequence's odom_poses.txt when it has one");
-  auto* odom = loc->add_option("--odometry", lc.odometry_path,
-                               "the vehicle's odometry poses, KITTI or TUM (default with --track: QUERY/odom_poses.txt if present)");
+                "driven since");
+  loc->add_option("--odometry", lc.odometry_path,
+                  "the vehicle's odometry poses (KITTI or TUM) that build every query's local cloud (default: the replayed "
+                  "sequence's odom_poses.txt)");
+  std::string cloud_poses = "odometry";
+  loc->add_option("--cloud-poses", cloud_poses,
+                  "odometry (default): local clouds from the vehicle's odometry, as on a car; reference: from the "
+                  "sequence's reference poses, a comparison that flatters every figure (the report says so)")
+      ->check(CLI::IsMember({"odometry", "reference"}));
   loc->add_option("--gnss-sigma-m", lc.gnss_sigma_m,
                   "GNSS-like priors: the true pose plus Gaussian noise of this many metres (seeded), radius 3 sigma");
   loc->add_option("--gnss-seed", lc.gnss_seed, "seed of the GNSS noise (default 1)");
   loc->add_flag("--compare-global", lc.compare_global,
                 "also send every query that has a prior without it (not scored) and report both server times");
   cli::add_output_option(*loc, out_dir, "report folder (JSON + PNG)");
+  server::MapLoadOptions load;
+  float recent_window_m = -1.0f;
+  loc->add_option("--recent-window-m", recent_window_m,
+                  "in-process only: localize with this refine.recent_window_m instead of the map's (0: the whole cloud's "
+                  "pose); a what-if on a stored map");
   bool segments = false;
   loc->add_flag("--segments", segments,
                 "query by segments (LOCALIZE_SEGMENTS): segment and describe each local cloud here, as a vehicle would, "
@@ -224,10 +235,12 @@ int main(int argc, char** argv) {
   try {
     if (*loc) {
       if (lc.query_folder.empty() == lc.sim_dataset.empty()) throw std::runtime_error("give exactly one of --query and --sim");
-      if (lc.track && !odom->count() && !lc.query_folder.empty() && fs::exists(fs::path(lc.query_folder) / "odom_poses.txt"))
-        lc.odometry_path = (fs::path(lc.query_folder) / "odom_poses.txt").string();
-      if (!lc.odometry_path.empty()) std::printf("vehicle odometry: %s\n", lc.odometry_path.c_str());
-      return run_localize(lc, server, token_file, out_dir, segments);
+      lc.cloud_poses = io::parse_cloud_poses(cloud_poses);
+      if (recent_window_m >= 0.0f) {
+        if (!server.empty()) throw std::runtime_error("--recent-window-m is for in-process runs (the server serves its map's)");
+        load.recent_window_m = recent_window_m;
+      }
+      return run_localize(lc, server, token_file, out_dir, segments, load);
     }
     if (*fun) {
       const auto loaded = server::load_map(fc.map_path);

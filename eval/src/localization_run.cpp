@@ -57,6 +57,7 @@ double distance_to(const std::vector<Eigen::Vector3d>& path, const Eigen::Vector
 api::LocalizeRequest request_of(const io::ReplayQuery& q) {
   api::LocalizeRequest r;
   r.request_id = q.frame;
+  r.flags |= api::kFlagDetail;  // the window's warp, for the report
   if (q.voxelized) r.flags |= api::kFlagVoxelized;
   r.sensor_position_local = q.T_odom_sensor.translation();
   r.sensor_orientation_local = Eigen::Quaterniond(q.T_odom_sensor.linear()).normalized();
@@ -84,12 +85,16 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
   run.replay.voxel = parameters.localizer.segmentation.voxel;
   for (const storage::Keyframe& k : map.trajectory()) run.map_trajectory.push_back(k.T_map_sensor.translation());
   const Truth truth = open_truth(c);
-  std::optional<io::Sequence> odometry;  // the replayed sequence when the vehicle has its own odometry
-  if (!c.odometry_path.empty()) {
-    if (!c.sim_dataset.empty()) throw std::runtime_error("--odometry needs --query");
+  std::optional<io::Sequence> odometry;  // the replayed sequence, its scans placed by the vehicle's odometry
+  run.cloud_poses = c.cloud_poses;
+  if (c.cloud_poses == io::CloudPoses::kOdometry) {
     io::SequenceOptions so;
-    so.poses_path = c.odometry_path;
-    odometry = io::Sequence::open(c.query_folder, so);
+    so.poses_path = io::odometry_poses_path(truth.sequence.folder(), c.odometry_path);
+    run.cloud_poses_file = so.poses_path;
+    odometry = io::Sequence::open(truth.sequence.folder(), so);
+  } else {
+    if (!c.odometry_path.empty()) throw std::runtime_error("--odometry and --cloud-poses reference exclude each other");
+    run.cloud_poses_file = (fs::path(truth.sequence.folder()) / "poses.txt").string();
   }
   QueryPriors priors(c, truth.T_map_sensor);
   PriorComparison comparison;
@@ -117,6 +122,9 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
         o.inliers = reply.inliers;
         o.support = reply.support;
         o.confidence = reply.confidence;
+        if (reply.detail)
+          o.window_warp_m = reply.detail->window_warp_m, o.window_warp_deg = reply.detail->window_warp_deg,
+          o.window_points = reply.detail->window_points;
         const Pose3d& T_map_sensor_truth = truth.T_map_sensor[q.frame];
         o.T_map_sensor_truth = T_map_sensor_truth;
         o.time_s = truth.sequence.times()[q.frame];
@@ -124,9 +132,11 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
         score(o, reply.T_map_local * q.T_odom_sensor, T_map_sensor_truth, c.thresholds);
         add_timings(timings, reply.timings);
         if (c.print_each)
-          std::printf("frame %5zu  %7.1f m  %-8s %-13s %s inliers %3u support %3u conf %.2f  error %6.3f m %5.2f deg  %6.1f ms%s%s\n",
+          std::printf("frame %5zu  %7.1f m  %-8s %-13s %s inliers %3u support %3u conf %.2f  error %6.3f m %5.2f deg  "
+                      "warp %5.2f m %4.2f deg  %6.1f ms%s%s\n",
                       q.frame, q.odometer_m, mode.c_str(), o.status.c_str(), o.localized ? (o.correct ? "TRUE " : "FALSE") : "     ",
-                      reply.inliers, reply.support, reply.confidence, o.error_m, o.error_deg, o.latency_ms,
+                      reply.inliers, reply.support, reply.confidence, o.error_m, o.error_deg, o.window_warp_m,
+                      o.window_warp_deg, o.latency_ms,
                       o.mapped ? "" : "  (unmapped street)",
                       reply.reason.empty() ? "" : ("  " + reply.reason).c_str());
         run.outcomes.push_back(o);
@@ -154,6 +164,11 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
 void print_summary(const LocalizationRun& run) {
   const Summary& s = run.summary;
   std::printf("\n== %s\n", run.title.c_str());
+  if (run.cloud_poses == io::CloudPoses::kOdometry)
+    std::printf("local clouds: the vehicle's odometry (%s); the reference only scores\n", run.cloud_poses_file.c_str());
+  else
+    std::printf("local clouds: the REFERENCE poses (%s), a comparison only: no vehicle has them, and they flatter "
+                "every figure below\n", run.cloud_poses_file.c_str());
   std::printf("queries %zu (%zu on mapped streets): %zu localized, %zu true, %zu false (> %.1f m or %.1f deg)\n", s.queries,
               s.mapped_queries, s.localized, s.correct, s.false_localizations, Thresholds{}.false_translation_m,
               Thresholds{}.false_rotation_deg);
@@ -208,6 +223,7 @@ void write_localization_report(const LocalizationRun& run, const std::string& ou
   j["title"] = run.title;
   j["replay"] = {{"every_m", run.replay.every_m}, {"warmup_m", run.replay.warmup_m}, {"first", run.replay.first},
                  {"last", run.replay.last}, {"stride", run.replay.stride}};
+  j["local_clouds"] = {{"poses", io::to_string(run.cloud_poses)}, {"file", run.cloud_poses_file}};
   j["queries"] = s.queries;
   j["mapped_queries"] = s.mapped_queries;
   j["localized"] = s.localized;
@@ -230,7 +246,8 @@ void write_localization_report(const LocalizationRun& run, const std::string& ou
                         {"status", o.status},       {"correct", o.correct},       {"error_m", o.error_m},
                         {"error_deg", o.error_deg}, {"latency_ms", o.latency_ms}, {"inliers", o.inliers},
                         {"support", o.support},     {"confidence", o.confidence}, {"mode", o.mode},
-                        {"server_ms", o.server_ms}};
+                        {"server_ms", o.server_ms},   {"window_warp_m", o.window_warp_m},
+                        {"window_warp_deg", o.window_warp_deg}, {"window_points", o.window_points}};
     if (o.localized) {
       const Eigen::Quaterniond r(o.T_map_sensor.linear());
       const Eigen::Vector3d& t = o.T_map_sensor.translation();

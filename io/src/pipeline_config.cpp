@@ -103,6 +103,8 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("point_to_plane", l.refine.point_to_plane);
   v("max_query_points", l.refine.max_query_points);
   v("max_segment_points", l.refine.max_segment_points);
+  v("recent_window_m", l.refine.recent_window_m);
+  v("min_recent_points", l.refine.min_recent_points);
   v.section("localizer");
   v("support_radius_m", l.support_radius_m);
   v("min_support", l.min_support);
@@ -380,6 +382,9 @@ PipelineConfig parse_map_parameters(const std::string& json_text, const std::str
   const json in = json::parse(json_text);  // parsed once already: valid
   if (!(in.contains("refine") && in["refine"].is_object() && in["refine"].contains("max_segment_points")))
     c.localizer.refine.max_segment_points = 0;
+  // Maps written before the recent window answered for the whole cloud: they still do.
+  if (!(in.contains("refine") && in["refine"].is_object() && in["refine"].contains("recent_window_m")))
+    c.localizer.refine.recent_window_m = 0.0f;
   return c;
 }
 

@@ -1,8 +1,10 @@
 #include "segmatch/io/replay.h"
 
 #include "segmatch/core/voxel_accumulator.h"
+#include "segmatch/io/error.h"
 
 #include <cmath>
+#include <filesystem>
 #include <stdexcept>
 
 namespace segmatch {
@@ -15,6 +17,27 @@ void ReplayConfig::validate() const {
   if (last < first) throw std::invalid_argument("ReplayConfig.last must be >= first");
   local_cloud.validate();
   voxel.validate();
+}
+
+const char* to_string(CloudPoses poses) { return poses == CloudPoses::kOdometry ? "odometry" : "reference"; }
+
+CloudPoses parse_cloud_poses(const std::string& name) {
+  if (name == "odometry") return CloudPoses::kOdometry;
+  if (name == "reference") return CloudPoses::kReference;
+  throw std::invalid_argument("cloud poses must be odometry or reference, not '" + name + "'");
+}
+
+std::string odometry_poses_path(const std::string& folder, const std::string& explicit_path) {
+  namespace fs = std::filesystem;
+  if (!explicit_path.empty()) {
+    if (!fs::is_regular_file(explicit_path)) throw IoError(explicit_path + ": odometry poses file not found");
+    return explicit_path;
+  }
+  const fs::path own = fs::path(folder) / "odom_poses.txt";
+  if (fs::is_regular_file(own)) return own.string();
+  throw IoError(folder + ": no odom_poses.txt, and local clouds are built from the vehicle's odometry: give --odometry "
+                "FILE (KITTI or TUM poses), or --cloud-poses reference to build them from the reference poses (a "
+                "comparison only: no vehicle has those)");
 }
 
 void replay_sequence(const Sequence& sequence, const ReplayConfig& config,

@@ -173,6 +173,7 @@ class LocalizeReply:
     matched_segment_ids: List[int] = field(default_factory=list)  # map segment ids of the inliers
     timings: Timings = field(default_factory=Timings)
     refusal: int = 0  # revision 5: a RefusalCode when the request set its refusal-code bit, else 0
+    detail: Optional[ReplyDetail] = None  # revision 6: with the request's detail bit
 
     @property
     def refusal_name(self) -> str:
@@ -204,16 +205,22 @@ class LocalizeReply:
             w.u64(i)
         for f in fields(Timings):
             w.f32(getattr(self.timings, f.name))
+        if self.detail is not None:
+            w.u16(REPLY_DETAIL_BYTES)
+            w.f32(self.detail.window_warp_m)
+            w.f32(self.detail.window_warp_deg)
+            w.u32(self.detail.window_points)
 
     @classmethod
     def _get(cls, r: Reader) -> "LocalizeReply":
         request_id, status, refusal, reason = r.u64(), r.u16(), r.u16(), r.str()  # any refusal code
         pose = Pose(r.f64s(4), r.f64s(3))
         inliers, confidence, support, ids = r.u32(), r.f32(), r.u32(), r.u32()
-        if ids * 8 + len(TIMING_NAMES) * 4 != r.remaining():
+        if ids * 8 + len(TIMING_NAMES) * 4 > r.remaining():
             raise DecodeError(DecodeStatus.TRUNCATED, f"{ids} segment ids and timings in {r.remaining()} bytes")
         matched = [r.u64() for _ in range(ids)]
         timings = Timings(*(r.f32() for _ in TIMING_NAMES))
+        detail = _get_detail(r) if r.remaining() > 0 else None
         pose_status = _pose_status(pose)
         if pose_status:
             raise DecodeError(pose_status, "T_map_local")
@@ -222,4 +229,24 @@ class LocalizeReply:
         if not math.isfinite(confidence):
             raise DecodeError(DecodeStatus.NON_FINITE, "confidence")
         return cls(request_id, LocalizeStatus(status), reason, pose, inliers, confidence, support, matched, timings,
-                   refusal)
+                   refusal, detail)
+
+
+REPLY_DETAIL_BYTES = 12  # revision 6's fields; a later revision's block is longer
+
+
+def _get_detail(r: Reader) -> ReplyDetail:
+    """The detail block: its length, the fields this revision knows, the rest skipped."""
+    size = r.u16()
+    if size > r.remaining():
+        raise DecodeError(DecodeStatus.TRUNCATED, f"detail block of {size} bytes in {r.remaining()}")
+    if size < r.remaining():
+        raise DecodeError(DecodeStatus.TRAILING_BYTES, f"{r.remaining() - size} bytes after the detail block")
+    if size < REPLY_DETAIL_BYTES:
+        raise DecodeError(DecodeStatus.BAD_FIELD, f"detail block of {size} bytes (at least {REPLY_DETAIL_BYTES})")
+    d = ReplyDetail(r.f32(), r.f32(), r.u32())
+    for _ in range(size - REPLY_DETAIL_BYTES):
+        r.u8()  # a later revision's fields
+    if not (math.isfinite(d.window_warp_m) and math.isfinite(d.window_warp_deg)):
+        raise DecodeError(DecodeStatus.NON_FINITE, "window warp")
+    return d

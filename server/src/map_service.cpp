@@ -47,6 +47,10 @@ std::shared_ptr<const LoadedMap> load_map(const std::string& path, const MapLoad
   if (map->metadata.parameters_json.empty())
     throw std::runtime_error(path + ": the map stores no parameters (parameters_json is empty)");
   map->config = io::parse_map_parameters(map->metadata.parameters_json, path + " (parameters_json)");
+  if (options.recent_window_m) {
+    map->config.localizer.refine.recent_window_m = *options.recent_window_m;
+    map->config.localizer.refine.validate();
+  }
   std::shared_ptr<const RandomForestMatcher> classifier = load_classifier(reader);
   MatcherConfig& matcher = map->config.localizer.matcher;
   if (matcher.type == MatcherType::kRandomForest && !classifier) {
@@ -109,6 +113,7 @@ struct RequestFields {
   std::optional<double> heading_tolerance_deg;
   Eigen::Vector3d sensor_local = Eigen::Vector3d::Zero();
   bool refusal_code = false;  // revision 5: LOCALIZE bit 3, LOCALIZE_SEGMENTS bit 2
+  bool detail = false;        // revision 6: LOCALIZE bit 4, LOCALIZE_SEGMENTS bit 3
 };
 
 RequestFields request_fields(const api::LocalizeRequest& r) {
@@ -116,12 +121,14 @@ RequestFields request_fields(const api::LocalizeRequest& r) {
                 r.sensor_position_local};
   if (r.flags & api::kFlagPriorHeading) p.heading_tolerance_deg = r.prior_heading_tolerance_deg;
   p.refusal_code = (r.flags & api::kFlagRefusalCode) != 0;
+  p.detail = (r.flags & api::kFlagDetail) != 0;
   return p;
 }
 
 RequestFields request_fields(const api::LocalizeSegmentsRequest& r) {
   return {(r.flags & api::kSegmentsFlagHasPrior) != 0, r.T_map_local_prior, r.prior_radius_m,
-          r.prior_heading_tolerance_deg, r.sensor_position_local, (r.flags & api::kSegmentsFlagRefusalCode) != 0};
+          r.prior_heading_tolerance_deg, r.sensor_position_local, (r.flags & api::kSegmentsFlagRefusalCode) != 0,
+          (r.flags & api::kSegmentsFlagDetail) != 0};
 }
 
 // A prior with a radius narrows the search (docs/protocol.md 5.4); radius 0 keeps revision 1's
@@ -181,6 +188,7 @@ api::LocalizeReply reply_of(const LoadedMap& map, const LocalizationResult& r, u
   for (const Match& m : r.inliers)
     if (m.target >= 0 && static_cast<size_t>(m.target) < targets.size()) reply.matched_segment_ids.push_back(targets[m.target].id);
   copy_timings(r.timings, reply.timings);
+  if (prior.detail) reply.detail = api::ReplyDetail{r.window_warp_m, r.window_warp_deg, static_cast<uint32_t>(r.window_points)};
   check_prior(prior, reply);
   reply.timings.server_total =
       std::chrono::duration<float, std::milli>(std::chrono::steady_clock::now() - start).count();

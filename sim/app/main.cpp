@@ -67,11 +67,17 @@ void add_keyframe_options(CLI::App& app, KeyframeOptions* k) {
   app.add_option("--keyframe-frames", k->config.frames,
                  "scans integrated per keyframe (default: 5 for livox-avia, 1 for spinning sensors)");
   app.add_option("--odom-drift-pct", k->odom_drift_pct,
-                 "odom_poses.txt (sequences and keyframes) reads every step this % too long (default 0.5; 0 "
-                 "with the two below 0: equal to poses.txt)");
+                 "odom_poses.txt (sequences and keyframes) reads every step this % too long (default 0.2; 0 "
+                 "with the four below 0: equal to poses.txt)");
   app.add_option("--odom-yaw-drift-deg-per-m", k->config.odom_yaw_drift_deg_per_m,
-                 "and turns this much left per metre (default 0.01)");
+                 "and turns this much left per metre (default 0.003)");
   app.add_option("--odom-climb-m-per-m", k->config.odom_climb_m_per_m, "and climbs this much per metre (default 0)");
+  app.add_option("--odom-heading-walk", k->config.odom_heading_walk_deg_per_sqrt_m,
+                 "and its heading takes a random walk of this many deg per sqrt(m) driven (default 0.04: LiDAR-inertial "
+                 "odometry, ~0.4 deg per 100 m; 0: none)");
+  app.add_option("--odom-pitch-walk", k->config.odom_pitch_walk_deg_per_sqrt_m,
+                 "and its pitch one of this many deg per sqrt(m) (default 0.02; 0: none)");
+  app.add_option("--odom-seed", k->config.odom_seed, "seed of those random walks (default 1; mixed with --seed per sequence)");
 }
 
 void print_summary(const sim::DatasetConfig& config, const sim::DatasetSummary& s, const std::string& out) {

@@ -159,6 +159,7 @@ KeyframeSummary write_sequence_keyframes(const DatasetConfig& c, int index, cons
   const fs::path seq = out / "sequences" / nn;
   if (progress) progress("keyframes " + nn, 0, 1);
   KeyframeConfig kc = c.keyframes;
+  kc.odom_seed = mix_seed(c.world.seed, static_cast<uint64_t>(index), c.keyframes.odom_seed);
   kc.frames = keyframe_scan_count(c);
   kc.write_labels = c.write_labels;
   const ScanSource read_back = [&](size_t f) {
@@ -195,6 +196,13 @@ nlohmann::json describe(const DatasetConfig& c, const World& w, const DatasetSum
                                              {"duration_s", t[k]->times_s.back()},
                                              {"T_world_lidar0_translation", {T.translation().x(), T.translation().y(), T.translation().z()}}};
   }
+  const KeyframeConfig& d = c.keyframes;  // the drift of every odom_poses.txt
+  j["odometry"] = {{"scale_error", d.odom_scale_error},
+                   {"yaw_drift_deg_per_m", d.odom_yaw_drift_deg_per_m},
+                   {"climb_m_per_m", d.odom_climb_m_per_m},
+                   {"heading_walk_deg_per_sqrt_m", d.odom_heading_walk_deg_per_sqrt_m},
+                   {"pitch_walk_deg_per_sqrt_m", d.odom_pitch_walk_deg_per_sqrt_m},
+                   {"seed", d.odom_seed}};
   j["revisits"] = {{"frames_01_within_5m_of_00", s.revisit_frames},
                    {"frames_01_beyond_30m_of_00", s.unmapped_frames}};
   j["points"] = s.points;
@@ -279,7 +287,9 @@ DatasetSummary generate_dataset(const DatasetConfig& c, const std::string& out_d
   const World* worlds[2] = {&world, &changed};
   for (int k = 0; k < 2; ++k) {
     const fs::path dir = out / "sequences" / (k == 0 ? "00" : "01");
-    write_sequence_metadata(dir, *trav[k], c.keyframes);
+    KeyframeConfig drift = c.keyframes;  // each sequence's odometry wanders its own way
+    drift.odom_seed = mix_seed(c.world.seed, static_cast<uint64_t>(k), c.keyframes.odom_seed);
+    write_sequence_metadata(dir, *trav[k], drift);
     io::write_kitti_poses((out / "ground_truth" / (k == 0 ? "lidar_poses_00.txt" : "lidar_poses_01.txt")).string(),
                           trav[k]->T_world_lidar);
     write_objects_csv(out / "ground_truth" / (k == 0 ? "objects_00.csv" : "objects_01.csv"), *worlds[k]);

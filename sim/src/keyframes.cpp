@@ -1,6 +1,7 @@
 #include "segmatch/sim/keyframes.h"
 
 #include "segmatch/core/preprocess.h"
+#include "segmatch/core/random.h"
 #include "segmatch/io/cloud_io.h"
 #include "segmatch/io/pose_io.h"
 
@@ -55,6 +56,10 @@ void KeyframeConfig::validate() const {
     throw std::invalid_argument("keyframe odom_yaw_drift_deg_per_m must be in -10..10");
   if (!(std::fabs(odom_climb_m_per_m) <= 0.1))
     throw std::invalid_argument("keyframe odom_climb_m_per_m must be in -0.1..0.1");
+  if (!(odom_heading_walk_deg_per_sqrt_m >= 0.0 && odom_heading_walk_deg_per_sqrt_m <= 10.0))
+    throw std::invalid_argument("keyframe odom_heading_walk_deg_per_sqrt_m must be in 0..10");
+  if (!(odom_pitch_walk_deg_per_sqrt_m >= 0.0 && odom_pitch_walk_deg_per_sqrt_m <= 10.0))
+    throw std::invalid_argument("keyframe odom_pitch_walk_deg_per_sqrt_m must be in 0..10");
 }
 
 int default_keyframe_frames(const LidarModel& model) { return model.pattern == ScanPattern::kRosette ? 5 : 1; }
@@ -72,19 +77,25 @@ std::vector<size_t> keyframe_frames(const Traversal& traversal, double every_m, 
 
 Poses drifted_odometry(const Poses& T_world_sensor, const KeyframeConfig& c) {
   // No drift: the very same poses (composing the steps again would round differently).
-  if (c.odom_scale_error == 0.0 && c.odom_yaw_drift_deg_per_m == 0.0 && c.odom_climb_m_per_m == 0.0)
+  if (c.odom_scale_error == 0.0 && c.odom_yaw_drift_deg_per_m == 0.0 && c.odom_climb_m_per_m == 0.0 &&
+      c.odom_heading_walk_deg_per_sqrt_m == 0.0 && c.odom_pitch_walk_deg_per_sqrt_m == 0.0)
     return T_world_sensor;
   Poses out;
   if (T_world_sensor.empty()) return out;
+  Rng walk(c.odom_seed);
+  constexpr double kRad = kPi / 180.0;
+  double pitch_deg = 0.0;  // the walk's current pitch error: it slants the steps, not the attitude
   out.push_back(T_world_sensor.front());
   for (size_t k = 1; k < T_world_sensor.size(); ++k) {
     const Pose3d step = T_world_sensor[k - 1].inverse() * T_world_sensor[k];
     const double length_m = step.translation().norm();
+    const double root = std::sqrt(length_m);
+    const double yaw = c.odom_yaw_drift_deg_per_m * length_m + c.odom_heading_walk_deg_per_sqrt_m * root * walk.normal();
+    pitch_deg += c.odom_pitch_walk_deg_per_sqrt_m * root * walk.normal();
     Pose3d read = step;
     read.translation() *= 1.0 + c.odom_scale_error;
-    read.translation().z() += c.odom_climb_m_per_m * length_m;
-    read.linear() = Eigen::AngleAxisd(c.odom_yaw_drift_deg_per_m * length_m * kPi / 180.0, Eigen::Vector3d::UnitZ())
-                        .toRotationMatrix() * step.linear();
+    read.translation().z() += (c.odom_climb_m_per_m + std::tan(pitch_deg * kRad)) * length_m;
+    read.linear() = Eigen::AngleAxisd(yaw * kRad, Eigen::Vector3d::UnitZ()).toRotationMatrix() * step.linear();
     out.push_back(out.back() * read);
   }
   return out;

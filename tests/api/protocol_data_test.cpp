@@ -81,7 +81,8 @@ const std::set<std::string> kFiles = {
     "hello.bin", "hello_ok.bin", "ping.bin", "pong.bin", "info.bin", "info_reply.bin",
     "localize_global.bin", "localize_prior_voxelized.bin", "localize_segments.bin",
     "localize_reply_localized.bin", "localize_reply_not_localized.bin", "localize_reply_outside_prior.bin",
-    "localize_refusal_code.bin", "localize_reply_refused.bin", "error.bin"};
+    "localize_refusal_code.bin", "localize_reply_refused.bin", "localize_detail.bin", "localize_reply_detail.bin",
+    "error.bin"};
 
 }  // namespace
 
@@ -220,6 +221,35 @@ TEST(ProtocolData, LocalizeReplies) {
   refused.reason = "ambiguous: two distinct poses are supported by 16 and 15 query segments";
   check_file<LocalizeReply>("localize_reply_refused.bin", refused,
                             [](const LocalizeReply& m) { EXPECT_EQ(static_cast<int>(m.refusal), 6); });
+}
+
+// Revision 6: a request that asks for the detail block, and a localized reply carrying one.
+TEST(ProtocolData, LocalizeDetail) {
+  LocalizeRequest asks;
+  asks.request_id = 13;
+  asks.flags = kFlagDetail;
+  asks.sensor_position_local = Eigen::Vector3d(0.25, -1.5, 1.75);
+  asks.sensor_orientation_local = Eigen::Quaterniond(0.5, 0.5, -0.5, 0.5);
+  asks.point_stride = 3;
+  asks.points = {{1, 2, 3, 0}, {-4.5f, 0.25f, 10, 0}, {12.125f, -7, 0.5f, 0}, {0.1f, 0.2f, 0.3f, 0}};
+  check_file<LocalizeRequest>("localize_detail.bin", asks, [](const LocalizeRequest& m) { EXPECT_EQ(m.flags, 16u); });
+
+  LocalizeReply with;
+  with.request_id = 13;
+  with.status = LocalizeStatus::kLocalized;
+  with.T_map_local = pose(-M_PI / 2, Eigen::Vector3d(162.5, 84.25, 3.5));
+  with.inliers = 3;
+  with.confidence = 0.875f;
+  with.support = 12;
+  with.matched_segment_ids = {4, 17, 1099511627776ull};
+  with.timings = timings();
+  with.detail = ReplyDetail{0.375f, 0.25f, 1234};
+  check_file<LocalizeReply>("localize_reply_detail.bin", with, [](const LocalizeReply& m) {
+    ASSERT_TRUE(m.detail.has_value());
+    EXPECT_EQ(m.detail->window_warp_m, 0.375f);
+    EXPECT_EQ(m.detail->window_warp_deg, 0.25f);
+    EXPECT_EQ(m.detail->window_points, 1234u);
+  });
 }
 
 TEST(ProtocolData, Error) {

@@ -129,6 +129,10 @@ TEST(PipelineConfig, StoredMapParametersKeepTheBehaviourTheyWereBuiltWith) {
             20000);
   const std::string old_map = R"({"preset": "kitti-hdl64", "refine": {"max_query_points": 2000}})";
   EXPECT_EQ(segmatch::io::parse_map_parameters(old_map, "old map").localizer.refine.max_segment_points, 0);
+  // ... and answers for its whole cloud, as it did: the recent window came after it.
+  EXPECT_EQ(segmatch::io::parse_map_parameters(old_map, "old map").localizer.refine.recent_window_m, 0.0f);
+  EXPECT_EQ(segmatch::io::parse_map_parameters(segmatch::io::to_json(today), "new map").localizer.refine.recent_window_m,
+            today.localizer.refine.recent_window_m);
   EXPECT_EQ(segmatch::io::parse_pipeline_config(old_map, "a config file").localizer.refine.max_segment_points, 20000)
       << "a config file that leaves it out gets today's default";
 }

@@ -43,6 +43,7 @@ Poses drifted(const Poses& truth) {
   drift.odom_scale_error = 0.003;
   drift.odom_yaw_drift_deg_per_m = 0.002;
   drift.odom_climb_m_per_m = 0.002;
+  drift.odom_heading_walk_deg_per_sqrt_m = drift.odom_pitch_walk_deg_per_sqrt_m = 0;
   return drifted_odometry(truth, drift);
 }
 

@@ -29,6 +29,7 @@ Poses drifted(const Poses& truth, double scale_error = 0.0) {
   drift.odom_scale_error = scale_error;
   drift.odom_yaw_drift_deg_per_m = 0.002;
   drift.odom_climb_m_per_m = 0.002;
+  drift.odom_heading_walk_deg_per_sqrt_m = drift.odom_pitch_walk_deg_per_sqrt_m = 0;
   return sim::drifted_odometry(truth, drift);
 }
 
@@ -209,6 +210,7 @@ TEST(PoseGraph, GravityPriorKeepsTheTrajectoryLevel) {
   climb.odom_scale_error = 0;
   climb.odom_yaw_drift_deg_per_m = 0;
   climb.odom_climb_m_per_m = 0.002;
+  climb.odom_heading_walk_deg_per_sqrt_m = climb.odom_pitch_walk_deg_per_sqrt_m = 0;
   const Poses odom = sim::drifted_odometry(truth, climb);
   auto vertical_rmse = [&](const PoseGraphConfig& c) {
     PoseGraph g = graph_with_true_loops(odom, truth, c);

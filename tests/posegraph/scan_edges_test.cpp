@@ -103,6 +103,7 @@ struct ScaleCase {
     drift.odom_scale_error = 0.01;  // every step 1 % long, nothing else
     drift.odom_yaw_drift_deg_per_m = 0;
     drift.odom_climb_m_per_m = 0;
+    drift.odom_heading_walk_deg_per_sqrt_m = drift.odom_pitch_walk_deg_per_sqrt_m = 0;
     odom = drifted_odometry(truth, drift);
     graph = odometry_graph(odom, config);
     const size_t lap = truth.size() / 2;

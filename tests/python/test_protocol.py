@@ -62,6 +62,9 @@ EXPECTED = {
     "localize_reply_refused.bin": p.LocalizeReply(
         12, p.LocalizeStatus.NOT_LOCALIZED, "ambiguous: two distinct poses are supported by 16 and 15 query segments",
         Pose(), 0, 0.0, 0, [], TIMINGS, refusal=p.RefusalCode.AMBIGUOUS),
+    "localize_detail.bin": p.Localize(13, p.FLAG_DETAIL, (0.25, -1.5, 1.75), (0.5, 0.5, -0.5, 0.5),
+                                      points=pts([[1, 2, 3], [-4.5, 0.25, 10], [12.125, -7, 0.5], [0.1, 0.2, 0.3]])),
+    "localize_reply_detail.bin": localized_reply(request_id=13, detail=p.ReplyDetail(0.375, 0.25, 1234)),
     "error.bin": p.Error(ErrorCode.NON_FINITE, "NaN or Inf value"),
 }
 

@@ -166,10 +166,39 @@ TEST(Keyframes, IntegratingFramesAddsPoints) {
   EXPECT_GT(mean_points(b), 1.5 * mean_points(a));
 }
 
+// The default odometry drifts like a LiDAR-inertial one (KeyframeConfig): over 100 m of a
+// straight drive, 0.3-1 deg of heading and 0.5-2 m of position on average over seeds; the same
+// seed gives the same poses, another seed others; roll and pitch stay level (gravity).
+TEST(Keyframes, DefaultOdometryWandersLikeLidarInertialOdometry) {
+  Poses line;
+  for (int i = 0; i <= 100; ++i) line.push_back(Pose3d(Eigen::Translation3d(double(i), 0, 0)));
+  KeyframeConfig c;
+  double heading_deg = 0.0, position_m = 0.0;
+  constexpr int kSeeds = 200;
+  for (int seed = 1; seed <= kSeeds; ++seed) {
+    c.odom_seed = static_cast<uint64_t>(seed);
+    const Pose3d end = drifted_odometry(line, c).back();
+    heading_deg += std::abs(std::atan2(end.linear()(1, 0), end.linear()(0, 0))) * 180.0 / M_PI / kSeeds;
+    position_m += (end.translation() - line.back().translation()).norm() / kSeeds;
+    EXPECT_NEAR(end.linear()(2, 2), 1.0, 1e-12) << "roll and pitch stay level";
+  }
+  EXPECT_GE(heading_deg, 0.3);
+  EXPECT_LE(heading_deg, 1.0);
+  EXPECT_GE(position_m, 0.5);
+  EXPECT_LE(position_m, 2.0);
+  c.odom_seed = 7;
+  const Poses a = drifted_odometry(line, c), b = drifted_odometry(line, c);
+  c.odom_seed = 8;
+  const Poses other = drifted_odometry(line, c);
+  EXPECT_TRUE(a.back().isApprox(b.back(), 1e-15));
+  EXPECT_FALSE(a.back().isApprox(other.back(), 1e-9));
+}
+
 TEST(Keyframes, OdometryDriftIsSystematicAndCanBeOff) {
   Poses line;
   for (int i = 0; i <= 10; ++i) line.push_back(Pose3d(Eigen::Translation3d(double(i), 0, 0)));
   KeyframeConfig c;
+  c.odom_heading_walk_deg_per_sqrt_m = c.odom_pitch_walk_deg_per_sqrt_m = 0;
   c.odom_scale_error = 0.01;
   c.odom_yaw_drift_deg_per_m = 0.0;
   EXPECT_NEAR(drifted_odometry(line, c).back().translation().x(), 10.1, 1e-9);
@@ -246,6 +275,7 @@ TEST(SimCli, LivoxKeyframesFromTheCommandLine) {
   const auto r = test::run_command(bin + " --preset tiny --sensor livox-avia --speed-mps 1.5 --length-00-m 50 "
                                          "--length-01-m 50 --keyframes-every-m 2 --keyframe-leaf-m 0.25 "
                                          "--keyframe-frames 3 --odom-drift-pct 0 --odom-yaw-drift-deg-per-m 0 "
+                                         "--odom-heading-walk 0 --odom-pitch-walk 0 "
                                          "--no-images --out " + dir.path().string());
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_NE(r.output.find("keyframes:"), std::string::npos) << r.output;

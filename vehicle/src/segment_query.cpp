@@ -40,6 +40,7 @@ api::LocalizeSegmentsRequest SegmentQuery::make_request(const api::LocalizeReque
   r.request_id = c.request_id;
   if (c.flags & api::kFlagHasPrior) r.flags |= api::kSegmentsFlagHasPrior;
   if (send_esf_) r.flags |= api::kSegmentsFlagEsf;
+  if (c.flags & api::kFlagDetail) r.flags |= api::kSegmentsFlagDetail;
   r.sensor_position_local = c.sensor_position_local;
   r.sensor_orientation_local = c.sensor_orientation_local;
   r.T_map_local_prior = c.T_map_local_prior;

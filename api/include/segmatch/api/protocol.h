@@ -13,6 +13,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -23,7 +24,7 @@ constexpr std::array<uint8_t, 4> kMagic = {'S', 'G', 'M', 'Q'};
 constexpr uint16_t kProtocolVersion = 1;
 // The protocol document's revision (docs/protocol.md, History): messages, flag bits and error
 // codes added compatibly since version 1. The frame header still says kProtocolVersion.
-constexpr int kProtocolRevision = 5;
+constexpr int kProtocolRevision = 6;
 constexpr size_t kHeaderBytes = 12;
 
 enum class MessageType : uint16_t {
@@ -128,7 +129,9 @@ constexpr uint32_t kFlagPriorHeading = 1u << 2;
 // Revision 5: the reply carries a RefusalCode (docs/protocol.md 6.4). A server of revision 4
 // or older answers MALFORMED to it.
 constexpr uint32_t kFlagRefusalCode = 1u << 3;
-constexpr uint32_t kKnownFlags = kFlagHasPrior | kFlagVoxelized | kFlagPriorHeading | kFlagRefusalCode;
+// Revision 6: the reply carries a ReplyDetail block (docs/protocol.md 6.4).
+constexpr uint32_t kFlagDetail = 1u << 4;
+constexpr uint32_t kKnownFlags = kFlagHasPrior | kFlagVoxelized | kFlagPriorHeading | kFlagRefusalCode | kFlagDetail;
 
 struct LocalizeRequest {
   uint64_t request_id = 0;
@@ -156,7 +159,9 @@ struct LocalizeRequest {
 constexpr uint32_t kSegmentsFlagHasPrior = 1u << 0;  // as LOCALIZE bit 0 (heading tolerance always sent)
 constexpr uint32_t kSegmentsFlagEsf = 1u << 1;       // every segment carries its ESF histogram
 constexpr uint32_t kSegmentsFlagRefusalCode = 1u << 2;  // revision 5, as LOCALIZE bit 3
-constexpr uint32_t kKnownSegmentsFlags = kSegmentsFlagHasPrior | kSegmentsFlagEsf | kSegmentsFlagRefusalCode;
+constexpr uint32_t kSegmentsFlagDetail = 1u << 3;       // revision 6, as LOCALIZE bit 4
+constexpr uint32_t kKnownSegmentsFlags =
+    kSegmentsFlagHasPrior | kSegmentsFlagEsf | kSegmentsFlagRefusalCode | kSegmentsFlagDetail;
 constexpr int kPointStepExponentMin = -16;  // finest point step 2^-16 m (15 um)
 constexpr int kPointStepExponentMax = 10;
 constexpr int kEsfExponentMin = -64;
@@ -210,6 +215,17 @@ struct ModuleTimingsMs {
 };
 constexpr size_t kTimingCount = 10;
 
+// Revision 6 (docs/protocol.md 6.4): what the localizer measured beyond the pose, sent only to
+// a request that sets its detail bit. The block carries its own length, so later revisions
+// append fields to it and a decoder skips those it does not know.
+struct ReplyDetail {
+  // How far the whole local cloud's pose and its recent window's differ at the sensor (the
+  // vehicle odometry's warp over the cloud), and the window's matched points (0: no window).
+  float window_warp_m = 0.f, window_warp_deg = 0.f;
+  uint32_t window_points = 0;
+};
+constexpr size_t kReplyDetailBytes = 12;  // revision 6's fields
+
 struct LocalizeReply {
   uint64_t request_id = 0;
   LocalizeStatus status = LocalizeStatus::kNotLocalized;
@@ -221,6 +237,7 @@ struct LocalizeReply {
   uint32_t support = 0;
   std::vector<uint64_t> matched_segment_ids;  // map segment ids of the inliers
   ModuleTimingsMs timings;
+  std::optional<ReplyDetail> detail;  // with the request's detail bit (revision 6)
 };
 
 struct ErrorReply {

@@ -90,6 +90,14 @@ struct RefineConfig {
   // its segments (docs/protocol.md 5.5): both paths refine on the same points, and the request
   // stays a few hundred kilobytes (a 60 m HDL-64E cylinder has ~110k points in its segments).
   int max_segment_points = 20000;
+  // The answer is the sensor's pose now, not the whole local cloud's (beyond the paper): the
+  // vehicle's odometry built the cloud and drifts along it, so the pose that best aligns all of
+  // it is off at the sensor by the drift accumulated over the window. After the whole-cloud
+  // refinement the matched query points within recent_window_m (horizontal) of the sensor are
+  // refined alone, starting from the whole cloud's pose; with fewer than min_recent_points of
+  // them, or a worse fitness than the floor, the whole-cloud pose stands. 0: off.
+  float recent_window_m = 30.0f;
+  int min_recent_points = 200;
   void validate() const;  // throws std::invalid_argument naming the field
 };
 

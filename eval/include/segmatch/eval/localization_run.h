@@ -28,9 +28,11 @@ struct LocalizationRunConfig {
   io::ReplayConfig replay;
   Thresholds thresholds;
   bool print_each = true;   // one line per query on stdout
-  // The vehicle's odometry (poses file of the query sequence, e.g. its odom_poses.txt): the
-  // local clouds are accumulated with it, while the sequence's poses stay the reference. Empty:
-  // the reference poses themselves (perfect odometry).
+  // The local clouds are accumulated with the vehicle's odometry, as on a car: odometry_path,
+  // or the replayed sequence's odom_poses.txt when empty (io::odometry_poses_path). The
+  // sequence's poses only score. kReference builds them from the reference poses instead (a
+  // comparison: it flatters every figure), and the report says so.
+  io::CloudPoses cloud_poses = io::CloudPoses::kOdometry;
   std::string odometry_path;
   // Tracking between fixes (api::Tracker): each query's prior comes from the last fix.
   bool track = false;
@@ -50,6 +52,8 @@ struct LocalizationRun {
   std::vector<Eigen::Vector3d> map_trajectory;
   std::string title;
   io::ReplayConfig replay;  // as run, so that a regression test can replay the same queries
+  io::CloudPoses cloud_poses = io::CloudPoses::kOdometry;
+  std::string cloud_poses_file;  // the poses file the local clouds were built with
   // From the first localization on (tracking's figure: a pose carried by odometry alone is not
   // a localization): queries, and those the server answered LOCALIZED.
   size_t after_first_fix = 0, localized_after_first_fix = 0;

@@ -36,6 +36,10 @@ struct QueryOutcome {
   std::string status;                // the localizer's status word, for reports
   std::string mode = "global";       // how the query was asked: global, tracked (Tracker), gnss
   double server_ms = 0.0;            // the server's own time (server_total)
+  // The reply's detail (docs/protocol.md 6.4): how far the whole local cloud's pose and its
+  // recent window's differ at the sensor (the odometry's warp over the cloud). 0 without.
+  double window_warp_m = 0.0, window_warp_deg = 0.0;
+  uint32_t window_points = 0;
   Eigen::Vector3d truth_xy = Eigen::Vector3d::Zero();     // map-frame truth position
   Eigen::Vector3d estimate_xy = Eigen::Vector3d::Zero();  // map-frame estimate when localized
   Pose3d T_map_sensor = Pose3d::Identity();              // the estimate when localized

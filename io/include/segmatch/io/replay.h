@@ -12,6 +12,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <string>
 
 namespace segmatch {
 namespace io {
@@ -39,6 +40,19 @@ struct ReplayQuery {
   PointCloud cloud_odom;                    // the local cylinder, odometry frame
   bool voxelized = false;                   // cloud_odom holds voxel centroids (config.voxelize)
 };
+
+// Which poses put a replayed query's scans into its local cloud. A vehicle has only its own
+// odometry; the sequence's reference poses (poses.txt) build clouds no vehicle could, which
+// flatters every figure, and serve only to compare.
+enum class CloudPoses { kOdometry, kReference };
+const char* to_string(CloudPoses poses);
+// Parses "odometry" / "reference"; throws std::invalid_argument naming the value otherwise.
+CloudPoses parse_cloud_poses(const std::string& name);
+
+// The odometry a replay of `folder` builds its local clouds with: `explicit_path` when given
+// (it must exist), else folder/odom_poses.txt. Throws IoError naming what is missing and the
+// way out (--odometry FILE, or --cloud-poses reference to compare) when there is none.
+std::string odometry_poses_path(const std::string& folder, const std::string& explicit_path);
 
 // Calls visit(query) for every query in order; visit returns false to stop early. progress
 // (optional) gets (scans done, scans total). Throws IoError on an unreadable scan.

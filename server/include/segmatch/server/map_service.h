@@ -49,6 +49,9 @@ enum class MapPoints { kLazy, kMemory };
 struct MapLoadOptions {
   MapPoints points = MapPoints::kLazy;
   size_t cache_points = 2'000'000;  // kLazy: points kept cached (16 bytes each)
+  // Serve with this refine.recent_window_m instead of the map's (a what-if on a stored map:
+  // segmatch-eval localize --recent-window-m). Empty: the map's.
+  std::optional<float> recent_window_m;
 };
 
 // Throws (storage::StorageError, io::IoError or std::runtime_error, each naming the file) when

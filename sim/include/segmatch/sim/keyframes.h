@@ -29,15 +29,26 @@ struct KeyframeConfig {
   float leaf_m = 0.2f;   // voxel edge of the downsampling: one centroid per occupied voxel
   int frames = 0;        // consecutive scans integrated per keyframe, ending at it;
                          // 0: the sensor's default (default_keyframe_frames)
-  // Drift of odom_poses.txt. Systematic, so the same every run: every keyframe-to-keyframe
+  // Drift of odom_poses.txt. A systematic part, the same every run: every keyframe-to-keyframe
   // step is read odom_scale_error too long and turned odom_yaw_drift_deg_per_m per metre of
   // the step to the left (an uncalibrated wheel / IMU bias rather than white noise).
-  // hku-loop1's odometry ends 0.3 m / 0.4 deg off after 64 m: ~0.5 % and ~0.006 deg/m.
-  // Both 0: odom_poses.txt equals poses.txt.
-  double odom_scale_error = 0.005;
-  double odom_yaw_drift_deg_per_m = 0.01;
+  // All terms 0 (with the walks below): odom_poses.txt equals poses.txt.
+  double odom_scale_error = 0.002;
+  double odom_yaw_drift_deg_per_m = 0.003;
   // ... and climbs this much per metre of the step (LiDAR odometry drifts in height too).
   double odom_climb_m_per_m = 0.0;
+  // LiDAR-inertial odometry also wanders: heading and pitch take a random walk, each step
+  // adding a Gaussian angle of this many degrees times the square root of its length (a
+  // walk's spread grows with the root of the distance: 0.04 gives 0.4 deg per 100 m). The
+  // heading error turns the odometry; the pitch error only slants its steps (height drift): an
+  // IMU's gravity keeps LiDAR-inertial roll and pitch from drifting, and so does the walk. With the
+  // systematic terms above, about 0.3-1 deg and 0.5-1 m per 100 m, as FAST-LIO-like odometry
+  // drifts (hku-loop1: 0.3 m / 0.4 deg over 64 m; riverside02: 0.19 m / 0.27 deg per 90 m, up
+  // to 2.3 m / 1.3 deg per 170 m). Seeded by odom_seed (the dataset mixes in the world seed and
+  // the sequence). 0: none.
+  double odom_heading_walk_deg_per_sqrt_m = 0.04;
+  double odom_pitch_walk_deg_per_sqrt_m = 0.02;
+  uint64_t odom_seed = 1;
   bool write_labels = true;  // label field in the PCDs (majority ground-truth label per voxel)
 
   void validate() const;  // throws std::invalid_argument naming the bad field
@@ -52,8 +63,8 @@ int default_keyframe_frames(const LidarModel& model);
 // first scan at least every_m (straight line) from the previous keyframe.
 std::vector<size_t> keyframe_frames(const Traversal& traversal, double every_m, int frames);
 
-// Odometry poses with the systematic drift of `config` applied to every step between
-// consecutive poses; the first pose is kept.
+// Odometry poses with the drift of `config` (systematic terms and the seeded random walk)
+// applied to every step between consecutive poses; the first pose is kept.
 Poses drifted_odometry(const Poses& T_world_sensor, const KeyframeConfig& config);
 
 struct KeyframeSummary {
