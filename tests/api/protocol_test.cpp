@@ -274,7 +274,7 @@ TEST(Protocol, RejectsReservedFlagsAndOverlongStrings) {
   std::vector<uint8_t> f = encode(some_request());
   put_u32(f, kOffFlags, 0x80000001u);
   EXPECT_EQ(decode_request(f), DecodeStatus::kBadField);
-  put_u32(f, kOffFlags, 1u << 4);  // the first bit not defined by revision 5 (docs/protocol.md 8)
+  put_u32(f, kOffFlags, 1u << 5);  // the first bit not defined by revision 6 (docs/protocol.md 8)
   EXPECT_EQ(decode_request(f), DecodeStatus::kBadField);
   put_u32(f, kOffFlags, kFlagRefusalCode);  // revision 5's bit 3, no trailer
   EXPECT_EQ(decode_request(f), DecodeStatus::kOk);

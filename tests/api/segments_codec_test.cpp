@@ -220,7 +220,7 @@ TEST(SegmentsCodec, RefusesNonFiniteValuesBadFlagsAndExponents) {
   std::memcpy(&f[kOffRadius], &negative, 8);
   EXPECT_EQ(decode_request(f), DecodeStatus::kBadField);
   f = good;
-  put_u32(f, kOffFlags, kSegmentsFlagHasPrior | kSegmentsFlagEsf | 8u);
+  put_u32(f, kOffFlags, kSegmentsFlagHasPrior | kSegmentsFlagEsf | 16u);  // bit 4: not defined by revision 6
   EXPECT_EQ(decode_request(f), DecodeStatus::kBadField);
   f = good;
   f[kOffFirstSegment + 44] = static_cast<uint8_t>(int8_t{11});  // point step 2^11 m

@@ -196,7 +196,7 @@ class MalformedFrames(unittest.TestCase):
         struct.pack_into("<d", f, H + 124, math.inf)
         self.assertEqual(status_of(f), DecodeStatus.NON_FINITE, "radius")
         f = localize_frame()
-        struct.pack_into("<I", f, H + 8, 1 << 4)  # the first bit revision 5 does not define
+        struct.pack_into("<I", f, H + 8, 1 << 5)  # the first bit revision 6 does not define
         self.assertEqual(status_of(f), DecodeStatus.BAD_FIELD, "unknown flag bit")
         f = localize_frame(prior_heading_tolerance_deg=-1.0, flags=p.FLAG_PRIOR_HEADING)
         self.assertEqual(status_of(f), DecodeStatus.BAD_FIELD, "negative heading tolerance")
