@@ -158,6 +158,17 @@ class Timings:
 
 
 @dataclass
+class ReplyDetail:
+    """LOCALIZE_REPLY's detail block (revision 6, docs/protocol.md 6.4), sent to a request that set
+    its detail bit: how far the whole local cloud's pose and its recent window's put the sensor
+    apart (the vehicle odometry's warp over the cloud), and the window's matched points."""
+
+    window_warp_m: float = 0.0
+    window_warp_deg: float = 0.0
+    window_points: int = 0
+
+
+@dataclass
 class LocalizeReply:
     """LOCALIZE_REPLY (docs/protocol.md 6.4). T_map_local (4x4) maps local-frame points into the
     map; the sensor's map pose is T_map_local @ T_local_sensor. pose holds the wire values."""
