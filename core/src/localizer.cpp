@@ -63,6 +63,14 @@ std::vector<PoseHypothesis> within_prior(std::vector<PoseHypothesis> hypotheses,
   return kept;
 }
 
+// The map segments whose centroids lie within radius_m of center, horizontally.
+std::vector<int> targets_within_disc(const Segments& targets, const Eigen::Vector3d& center, double radius_m) {
+  std::vector<int> out;
+  for (size_t t = 0; t < targets.size(); ++t)
+    if ((targets[t].centroid.cast<double>() - center).head<2>().norm() <= radius_m) out.push_back(static_cast<int>(t));
+  return out;
+}
+
 // Per query segment, the map segments lying where the prior, within its tolerances, puts it
 // (see PosePrior). Targets are first cut to the horizontal disc that can hold any of them.
 std::vector<std::vector<int>> targets_near_prior(const Segments& query, const Segments& targets,
@@ -71,10 +79,7 @@ std::vector<std::vector<int>> targets_near_prior(const Segments& query, const Se
   const Eigen::Vector3d s = sensor.cast<double>(), s_map = prior.T_map_query * s;
   double reach = 0.0;
   for (const Segment& q : query) reach = std::max(reach, (q.centroid.cast<double>() - s).norm());
-  const double disc = reach * (1.0 + angle) + prior.radius_m;
-  std::vector<int> nearby;
-  for (size_t t = 0; t < targets.size(); ++t)
-    if ((targets[t].centroid.cast<double>() - s_map).head<2>().norm() <= disc) nearby.push_back(static_cast<int>(t));
+  const std::vector<int> nearby = targets_within_disc(targets, s_map, reach * (1.0 + angle) + prior.radius_m);
   std::vector<std::vector<int>> allowed(query.size());
   for (size_t qi = 0; qi < query.size(); ++qi) {
     const Eigen::Vector3d q = query[qi].centroid.cast<double>();
@@ -126,27 +131,26 @@ float confidence_of(size_t support, int min_support, float fitness) {
   return static_cast<float>((1.0 - std::exp(-extra / 3.0)) * fitness);
 }
 
-// The sensor's pose now (RefineConfig::recent_window_m): the matched query points near the
-// sensor refined alone from the whole cloud's pose. The odometry that built the cloud drifted
-// between its oldest scans and the sensor; near the sensor that drift is small.
-// Every query segment's points near the sensor, and every map segment's near where the pose
-// puts it (a margin for segments that straddle the window's edge): the window alone has fewer
-// matched segments than the whole cloud, so it takes all it has.
+// The recent window's points (RefineConfig::recent_window_m): every query segment's points
+// near the sensor, and every map segment's near where the pose puts the sensor (a margin for
+// segments that straddle the window's edge). The window has fewer matched segments than the
+// whole cloud, so it takes all it has, not only the supporting ones.
 struct WindowPoints {
   PointCloud query, targets;
 };
 WindowPoints window_points(const Segments& query, const Segments& targets, const TargetPoints* source,
                            const Eigen::Vector3d& sensor, const Pose3d& T_map_query, size_t stride, float window_m) {
+  constexpr double kMarginM = 10.0;
   Matches all_query, near_targets;
   for (size_t i = 0; i < query.size(); ++i) all_query.push_back({static_cast<int>(i), 0});
-  const Eigen::Vector3d center = T_map_query * sensor;
-  const double reach = window_m + 10.0;
-  for (size_t t = 0; t < targets.size(); ++t)
-    if ((targets[t].centroid.cast<double>() - center).head<2>().norm() <= reach) near_targets.push_back({0, static_cast<int>(t)});
+  for (int t : targets_within_disc(targets, T_map_query * sensor, window_m + kMarginM)) near_targets.push_back({0, t});
   return {crop_cylinder(gather(query, all_query, true, stride), sensor, window_m),
           gather(targets, near_targets, false, 1, source)};
 }
 
+// The sensor's pose now: the window refined alone from the whole cloud's pose. The odometry
+// that built the cloud drifted between its oldest scans and the sensor; near the sensor that
+// drift is small.
 void refine_recent_window(const WindowPoints& points, const Eigen::Vector3f& sensor, float min_fitness,
                           const RefineConfig& config, LocalizationResult& r) {
   const Eigen::Vector3d s = sensor.cast<double>();

@@ -50,6 +50,20 @@ ModuleTimingsMs timings() {
   return t;
 }
 
+// The localized reply of localize_reply_localized.bin, with another request id.
+LocalizeReply localized_reply(uint64_t request_id) {
+  LocalizeReply r;
+  r.request_id = request_id;
+  r.status = LocalizeStatus::kLocalized;
+  r.T_map_local = pose(-M_PI / 2, Eigen::Vector3d(162.5, 84.25, 3.5));
+  r.inliers = 3;
+  r.confidence = 0.875f;
+  r.support = 12;
+  r.matched_segment_ids = {4, 17, 1099511627776ull};
+  r.timings = timings();
+  return r;
+}
+
 // Checks (or, when writing, first writes) one file: it equals encode(expected), decodes, and the
 // decoded message re-encodes to the same bytes; `fields` checks values the bytes alone don't show.
 template <typename M>
@@ -182,15 +196,7 @@ TEST(ProtocolData, LocalizeSegments) {
 }
 
 TEST(ProtocolData, LocalizeReplies) {
-  LocalizeReply ok;
-  ok.request_id = 7;
-  ok.status = LocalizeStatus::kLocalized;
-  ok.T_map_local = pose(-M_PI / 2, Eigen::Vector3d(162.5, 84.25, 3.5));
-  ok.inliers = 3;
-  ok.confidence = 0.875f;
-  ok.support = 12;
-  ok.matched_segment_ids = {4, 17, 1099511627776ull};
-  ok.timings = timings();
+  const LocalizeReply ok = localized_reply(7);
   check_file<LocalizeReply>("localize_reply_localized.bin", ok, [](const LocalizeReply& m) {
     EXPECT_EQ(m.status, LocalizeStatus::kLocalized);
     EXPECT_NEAR(m.T_map_local(1, 0), -1.0, 1e-15) << "yaw -90 deg";
@@ -234,15 +240,7 @@ TEST(ProtocolData, LocalizeDetail) {
   asks.points = {{1, 2, 3, 0}, {-4.5f, 0.25f, 10, 0}, {12.125f, -7, 0.5f, 0}, {0.1f, 0.2f, 0.3f, 0}};
   check_file<LocalizeRequest>("localize_detail.bin", asks, [](const LocalizeRequest& m) { EXPECT_EQ(m.flags, 16u); });
 
-  LocalizeReply with;
-  with.request_id = 13;
-  with.status = LocalizeStatus::kLocalized;
-  with.T_map_local = pose(-M_PI / 2, Eigen::Vector3d(162.5, 84.25, 3.5));
-  with.inliers = 3;
-  with.confidence = 0.875f;
-  with.support = 12;
-  with.matched_segment_ids = {4, 17, 1099511627776ull};
-  with.timings = timings();
+  LocalizeReply with = localized_reply(13);
   with.detail = ReplyDetail{0.375f, 0.25f, 1234};
   check_file<LocalizeReply>("localize_reply_detail.bin", with, [](const LocalizeReply& m) {
     ASSERT_TRUE(m.detail.has_value());
