@@ -39,6 +39,9 @@ void LocalCloudConfig::validate() const {
   if (!(subsample_leaf_m >= 0.0) || !std::isfinite(subsample_leaf_m)) {
     throw std::invalid_argument("LocalCloudConfig.subsample_leaf_m must be >= 0");
   }
+  if (!(max_scan_age_m >= 0.0) || !std::isfinite(max_scan_age_m)) {
+    throw std::invalid_argument("LocalCloudConfig.max_scan_age_m must be >= 0 (0: no limit)");
+  }
 }
 
 LocalCloud::LocalCloud(const LocalCloudConfig& config) : config_(config) { config_.validate(); }
@@ -52,10 +55,12 @@ bool LocalCloud::add_scan(const PointCloud& scan_sensor, const Pose3d& T_world_s
   if (has_last_ && (position - last_position_).norm() < config_.min_travel_between_scans_m) {
     return false;
   }
+  if (has_last_) odometer_m_ += (position - last_position_).norm();
   has_last_ = true;
   last_position_ = position;
 
   Scan scan;
+  scan.added_at_m = odometer_m_;
   const std::vector<uint32_t> keep = detail::subsample_indices(scan_sensor, config_.subsample_leaf_m);
   scan.points.reserve(keep.size());
   if (labels) scan.labels.reserve(keep.size());
@@ -75,12 +80,9 @@ PointCloud LocalCloud::crop(const Pose3d& T_world_sensor, std::vector<uint32_t>*
   const double cx = T_world_sensor.translation().x();
   const double cy = T_world_sensor.translation().y();
   const double r2 = config_.radius_m * config_.radius_m;
-  // Drop scans whose bounding box lies wholly outside the cylinder (nearest box point).
   const auto outside = [&](const Scan& s) {
-    if (s.points.empty()) return true;
-    const double nx = std::clamp(cx, double(s.min_xy[0]), double(s.max_xy[0]));
-    const double ny = std::clamp(cy, double(s.min_xy[1]), double(s.max_xy[1]));
-    return (nx - cx) * (nx - cx) + (ny - cy) * (ny - cy) > r2;
+    return detail::scan_leaves(s.min_xy, s.max_xy, s.points.empty(), s.added_at_m, odometer_m_, cx, cy,
+                               config_.radius_m, config_.max_scan_age_m);
   };
   scans_.erase(std::remove_if(scans_.begin(), scans_.end(), outside), scans_.end());
 
@@ -109,6 +111,7 @@ size_t LocalCloud::point_count() const {
 
 void LocalCloud::clear() {
   scans_.clear();
+  odometer_m_ = 0.0;
   has_last_ = false;
 }
 

@@ -32,7 +32,7 @@ void MapBuilderConfig::validate() const {
 
 MapBuilder::MapBuilder(const MapBuilderConfig& config)
     : config_((config.validate(), config)),
-      local_(config.local_cloud, config.segmentation.voxel),
+      local_(without_age_limit(config.local_cloud), config.segmentation.voxel),
       map_(resolving(config.segment_map)) {}
 
 bool MapBuilder::add_scan(const PointCloud& points_sensor, const Pose3d& T_world_sensor, uint32_t scan_index,

@@ -72,6 +72,18 @@ inline void grow_xy_bounds(const Point& q, float min_xy[2], float max_xy[2]) {
   max_xy[1] = std::max(max_xy[1], q.y);
 }
 
+// Whether a held scan leaves the local cloud at a crop around (cx, cy): its bounding box lies
+// wholly outside the cylinder, or it was added more than max_scan_age_m of driving before the
+// last added scan (0: no age limit). LocalCloud and VoxelAccumulator both drop scans by this.
+inline bool scan_leaves(const float min_xy[2], const float max_xy[2], bool empty, double added_at_m, double odometer_m,
+                        double cx, double cy, double radius_m, double max_scan_age_m) {
+  if (empty) return true;
+  if (max_scan_age_m > 0.0 && odometer_m - added_at_m > max_scan_age_m) return true;
+  const double nx = std::clamp(cx, double(min_xy[0]), double(max_xy[0]));
+  const double ny = std::clamp(cy, double(min_xy[1]), double(max_xy[1]));
+  return (nx - cx) * (nx - cx) + (ny - cy) * (ny - cy) > radius_m * radius_m;
+}
+
 // Stable LSD radix sort of (key << 32 | value) words by key, the lowest `key_bits` (<= 32) bits
 // of the high half.
 void sort_packed(std::vector<uint64_t>& words, int key_bits);

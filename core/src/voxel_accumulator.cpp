@@ -49,6 +49,7 @@ struct Scan {
   std::vector<Tile> tiles;       // plus a sentinel holding points.size()
   float min_xy[2] = {0.f, 0.f};
   float max_xy[2] = {0.f, 0.f};
+  double added_at_m = 0.0;       // odometer when it was added (LocalCloud's)
 };
 
 // Adds (sign +1) or subtracts (-1) points [begin, end) into the table, computing the keys of
@@ -129,6 +130,7 @@ struct VoxelAccumulator::Impl {
   std::unordered_map<uint64_t, VoxelTable> tiles;
   bool has_last = false;
   Eigen::Vector3d last_position = Eigen::Vector3d::Zero();
+  double odometer_m = 0.0;  // as LocalCloud's
   // Crop buffers, reused.
   PointCloud ring;
   std::vector<uint32_t> ring_labels;
@@ -199,8 +201,10 @@ bool VoxelAccumulator::add_scan(const PointCloud& scan_sensor, const Pose3d& T_w
     if (labels) world_labels.push_back((*labels)[i]);
     detail::grow_xy_bounds(q, scan.min_xy, scan.max_xy);
   }
+  if (m.has_last) m.odometer_m += (position - m.last_position).norm();
   m.has_last = true;
   m.last_position = position;
+  scan.added_at_m = m.odometer_m;
 
   // Group the points by tile (stable radix sort on tile keys relative to the scan's first tile).
   const size_t n = world.size();
@@ -291,13 +295,10 @@ PointCloud VoxelAccumulator::crop(const Pose3d& T_world_sensor, std::vector<uint
 void VoxelAccumulator::evict(const Pose3d& T_world_sensor) {
   Impl& m = *impl_;
   const double cx = T_world_sensor.translation().x(), cy = T_world_sensor.translation().y();
-  const double r2 = m.local.radius_m * m.local.radius_m;
-  // As LocalCloud::crop: a scan whose bounding box lies wholly outside is dropped.
+  // As LocalCloud::crop.
   const auto outside = [&](const Scan& s) {
-    if (s.points.empty()) return true;
-    const double nx = std::clamp(cx, double(s.min_xy[0]), double(s.max_xy[0]));
-    const double ny = std::clamp(cy, double(s.min_xy[1]), double(s.max_xy[1]));
-    return (nx - cx) * (nx - cx) + (ny - cy) * (ny - cy) > r2;
+    return detail::scan_leaves(s.min_xy, s.max_xy, s.points.empty(), s.added_at_m, m.odometer_m, cx, cy,
+                               m.local.radius_m, m.local.max_scan_age_m);
   };
   for (const Scan& s : m.scans)
     if (outside(s)) m.sum_scan(s, -1);
@@ -322,6 +323,7 @@ void VoxelAccumulator::clear() {
   impl_->scans.clear();
   impl_->tiles.clear();
   impl_->has_last = false;
+  impl_->odometer_m = 0.0;
 }
 
 }  // namespace segmatch

@@ -205,6 +205,9 @@ int main(int argc, char** argv) {
   loc->add_option("--recent-window-m", recent_window_m,
                   "in-process only: localize with this refine.recent_window_m instead of the map's (0: the whole cloud's "
                   "pose); a what-if on a stored map");
+  loc->add_option("--max-scan-age-m", lc.max_scan_age_m,
+                  "the vehicle's local cloud holds each scan for this many metres of driving instead of the map's "
+                  "local_cloud.max_scan_age_m (0: until it leaves the cylinder); a what-if");
   bool segments = false;
   loc->add_flag("--segments", segments,
                 "query by segments (LOCALIZE_SEGMENTS): segment and describe each local cloud here, as a vehicle would, "

@@ -80,8 +80,9 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
   LocalizationRun run;
   // The vehicle accumulates and voxelizes exactly as the map was built.
   run.replay = c.replay;
-  const io::PipelineConfig parameters = io::parse_pipeline_config(map.metadata().parameters_json, c.map_path);
+  const io::PipelineConfig parameters = io::parse_map_parameters(map.metadata().parameters_json, c.map_path);
   run.replay.local_cloud = parameters.local_cloud;
+  if (c.max_scan_age_m >= 0.0) run.replay.local_cloud.max_scan_age_m = c.max_scan_age_m;
   run.replay.voxel = parameters.localizer.segmentation.voxel;
   for (const storage::Keyframe& k : map.trajectory()) run.map_trajectory.push_back(k.T_map_sensor.translation());
   const Truth truth = open_truth(c);

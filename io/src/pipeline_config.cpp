@@ -48,6 +48,7 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("radius_m", c.local_cloud.radius_m);
   v("min_travel_between_scans_m", c.local_cloud.min_travel_between_scans_m);
   v("subsample_leaf_m", c.local_cloud.subsample_leaf_m);
+  v("max_scan_age_m", c.local_cloud.max_scan_age_m);
   v.section("voxel");
   v("leaf_m", s.voxel.leaf_m);
   v("min_points_per_voxel", s.voxel.min_points_per_voxel);
@@ -382,9 +383,12 @@ PipelineConfig parse_map_parameters(const std::string& json_text, const std::str
   const json in = json::parse(json_text);  // parsed once already: valid
   if (!(in.contains("refine") && in["refine"].is_object() && in["refine"].contains("max_segment_points")))
     c.localizer.refine.max_segment_points = 0;
-  // Maps written before the recent window answered for the whole cloud: they still do.
+  // Maps written before the recent window answered for the whole cloud, and held scans until
+  // they left the cylinder: they still do.
   if (!(in.contains("refine") && in["refine"].is_object() && in["refine"].contains("recent_window_m")))
     c.localizer.refine.recent_window_m = 0.0f;
+  if (!(in.contains("local_cloud") && in["local_cloud"].is_object() && in["local_cloud"].contains("max_scan_age_m")))
+    c.local_cloud.max_scan_age_m = 0.0;
   return c;
 }
 

@@ -22,7 +22,8 @@ Segments segments_along(const World& world, const Traversal& traversal, const Li
   const RayCaster caster(world.scene());
   SegmentMap map(config.segment_map);
   Segments all;
-  for_each_voxelized_cloud(caster, model, traversal, config.local_cloud, config.segmentation.voxel, config.schedule,
+  for_each_voxelized_cloud(caster, model, traversal, without_age_limit(config.local_cloud), config.segmentation.voxel,
+                           config.schedule,
                            [&](const SimulatedLocalCloud& lc) {
                              Segments s = extract_segments_from_voxels(
                                  lc.cloud, lc.T_world_sensor.translation().cast<float>(), config.segmentation, &lc.labels);

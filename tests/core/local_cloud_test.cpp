@@ -103,6 +103,25 @@ TEST(LocalCloud, DropsScansOutsideTheCylinder) {
   EXPECT_EQ(out.size(), 5u);  // x = 11, 14, 16, 19, 21 (x = 9 is 11 m away)
 }
 
+// A scan leaves once the vehicle drove more than max_scan_age_m since it was added, even with
+// its points still in the cylinder (the odometry that placed it drifted since).
+TEST(LocalCloud, DropsScansOlderThanTheirMaximumAge) {
+  LocalCloudConfig config;
+  config.radius_m = 100.0;  // every scan stays within the cylinder
+  config.max_scan_age_m = 10.0;
+  LocalCloud cloud(config);
+  const PointCloud scan = {{1.f, 0.f, 0.f, 0.f}, {-1.f, 0.f, 0.f, 0.f}};
+  for (int s = 0; s < 5; ++s) cloud.add_scan(scan, pose_at(5.0 * s, 0.0, 0.0));
+  const PointCloud out = cloud.crop(pose_at(20.0, 0.0, 0.0));  // driven 20 m: scans at 0 and 5 are too old
+  EXPECT_EQ(cloud.scan_count(), 3u);
+  EXPECT_EQ(out.size(), 6u);
+  config.max_scan_age_m = 0.0;  // no age limit: the cylinder alone decides
+  LocalCloud unbounded(config);
+  for (int s = 0; s < 5; ++s) unbounded.add_scan(scan, pose_at(5.0 * s, 0.0, 0.0));
+  unbounded.crop(pose_at(20.0, 0.0, 0.0));
+  EXPECT_EQ(unbounded.scan_count(), 5u);
+}
+
 TEST(LocalCloud, CarriesLabels) {
   LocalCloud cloud;
   const PointCloud scan = {{1.f, 0.f, 0.f, 0.f}, {2.f, 0.f, 0.f, 0.f}, {200.f, 0.f, 0.f, 0.f}};

@@ -143,6 +143,17 @@ TEST(VoxelAccumulator, EqualsVoxelFilterOfTheCroppedLocalCloudIncludingDroppedSc
   EXPECT_GE(crops_after_drops, 20u) << "scans left the cylinder and were subtracted";
 }
 
+// Scans leaving by age, on a route that returns: the accumulator drops and subtracts the same
+// scans as LocalCloud.
+TEST(VoxelAccumulator, EqualsTheLocalCloudWhenScansLeaveByAge) {
+  const Scene scene;
+  LocalCloudConfig lc;
+  lc.radius_m = 40.0;  // the cylinder alone would keep most scans
+  lc.max_scan_age_m = 15.0;
+  const size_t crops_after_drops = drive_and_compare(scene, lc, 1.0, 121, 3, false, false, 70);
+  EXPECT_GE(crops_after_drops, 30u) << "scans left by age and were subtracted";
+}
+
 // A vehicle evicts after every scan (moving the subtraction of old scans off its queries):
 // the same as cropping at every scan, and crops far apart still equal the reference.
 TEST(VoxelAccumulator, EvictingAfterEveryScanEqualsCroppingAtEveryScan) {

@@ -77,7 +77,9 @@ Outcome query_along(const Localizer& localizer, const World& world, const Traver
   LocalCloudSchedule schedule;
   schedule.every_m = 10.0;
   schedule.seed = seed;
-  for_each_voxelized_cloud(caster, hdl64e(), t, LocalCloudConfig{}, localizer.config().segmentation.voxel, schedule,
+  // Exact simulated poses: nothing drifts, so no age limit (it is there for a vehicle's odometry
+  // and would only thin these clouds: README, "What we measured").
+  for_each_voxelized_cloud(caster, hdl64e(), t, without_age_limit(LocalCloudConfig{}), localizer.config().segmentation.voxel, schedule,
                            [&](const SimulatedLocalCloud& lc) {
     PointCloud cloud = lc.cloud;
     for (Point& p : cloud) {

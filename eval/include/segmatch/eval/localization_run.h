@@ -34,6 +34,9 @@ struct LocalizationRunConfig {
   // comparison: it flatters every figure), and the report says so.
   io::CloudPoses cloud_poses = io::CloudPoses::kOdometry;
   std::string odometry_path;
+  // The vehicle's local cloud holds scans for this many metres of driving instead of the
+  // map's local_cloud.max_scan_age_m (a what-if; negative: the map's).
+  double max_scan_age_m = -1.0;
   // Tracking between fixes (api::Tracker): each query's prior comes from the last fix.
   bool track = false;
   // GNSS-like priors: each query's prior is the true pose with Gaussian noise of this many
