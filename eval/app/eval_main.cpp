@@ -221,6 +221,10 @@ int main(int argc, char** argv) {
   fun->add_option("--first", fc.replay.first, "first scan");
   fun->add_option("--last", fc.replay.last, "last scan");
   fun->add_option("--stride", fc.replay.stride, "use every n-th scan");
+  fun->add_option("--odometry", fc.odometry_path, "the vehicle's odometry poses (default: QUERY/odom_poses.txt)");
+  std::string funnel_cloud_poses = "odometry";
+  fun->add_option("--cloud-poses", funnel_cloud_poses, "odometry (default) or reference, as for localize")
+      ->check(CLI::IsMember({"odometry", "reference"}));
   ClassifierOptions co;
   auto* cls = app.add_subcommand("classifier", "ROC curves of the match classifiers on a held-out simulated city or real stretches");
   cls->add_option("--model", co.model_shapes, "RF_eigen+shapes model file");
@@ -248,6 +252,7 @@ int main(int argc, char** argv) {
     if (*fun) {
       const auto loaded = server::load_map(fc.map_path);
       fc.replay.local_cloud = loaded->config.local_cloud;
+      fc.cloud_poses = io::parse_cloud_poses(funnel_cloud_poses);
       fc.replay.voxel = loaded->config.localizer.segmentation.voxel;
       eval::print_funnel(eval::run_funnel(fc, *loaded->localizer), loaded->config.localizer.verification.min_inliers);
       return 0;

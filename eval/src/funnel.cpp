@@ -2,6 +2,7 @@
 
 #include "segmatch/core/support.h"
 #include "segmatch/io/pose_io.h"
+#include "segmatch/io/replay.h"
 #include "segmatch/io/sequence.h"
 
 #include <cstdio>
@@ -14,8 +15,13 @@ namespace eval {
 std::vector<FunnelQuery> run_funnel(const LocalizationRunConfig& c, const Localizer& localizer,
                                     const FunnelConfig& funnel) {
   if (!c.sim_dataset.empty()) throw std::runtime_error("funnel: only --query sequences (poses in the map frame) for now");
-  const io::Sequence sequence = io::Sequence::open(c.query_folder);
-  const Poses truth = sequence.poses();
+  const Poses truth = io::Sequence::open(c.query_folder).poses();
+  // The local clouds as a vehicle builds them: from its odometry (or the reference, to compare).
+  io::SequenceOptions so;
+  if (c.cloud_poses == io::CloudPoses::kOdometry) so.poses_path = io::odometry_poses_path(c.query_folder, c.odometry_path);
+  const io::Sequence sequence = io::Sequence::open(c.query_folder, so);
+  std::printf("local clouds: %s\n", c.cloud_poses == io::CloudPoses::kOdometry ? so.poses_path.c_str()
+                                                                             : "the REFERENCE poses (a comparison only)");
   const LocalizerConfig& lc = localizer.config();
   const Segments& targets = localizer.targets();
   const CentroidIndex centroids(targets, funnel.counterpart_radius_m);
