@@ -189,6 +189,8 @@ int main(int argc, char** argv) {
   loc->add_option("--odometry", lc.odometry_path,
                   "the vehicle's odometry poses (KITTI or TUM) that build every query's local cloud (default: the replayed "
                   "sequence's odom_poses.txt)");
+  loc->add_option("--reference", lc.reference_path,
+                  "score against this poses file of the query sequence (KITTI or TUM) instead of its poses.txt");
   std::string cloud_poses = "odometry";
   loc->add_option("--cloud-poses", cloud_poses,
                   "odometry (default): local clouds from the vehicle's odometry, as on a car; reference: from the "

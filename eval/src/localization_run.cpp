@@ -31,7 +31,9 @@ struct Truth {
 
 Truth open_truth(const LocalizationRunConfig& c) {
   if (c.sim_dataset.empty()) {
-    io::Sequence seq = io::Sequence::open(c.query_folder);
+    io::SequenceOptions so;
+    so.poses_path = c.reference_path;
+    io::Sequence seq = io::Sequence::open(c.query_folder, so);
     Poses truth = seq.poses();
     return {std::move(seq), std::move(truth)};
   }
@@ -85,7 +87,11 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
   if (c.max_scan_age_m >= 0.0) run.replay.local_cloud.max_scan_age_m = c.max_scan_age_m;
   run.replay.voxel = parameters.localizer.segmentation.voxel;
   for (const storage::Keyframe& k : map.trajectory()) run.map_trajectory.push_back(k.T_map_sensor.translation());
+  if (!c.reference_path.empty() && !c.sim_dataset.empty()) throw std::runtime_error("--reference needs --query");
   const Truth truth = open_truth(c);
+  run.reference_file = !c.sim_dataset.empty()        ? "ground_truth/lidar_poses_01.txt"
+                       : !c.reference_path.empty() ? c.reference_path
+                                                   : (fs::path(c.query_folder) / "poses.txt").string();
   std::optional<io::Sequence> odometry;  // the replayed sequence, its scans placed by the vehicle's odometry
   run.cloud_poses = c.cloud_poses;
   if (c.cloud_poses == io::CloudPoses::kOdometry) {
@@ -95,7 +101,8 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
     odometry = io::Sequence::open(truth.sequence.folder(), so);
   } else {
     if (!c.odometry_path.empty()) throw std::runtime_error("--odometry and --cloud-poses reference exclude each other");
-    run.cloud_poses_file = (fs::path(truth.sequence.folder()) / "poses.txt").string();
+    run.cloud_poses_file = c.reference_path.empty() ? (fs::path(truth.sequence.folder()) / "poses.txt").string()
+                                                    : c.reference_path;
   }
   QueryPriors priors(c, truth.T_map_sensor);
   PriorComparison comparison;
@@ -166,7 +173,8 @@ void print_summary(const LocalizationRun& run) {
   const Summary& s = run.summary;
   std::printf("\n== %s\n", run.title.c_str());
   if (run.cloud_poses == io::CloudPoses::kOdometry)
-    std::printf("local clouds: the vehicle's odometry (%s); the reference only scores\n", run.cloud_poses_file.c_str());
+    std::printf("local clouds: the vehicle's odometry (%s); the reference (%s) only scores\n", run.cloud_poses_file.c_str(),
+                run.reference_file.c_str());
   else
     std::printf("local clouds: the REFERENCE poses (%s), a comparison only: no vehicle has them, and they flatter "
                 "every figure below\n", run.cloud_poses_file.c_str());
@@ -225,6 +233,7 @@ void write_localization_report(const LocalizationRun& run, const std::string& ou
   j["replay"] = {{"every_m", run.replay.every_m}, {"warmup_m", run.replay.warmup_m}, {"first", run.replay.first},
                  {"last", run.replay.last}, {"stride", run.replay.stride}};
   j["local_clouds"] = {{"poses", io::to_string(run.cloud_poses)}, {"file", run.cloud_poses_file}};
+  j["reference"] = run.reference_file;
   j["queries"] = s.queries;
   j["mapped_queries"] = s.mapped_queries;
   j["localized"] = s.localized;

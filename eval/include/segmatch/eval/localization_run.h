@@ -34,6 +34,9 @@ struct LocalizationRunConfig {
   // comparison: it flatters every figure), and the report says so.
   io::CloudPoses cloud_poses = io::CloudPoses::kOdometry;
   std::string odometry_path;
+  // Score against this poses file of the query sequence instead of its poses.txt (e.g.
+  // hku-loop1's odom_poses.txt, the trustworthy one at its revisit). Empty: poses.txt.
+  std::string reference_path;
   // The vehicle's local cloud holds scans for this many metres of driving instead of the
   // map's local_cloud.max_scan_age_m (a what-if; negative: the map's).
   double max_scan_age_m = -1.0;
@@ -57,6 +60,7 @@ struct LocalizationRun {
   io::ReplayConfig replay;  // as run, so that a regression test can replay the same queries
   io::CloudPoses cloud_poses = io::CloudPoses::kOdometry;
   std::string cloud_poses_file;  // the poses file the local clouds were built with
+  std::string reference_file;    // the poses file the answers are scored against (--query)
   // From the first localization on (tracking's figure: a pose carried by odometry alone is not
   // a localization): queries, and those the server answered LOCALIZED.
   size_t after_first_fix = 0, localized_after_first_fix = 0;
