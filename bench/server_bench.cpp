@@ -14,6 +14,7 @@
 #include <segmatch/io/pipeline_config.h>
 #include <segmatch/server/server.h>
 #include <segmatch/sim/city.h>
+#include <segmatch/sim/keyframes.h>
 #include <segmatch/storage/map_writer.h>
 #include <segmatch/vehicle/segment_query.h>
 
@@ -43,20 +44,20 @@ namespace {
 std::vector<api::LocalizeRequest> revisit_requests(const sim::City& city, const LocalCloudConfig& local_cloud,
                                                    const VoxelGridConfig* voxel, double every_m) {
   const sim::RayCaster caster(city.changed.scene());
-  const Pose3d T_local_world = city.second.T_world_lidar.front().inverse();
+  // The vehicle's local frame and odometry: drifting as sim::KeyframeConfig's defaults.
+  Poses truth_local;
+  for (const Pose3d& T : city.second.T_world_lidar) truth_local.push_back(city.second.T_world_lidar.front().inverse() * T);
+  const Poses odometry = sim::drifted_odometry(truth_local, sim::KeyframeConfig{});
   sim::LocalCloudSchedule schedule;
   schedule.every_m = every_m;
+  schedule.odometry = &odometry;
   std::vector<api::LocalizeRequest> out;
   sim::for_each_local_cloud(caster, sim::hdl64e(), city.second, local_cloud, schedule,
                             [&](const sim::SimulatedLocalCloud& lc) {
     api::LocalizeRequest r;
     r.request_id = lc.frame;
-    r.sensor_position_local = T_local_world * lc.T_world_sensor.translation();
+    r.sensor_position_local = lc.T_cloud_sensor.translation();
     r.points = lc.cloud;
-    for (Point& p : r.points) {
-      const Eigen::Vector3f v = T_local_world.cast<float>() * p.xyz();
-      p.x = v.x(), p.y = v.y(), p.z = v.z();
-    }
     // What a vehicle sends (docs/protocol.md 5.4): its local cloud voxelized with the map's grid.
     if (voxel) {
       r.points = voxel_filter(r.points, *voxel);
@@ -326,7 +327,7 @@ int main(int argc, char** argv) {
       revisit_requests(city, config.local_cloud, o.raw ? nullptr : &voxel, 10.0);
   size_t points = 0;
   for (const auto& r : requests) points += r.points.size();
-  std::printf("set-up %.0f s: %zu revisit local clouds, %.0f points on average\n",
+  std::printf("set-up %.0f s: %zu revisit local clouds (from drifting simulated odometry), %.0f points on average\n",
               std::chrono::duration<double>(Clock::now() - t0).count(), requests.size(), double(points) / requests.size());
   server::ServerConfig sc;
   sc.port = 0;

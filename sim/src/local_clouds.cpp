@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <stdexcept>
 #include <thread>
 
 namespace segmatch::sim {
@@ -59,15 +60,19 @@ void visit_local_clouds(Accumulator& local, const RayCaster& caster, const Lidar
                         const Traversal& traversal, const LocalCloudConfig& local_config,
                         const LocalCloudSchedule& schedule,
                         const std::function<void(const SimulatedLocalCloud&)>& visit) {
+  if (schedule.odometry && schedule.odometry->size() != traversal.size())
+    throw std::invalid_argument("LocalCloudSchedule.odometry must hold one pose per traversal scan");
   double next_cloud_at = traversal.odometer_m[schedule.first_frame] + schedule.warmup_m;
   for_each_kept_scan(caster, model, traversal, local_config, schedule, [&](size_t f, const SimulatedScan& scan) {
-    local.add_scan(scan.points, traversal.T_world_lidar[f], &scan.labels);
+    const Pose3d& T_cloud_sensor = schedule.odometry ? (*schedule.odometry)[f] : traversal.T_world_lidar[f];
+    local.add_scan(scan.points, T_cloud_sensor, &scan.labels);
     if (traversal.odometer_m[f] < next_cloud_at) return;
     next_cloud_at = traversal.odometer_m[f] + schedule.every_m;
     SimulatedLocalCloud out;
     out.frame = f;
     out.T_world_sensor = traversal.T_world_lidar[f];
-    out.cloud = local.crop(out.T_world_sensor, &out.labels);
+    out.T_cloud_sensor = T_cloud_sensor;
+    out.cloud = local.crop(T_cloud_sensor, &out.labels);
     visit(out);
   });
 }
