@@ -161,7 +161,7 @@ class Timings:
 class ReplyDetail:
     """LOCALIZE_REPLY's detail block (revision 6, docs/protocol.md 6.4), sent to a request that set
     its detail bit: how far the whole local cloud's pose and its recent window's put the sensor
-    apart (the vehicle odometry's warp over the cloud), and the window's matched points."""
+    apart (the vehicle odometry's warp over the cloud), and the window's query points."""
 
     window_warp_m: float = 0.0
     window_warp_deg: float = 0.0

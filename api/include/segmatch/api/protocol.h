@@ -220,7 +220,7 @@ constexpr size_t kTimingCount = 10;
 // append fields to it and a decoder skips those it does not know.
 struct ReplyDetail {
   // How far the whole local cloud's pose and its recent window's differ at the sensor (the
-  // vehicle odometry's warp over the cloud), and the window's matched points (0: no window).
+  // vehicle odometry's warp over the cloud), and the window's query points (0: no window).
   float window_warp_m = 0.f, window_warp_deg = 0.f;
   uint32_t window_points = 0;
 };

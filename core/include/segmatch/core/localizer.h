@@ -99,7 +99,7 @@ struct LocalizationResult {
   float refine_fitness = 0.0f;                      // fraction of query points on map surfaces
   float refine_rmse_m = 0.0f;
   // The recent window's refinement (RefineConfig::recent_window_m): how far the whole cloud's
-  // pose and the window's differ at the sensor, and the window's matched points (0: not run,
+  // pose and the window's differ at the sensor, and the window's query points (0: not run,
   // or too few points and the whole cloud's pose stands).
   float window_warp_m = 0.0f, window_warp_deg = 0.0f;
   size_t window_points = 0;

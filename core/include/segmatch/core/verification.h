@@ -93,9 +93,10 @@ struct RefineConfig {
   // The answer is the sensor's pose now, not the whole local cloud's (beyond the paper): the
   // vehicle's odometry built the cloud and drifts along it, so the pose that best aligns all of
   // it is off at the sensor by the drift accumulated over the window. After the whole-cloud
-  // refinement the matched query points within recent_window_m (horizontal) of the sensor are
-  // refined alone, starting from the whole cloud's pose; with fewer than min_recent_points of
-  // them, or a worse fitness than the floor, the whole-cloud pose stands. 0: off.
+  // refinement the query segments' points within recent_window_m (horizontal) of the sensor
+  // are refined alone against the map segments there, starting from the whole cloud's pose;
+  // with fewer than min_recent_points of them, or a fitness below the floor, the whole-cloud
+  // pose stands. 0: off.
   float recent_window_m = 30.0f;
   int min_recent_points = 200;
   void validate() const;  // throws std::invalid_argument naming the field
