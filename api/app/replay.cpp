@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -15,11 +16,23 @@
 namespace segmatch::query {
 
 namespace {
+// The detail block (revision 6: the window's warp; 7: method and covariance), in words.
 std::string warp_of(const api::LocalizeReply& r) {
-  if (!r.detail || r.detail->window_points == 0) return "";
-  char buf[96];
-  std::snprintf(buf, sizeof buf, "  window warp %.2f m %.2f deg", r.detail->window_warp_m, r.detail->window_warp_deg);
-  return buf;
+  if (!r.detail) return "";
+  std::string out;
+  char buf[128];
+  if (r.detail->window_points > 0) {
+    std::snprintf(buf, sizeof buf, "  window warp %.2f m %.2f deg", r.detail->window_warp_m, r.detail->window_warp_deg);
+    out += buf;
+  }
+  if (r.detail->estimate && r.status == api::LocalizeStatus::kLocalized) {
+    const Eigen::Matrix<double, 6, 6> c = api::covariance_matrix(r.detail->estimate->covariance_upper);
+    std::snprintf(buf, sizeof buf, "  by %s, sigma x %.3f y %.3f m yaw %.2f deg",
+                  api::to_string(static_cast<api::ReplyMethod>(r.detail->estimate->method)), std::sqrt(c(3, 3)),
+                  std::sqrt(c(4, 4)), std::sqrt(c(2, 2)) * 180.0 / M_PI);
+    out += buf;
+  }
+  return out;
 }
 }  // namespace
 
@@ -105,8 +118,9 @@ int replay(api::Client& client, const ReplayOptions& options) {
       const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
       latencies_ms.push_back(ms);
       localized += r.status == api::LocalizeStatus::kLocalized;
-      if (options.track) tracker.update(r, q.odometer_m);
+      const bool rejected = options.track && tracker.update(r, q.odometer_m) == api::TrackUpdate::kRejected;
       print_reply(r, ms);
+      if (rejected) std::printf("  rejected by the tracker's gate: not a fix (%d so far)\n", tracker.rejections());
     } catch (const api::ClientError& e) {
       ++errors;
       std::printf("error: %s\n", e.what());

@@ -144,7 +144,19 @@ DecodeStatus get_reply_detail(wire::Reader& r, LocalizeReply& m) {
   d.window_warp_m = r.f32();
   d.window_warp_deg = r.f32();
   d.window_points = r.u32();
-  for (size_t k = kReplyDetailBytes; k < bytes; ++k) (void)r.u8();  // a later revision's fields
+  size_t known = kReplyDetailBytes;
+  if (bytes >= kReplyDetailEstimateBytes) {  // revision 7
+    ReplyDetail::Estimate e;
+    e.method = r.u8();
+    for (int k = 0; k < 3; ++k) (void)r.u8();  // reserved
+    for (float& c : e.covariance_upper) {
+      c = r.f32();
+      if (!std::isfinite(c)) return DecodeStatus::kNonFinite;
+    }
+    d.estimate = e;
+    known = kReplyDetailEstimateBytes;
+  }
+  for (size_t k = known; k < bytes; ++k) (void)r.u8();  // a later revision's fields
   if (!std::isfinite(d.window_warp_m) || !std::isfinite(d.window_warp_deg)) return DecodeStatus::kNonFinite;
   m.detail = d;
   return DecodeStatus::kOk;
@@ -165,10 +177,16 @@ std::vector<uint8_t> encode(const LocalizeReply& m) {
   ModuleTimingsMs t = m.timings;
   for (float* f : timing_fields(t)) w.f32(*f);
   if (m.detail) {  // revision 6: a block with its own length (docs/protocol.md 6.4)
-    w.u16(static_cast<uint16_t>(kReplyDetailBytes));
+    const auto& e = m.detail->estimate;
+    w.u16(static_cast<uint16_t>(e ? kReplyDetailEstimateBytes : kReplyDetailBytes));
     w.f32(m.detail->window_warp_m);
     w.f32(m.detail->window_warp_deg);
     w.u32(m.detail->window_points);
+    if (e) {  // revision 7
+      w.u8(e->method);
+      for (int k = 0; k < 3; ++k) w.u8(0);
+      for (float c : e->covariance_upper) w.f32(c);
+    }
   }
   return detail::frame(type_of(m), w);
 }

@@ -63,6 +63,30 @@ const char* to_string(LocalizeStatus status) {
   return "unknown";
 }
 
+const char* to_string(ReplyMethod method) {
+  switch (method) {
+    case ReplyMethod::kSegments: return "segments";
+    case ReplyMethod::kRegistration: return "registration";
+  }
+  return "unknown";
+}
+
+Eigen::Matrix<double, 6, 6> covariance_matrix(const std::array<float, 21>& upper) {
+  Eigen::Matrix<double, 6, 6> c;
+  size_t k = 0;
+  for (int i = 0; i < 6; ++i)
+    for (int j = i; j < 6; ++j) c(i, j) = c(j, i) = upper[k++];
+  return c;
+}
+
+std::array<float, 21> covariance_upper(const Eigen::Matrix<double, 6, 6>& covariance) {
+  std::array<float, 21> upper{};
+  size_t k = 0;
+  for (int i = 0; i < 6; ++i)
+    for (int j = i; j < 6; ++j) upper[k++] = static_cast<float>(covariance(i, j));
+  return upper;
+}
+
 const char* to_string(RefusalCode code) {
   switch (code) {
     case RefusalCode::kNone: return "NONE";

@@ -1,5 +1,7 @@
 #include "segmatch/core/localizer.h"
 
+#include "localizer_stages.h"
+
 #include <chrono>
 #include <algorithm>
 #include <cmath>
@@ -8,6 +10,9 @@
 
 namespace segmatch {
 namespace {
+
+using detail::gather;
+using detail::targets_within_disc;
 
 class Stopwatch {
  public:
@@ -27,6 +32,7 @@ LocalizationResult refuse(LocalizationResult r, Refusal refusal, std::string why
   r.status = LocalizationStatus::kNotLocalized;
   r.refusal = refusal;
   r.reason = std::move(why);
+  r.covariance.setZero();  // a refused pose has none
   return r;
 }
 
@@ -52,23 +58,20 @@ Ranked rank_by_support(const std::vector<PoseHypothesis>& hypotheses, const Segm
   return r;
 }
 
-// The hypotheses that put the sensor within the prior's radius (all of them without a prior).
+// The hypotheses that put the sensor within the prior's radius and turn it by at most the
+// prior's max_rotation_deg (all of them without a prior). The turn was once left unchecked: on
+// hku-mb, priors 6 m off gave poses turned 11-17 deg (README, "continuous localization").
 std::vector<PoseHypothesis> within_prior(std::vector<PoseHypothesis> hypotheses, const Eigen::Vector3f& sensor,
                                          const PosePrior* prior) {
   if (!prior) return hypotheses;
   const Eigen::Vector3d s = sensor.cast<double>(), expected = prior->T_map_query * s;
+  const double max_turn = prior->max_rotation_deg * M_PI / 180.0;
   std::vector<PoseHypothesis> kept;
-  for (PoseHypothesis& h : hypotheses)
-    if ((h.T_target_query * s - expected).norm() <= prior->radius_m) kept.push_back(std::move(h));
+  for (PoseHypothesis& h : hypotheses) {
+    const double turn = Eigen::AngleAxisd(h.T_target_query.linear() * prior->T_map_query.linear().transpose()).angle();
+    if ((h.T_target_query * s - expected).norm() <= prior->radius_m && turn <= max_turn) kept.push_back(std::move(h));
+  }
   return kept;
-}
-
-// The map segments whose centroids lie within radius_m of center, horizontally.
-std::vector<int> targets_within_disc(const Segments& targets, const Eigen::Vector3d& center, double radius_m) {
-  std::vector<int> out;
-  for (size_t t = 0; t < targets.size(); ++t)
-    if ((targets[t].centroid.cast<double>() - center).head<2>().norm() <= radius_m) out.push_back(static_cast<int>(t));
-  return out;
 }
 
 // Per query segment, the map segments lying where the prior, within its tolerances, puts it
@@ -102,67 +105,12 @@ Floors floors_of(const LocalizerConfig& c, bool prior) {
           pick(c.min_confidence_with_prior, c.min_confidence)};
 }
 
-// Points of the segments on one side of the matches, for the refinement: every stride-th point
-// of each segment (segment_point_stride).
-// With `source`, a target's points come from there (the same points, in the same order).
-PointCloud gather(const Segments& segments, const Matches& inliers, bool query_side, size_t stride = 1,
-                  const TargetPoints* source = nullptr) {
-  PointCloud out;
-  std::vector<bool> taken(segments.size(), false);
-  for (const Match& m : inliers) {
-    const int i = query_side ? m.query : m.target;
-    if (taken[i]) continue;
-    taken[i] = true;
-    if (source) {
-      source->append(static_cast<size_t>(i), &out);
-      continue;
-    }
-    const PointCloud& points = segments[i].points;
-    for (size_t k = 0; k < points.size(); k += stride) out.push_back(points[k]);
-  }
-  return out;
-}
-
 // Confidence in 0..1: grows with the number of query segments that agree with the pose
 // beyond the minimum (each extra independent agreement makes a coincidence much less
 // likely) and is scaled by how well the surfaces agree after refinement.
 float confidence_of(size_t support, int min_support, float fitness) {
   const double extra = static_cast<double>(support) - min_support + 1.0;
   return static_cast<float>((1.0 - std::exp(-extra / 3.0)) * fitness);
-}
-
-// The recent window's points (RefineConfig::recent_window_m): every query segment's points
-// near the sensor, and every map segment's near where the pose puts the sensor (a margin for
-// segments that straddle the window's edge). The window has fewer matched segments than the
-// whole cloud, so it takes all it has, not only the supporting ones.
-struct WindowPoints {
-  PointCloud query, targets;
-};
-WindowPoints window_points(const Segments& query, const Segments& targets, const TargetPoints* source,
-                           const Eigen::Vector3d& sensor, const Pose3d& T_map_query, size_t stride, float window_m) {
-  constexpr double kMarginM = 10.0;
-  Matches all_query, near_targets;
-  for (size_t i = 0; i < query.size(); ++i) all_query.push_back({static_cast<int>(i), 0});
-  for (int t : targets_within_disc(targets, T_map_query * sensor, window_m + kMarginM)) near_targets.push_back({0, t});
-  return {crop_cylinder(gather(query, all_query, true, stride), sensor, window_m),
-          gather(targets, near_targets, false, 1, source)};
-}
-
-// The sensor's pose now: the window refined alone from the whole cloud's pose. The odometry
-// that built the cloud drifted between its oldest scans and the sensor; near the sensor that
-// drift is small.
-void refine_recent_window(const WindowPoints& points, const Eigen::Vector3f& sensor, float min_fitness,
-                          const RefineConfig& config, LocalizationResult& r) {
-  const Eigen::Vector3d s = sensor.cast<double>();
-  const PointCloud& recent = points.query;
-  if (recent.size() < static_cast<size_t>(config.min_recent_points)) return;
-  const RefineResult window = refine_alignment(recent, points.targets, r.T_map_query, config);
-  if (window.fitness < min_fitness) return;
-  r.window_points = recent.size();
-  r.window_warp_m = static_cast<float>((window.T_target_query * s - r.T_map_query * s).norm());
-  const Eigen::AngleAxisd turn(window.T_target_query.linear() * r.T_map_query.linear().transpose());
-  r.window_warp_deg = static_cast<float>(std::abs(turn.angle()) * 180.0 / M_PI);
-  r.T_map_query = window.T_target_query;
 }
 
 LocalizationResult stopped(LocalizationResult r, const char* when) {
@@ -209,6 +157,10 @@ const char* to_string(LocalizationStatus status) {
   return status == LocalizationStatus::kLocalized ? "localized" : "not_localized";
 }
 
+const char* to_string(LocalizationMethod method) {
+  return method == LocalizationMethod::kRegistration ? "registration" : "segments";
+}
+
 const char* to_string(Refusal refusal) {
   switch (refusal) {
     case Refusal::kNone: return "none";
@@ -238,6 +190,8 @@ void LocalizerConfig::validate() const {
   matcher.validate();
   verification.validate();
   refine.validate();
+  registration.validate();
+  covariance.validate();
   if (!(min_refine_fitness >= 0.0f && min_refine_fitness <= 1.0f))
     throw std::invalid_argument("min_refine_fitness must be in 0..1");
   if (!(max_refine_rmse_voxels >= 0.0f) || !std::isfinite(max_refine_rmse_voxels))
@@ -342,6 +296,15 @@ LocalizationResult Localizer::localize_segments(Segments query, const Eigen::Vec
   r.query_segments = r.query.size();
   if (deadline.passed()) return finish(stopped(std::move(r), "before retrieval"));
   if (targets_.empty()) return finish(refuse(std::move(r), Refusal::kEmptyMap, "the map has no segments"));
+  if (prior && config_.registration.enabled) {  // its time counts as refinement
+    detail::register_near_prior(targets_, points_.get(), centroids_, classifier_.get(), config_, *prior, sensor_position, r);
+    r.timings.refine_ms = clock.lap();
+    if (r.localized()) return finish(std::move(r));
+    r.refine_fitness = r.refine_rmse_m = 0.0f;
+    r.support = 0;
+    r.inliers.clear();
+    if (deadline.passed()) return finish(stopped(std::move(r), "during registration"));
+  }
   if (r.query.size() < static_cast<size_t>(min_inliers))
     return finish(refuse(std::move(r), Refusal::kTooFewSegments, "only " + std::to_string(r.query.size()) +
                                            " segments in the query cloud (at least " +
@@ -394,8 +357,9 @@ LocalizationResult Localizer::localize_segments(Segments query, const Eigen::Vec
     const size_t stride = segment_point_stride(r.query, static_cast<size_t>(config_.refine.max_segment_points));
     const PointCloud query_points = gather(r.query, ranked.support.pairs, true, stride);
     const PointCloud target_points = gather(targets_, ranked.support.pairs, false, 1, points_.get());
-    const RefineResult refined = refine_alignment(query_points, target_points, r.T_map_query, config_.refine);
-    r.timings.refine_ms = clock.lap();
+    const RefineResult refined = refine_alignment(query_points, target_points, r.T_map_query, config_.refine,
+                                                  r.T_map_query * sensor_position.cast<double>());
+    r.timings.refine_ms += clock.lap();
     if (deadline.passed()) return finish(stopped(std::move(r), "during refinement"));
     r.refine_fitness = refined.fitness;
     r.refine_rmse_m = refined.rmse_m;
@@ -408,10 +372,11 @@ LocalizationResult Localizer::localize_segments(Segments query, const Eigen::Vec
                                              std::to_string(refined.rmse_m) + " m apart (RMS, at most " +
                                              std::to_string(max_rmse_m) + ")"));
     r.T_map_query = refined.T_target_query;
+    r.covariance = pose_covariance(refined, config_.covariance);
     if (config_.refine.recent_window_m > 0.0f)
-      refine_recent_window(window_points(r.query, targets_, points_.get(), sensor_position.cast<double>(), r.T_map_query,
+      detail::refine_recent_window(detail::window_points(r.query, targets_, points_.get(), sensor_position.cast<double>(), r.T_map_query,
                                          stride, config_.refine.recent_window_m),
-                           sensor_position, floors.min_fitness, config_.refine, r);
+                           sensor_position, floors.min_fitness, config_.refine, config_.covariance, r);
     r.timings.refine_ms += clock.lap();
   }
   r.confidence = confidence_of(r.support, min_support, r.refine_fitness);

@@ -122,7 +122,16 @@ bool LoopDetector::Impl::rebuild_if_due(const Sighting& now) {
   Segments targets;
   targets.reserve(eligible.size());
   for (int i : eligible) targets.push_back(map.segments()[i]);
-  localizer = std::make_unique<Localizer>(config.localizer, std::move(targets), classifier);
+  // Loop closures are found by segment matching alone (the paper's method): registration
+  // around the odometry's guess (registration.h) is tracking against a prior map, and a loop's
+  // drift can exceed its basin.
+  LocalizerConfig segments_only = config.localizer;
+  segments_only.registration.enabled = false;
+  // Its odometry prior is no tracker's: the loop's own floors (min_inliers, min_confidence, the
+  // drift bound) decide, as measured on hku-loop1 and hku-mb, not the localizer's floors for
+  // priors (raised for tracking against wrong priors).
+  segments_only.min_support_with_prior = -1;
+  localizer = std::make_unique<Localizer>(segments_only, std::move(targets), classifier);
   target_map_index = std::move(eligible);
   clouds_since_build = 0;
   return true;

@@ -101,27 +101,39 @@ struct Correspondence {
   uint32_t target;
 };
 
-// One linearised point-to-plane step: minimises sum (n . (R p + t - q))^2 over x = [omega, t].
-// False if too few correspondences have normals or the system is singular.
-bool point_to_plane_step(const std::vector<Correspondence>& corr, LazyNormals& normals,
-                         Pose3d* delta) {
+// The point-to-plane normal equations over the correspondences with a normal: A = sum J J^T,
+// b = -sum J r, J = [(p - pivot) x n, n], r = n . (p - q); and sum r^2.
+struct PlaneSystem {
   Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
   Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
+  double sq = 0.0;
   size_t used = 0;
+};
+PlaneSystem plane_system(const std::vector<Correspondence>& corr, LazyNormals& normals, const Eigen::Vector3d& pivot) {
+  PlaneSystem s;
   for (const Correspondence& c : corr) {
     Eigen::Vector3f nf;
     if (!normals.get(c.target, nf)) continue;
     const Eigen::Vector3d n = nf.cast<double>();
     Eigen::Matrix<double, 6, 1> J;
-    J << c.p.cross(n), n;
+    J << (c.p - pivot).cross(n), n;
     const double r = n.dot(c.p - c.q);
-    A.noalias() += J * J.transpose();
-    b.noalias() -= J * r;
-    ++used;
+    s.A.noalias() += J * J.transpose();
+    s.b.noalias() -= J * r;
+    s.sq += r * r;
+    ++s.used;
   }
-  if (used < kMinCorrespondences) return false;
-  A.diagonal().array() += 1e-9 * static_cast<double>(used);  // guards degenerate geometry
-  const Eigen::Matrix<double, 6, 1> x = A.ldlt().solve(b);
+  return s;
+}
+
+// One linearised point-to-plane step: minimises sum (n . (R p + t - q))^2 over x = [omega, t].
+// False if too few correspondences have normals or the system is singular.
+bool point_to_plane_step(const std::vector<Correspondence>& corr, LazyNormals& normals,
+                         Pose3d* delta) {
+  PlaneSystem s = plane_system(corr, normals, Eigen::Vector3d::Zero());
+  if (s.used < kMinCorrespondences) return false;
+  s.A.diagonal().array() += 1e-9 * static_cast<double>(s.used);  // guards degenerate geometry
+  const Eigen::Matrix<double, 6, 1> x = s.A.ldlt().solve(s.b);
   if (!x.allFinite()) return false;
   const Eigen::Vector3d omega = x.head<3>();
   const double angle = omega.norm();
@@ -129,6 +141,15 @@ bool point_to_plane_step(const std::vector<Correspondence>& corr, LazyNormals& n
   if (angle > 0.0) delta->linear() = Eigen::AngleAxisd(angle, omega / angle).toRotationMatrix();
   delta->translation() = x.tail<3>();
   return true;
+}
+
+// The final pose's point-to-plane information (RefineResult::information) about `pivot`.
+void plane_information(const std::vector<Correspondence>& corr, LazyNormals& normals, const Eigen::Vector3d& pivot,
+                       RefineResult* out) {
+  const PlaneSystem s = plane_system(corr, normals, pivot);
+  out->information = s.A;
+  out->plane_correspondences = s.used;
+  out->plane_rmse_m = s.used ? static_cast<float>(std::sqrt(s.sq / static_cast<double>(s.used))) : 0.f;
 }
 
 Pose3d point_to_point_step(const std::vector<Correspondence>& corr) {
@@ -145,7 +166,7 @@ Pose3d point_to_point_step(const std::vector<Correspondence>& corr) {
 }  // namespace
 
 RefineResult refine_alignment(const PointCloud& query_points, const PointCloud& target_points,
-                              const Pose3d& initial, const RefineConfig& config) {
+                              const Pose3d& initial, const RefineConfig& config, const Eigen::Vector3d& pivot_target) {
   config.validate();
   RefineResult result;
   result.T_target_query = initial;
@@ -211,6 +232,7 @@ RefineResult refine_alignment(const PointCloud& query_points, const PointCloud& 
     }
     T = delta * T;
     const double rot = Eigen::AngleAxisd(delta.linear()).angle();
+    result.last_step_m = static_cast<float>(delta.translation().norm() + rot);
     if (every > 1) {
       if ((delta.translation().norm() < kCoarseUntil && rot < kCoarseUntil) || it + 1 >= kMaxCoarseIterations) every = 1;
       continue;
@@ -229,6 +251,7 @@ RefineResult refine_alignment(const PointCloud& query_points, const PointCloud& 
   result.T_target_query = T;
   result.fitness = static_cast<float>(corr.size()) / static_cast<float>(source.size());
   result.rmse_m = corr.empty() ? 0.f : static_cast<float>(std::sqrt(sq_sum / corr.size()));
+  if (config.point_to_plane) plane_information(corr, normals, pivot_target, &result);
   return result;
 }
 

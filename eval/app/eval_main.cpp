@@ -199,6 +199,10 @@ int main(int argc, char** argv) {
   loc->add_option("--gnss-sigma-m", lc.gnss_sigma_m,
                   "GNSS-like priors: the true pose plus Gaussian noise of this many metres (seeded), radius 3 sigma");
   loc->add_option("--gnss-seed", lc.gnss_seed, "seed of the GNSS noise (default 1)");
+  loc->add_option("--wrong-prior-m", lc.wrong_prior_m,
+                  "a stress test: every query's prior is the true pose moved this many metres in a seeded random "
+                  "horizontal direction (--gnss-seed), with radius --wrong-prior-radius-m; any fix it gives is false");
+  loc->add_option("--wrong-prior-radius-m", lc.wrong_prior_radius_m, "the radius the wrong priors claim (default 3 m)");
   loc->add_flag("--compare-global", lc.compare_global,
                 "also send every query that has a prior without it (not scored) and report both server times");
   cli::add_output_option(*loc, out_dir, "report folder (JSON + PNG)");

@@ -117,7 +117,7 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
         const auto start = std::chrono::steady_clock::now();
         const api::LocalizeReply reply = localize(request);
         const double latency_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-        priors.update(reply, q);
+        const bool rejected = priors.update(reply, q);
         if (c.compare_global) comparison.add(request, reply, localize);
         QueryOutcome o;
         o.latency_ms = latency_ms;
@@ -126,6 +126,7 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
         o.localized = reply.status == api::LocalizeStatus::kLocalized;
         o.status = api::to_string(reply.status);
         o.mode = mode;
+        o.rejected = rejected;
         o.server_ms = reply.timings.server_total;
         o.inliers = reply.inliers;
         o.support = reply.support;
@@ -138,14 +139,18 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
         o.time_s = truth.sequence.times()[q.frame];
         o.mapped = distance_to(run.map_trajectory, T_map_sensor_truth.translation()) <= c.thresholds.mapped_radius_m;
         score(o, reply.T_map_local * q.T_odom_sensor, T_map_sensor_truth, c.thresholds);
+        if (reply.detail && reply.detail->estimate) {
+          o.method = api::to_string(static_cast<api::ReplyMethod>(reply.detail->estimate->method));
+          score_covariance(o, api::covariance_matrix(reply.detail->estimate->covariance_upper));
+        }
         add_timings(timings, reply.timings);
         if (c.print_each)
-          std::printf("frame %5zu  %7.1f m  %-8s %-13s %s inliers %3u support %3u conf %.2f  error %6.3f m %5.2f deg  "
-                      "warp %5.2f m %4.2f deg  %6.1f ms%s%s\n",
+          std::printf("frame %5zu  %7.1f m  %-8s %-13s %s %-12s inliers %3u support %3u conf %.2f  error %6.3f m %5.2f deg  "
+                      "sigma %5.3f m (%4.1f)  warp %5.2f m %4.2f deg  %6.1f ms%s%s\n",
                       q.frame, q.odometer_m, mode.c_str(), o.status.c_str(), o.localized ? (o.correct ? "TRUE " : "FALSE") : "     ",
-                      reply.inliers, reply.support, reply.confidence, o.error_m, o.error_deg, o.window_warp_m,
-                      o.window_warp_deg, o.latency_ms,
-                      o.mapped ? "" : "  (unmapped street)",
+                      o.localized ? o.method.c_str() : "", reply.inliers, reply.support, reply.confidence, o.error_m,
+                      o.error_deg, o.sigma_h_m, o.mahalanobis_h, o.window_warp_m, o.window_warp_deg, o.latency_ms,
+                      o.mapped ? (rejected ? "  (rejected by the tracker)" : "") : (rejected ? "  (unmapped street; rejected by the tracker)" : "  (unmapped street)"),
                       reply.reason.empty() ? "" : ("  " + reply.reason).c_str());
         run.outcomes.push_back(o);
         return true;
@@ -160,7 +165,8 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
   bool fixed = false;
   for (const QueryOutcome& o : run.outcomes) {
     by_mode[o.mode].push_back(o.server_ms);
-    if (fixed) ++run.after_first_fix, run.localized_after_first_fix += o.localized;
+    if (fixed && o.mapped) ++run.after_first_fix, run.localized_after_first_fix += o.localized;
+    if (fixed && !o.mapped) ++run.unmapped_after_first_fix, run.unmapped_localized_after_first_fix += o.localized;
     fixed = fixed || o.localized;
   }
   for (auto& [mode, values] : by_mode) run.server_ms_by_mode[mode] = distribution_of(values);
@@ -187,8 +193,20 @@ void print_summary(const LocalizationRun& run) {
               s.px.total_m, s.px.x95_m);
   std::printf("latency per query: median %.1f ms, p90 %.1f ms, max %.1f ms\n", s.latency_ms.median, s.latency_ms.p90,
               s.latency_ms.max);
-  std::printf("after the first localization: %zu of %zu queries localized (%.1f %%)\n", run.localized_after_first_fix,
-              run.after_first_fix, run.after_first_fix ? 100.0 * run.localized_after_first_fix / run.after_first_fix : 0.0);
+  std::printf("after the first localization: %zu of %zu queries on mapped streets localized (%.1f %%); on unmapped "
+              "streets %zu of %zu\n", run.localized_after_first_fix, run.after_first_fix,
+              run.after_first_fix ? 100.0 * run.localized_after_first_fix / run.after_first_fix : 0.0,
+              run.unmapped_localized_after_first_fix, run.unmapped_after_first_fix);
+  if (s.rejected > 0)
+    std::printf("tracker: %zu LOCALIZED answers rejected by its gate, %zu of them false\n", s.rejected, s.rejected_false);
+  std::printf("answered by:");
+  for (const auto& [method, n] : s.localized_by_method) std::printf(" %s %zu", method.c_str(), n);
+  std::printf("\n");
+  if (s.with_covariance > 0)
+    std::printf("covariance: %zu of %zu localized queries have their horizontal error within the reported 3 sigma "
+                "(%.1f %%); reported 1-sigma median %.3f m, p90 %.3f m\n",
+                s.within_3_sigma, s.with_covariance, 100.0 * s.within_3_sigma / s.with_covariance, s.sigma_h_m.median,
+                s.sigma_h_m.p90);
   for (const auto& [mode, d] : run.server_ms_by_mode)
     std::printf("server time, %s queries: %zu, median %.1f ms, p90 %.1f ms\n", mode.c_str(), d.count, d.median, d.p90);
   if (run.ab_prior_server_ms.count > 0)
@@ -243,7 +261,13 @@ void write_localization_report(const LocalizationRun& run, const std::string& ou
   j["error_deg"] = dist(s.error_deg);
   j["latency_ms"] = dist(s.latency_ms);
   j["px"] = {{"total_mapped_m", s.px.total_m}, {"x95_m", s.px.x95_m}, {"gaps_m", s.px.gaps_m}};
-  j["after_first_fix"] = {{"queries", run.after_first_fix}, {"localized", run.localized_after_first_fix}};
+  j["after_first_fix"] = {{"queries", run.after_first_fix}, {"localized", run.localized_after_first_fix},
+                          {"unmapped_queries", run.unmapped_after_first_fix},
+                          {"unmapped_localized", run.unmapped_localized_after_first_fix}};
+  j["localized_by_method"] = s.localized_by_method;
+  j["rejected_by_tracker"] = {{"answers", s.rejected}, {"false", s.rejected_false}};
+  j["calibration"] = {{"with_covariance", s.with_covariance}, {"within_3_sigma", s.within_3_sigma},
+                      {"sigma_h_m", dist(s.sigma_h_m)}};
   for (const auto& [mode, d] : run.server_ms_by_mode) j["server_ms_by_mode"][mode] = dist(d);
   if (run.ab_prior_server_ms.count > 0)
     j["same_queries_with_and_without_prior"] = {{"prior_server_ms", dist(run.ab_prior_server_ms)},
@@ -257,7 +281,9 @@ void write_localization_report(const LocalizationRun& run, const std::string& ou
                         {"error_deg", o.error_deg}, {"latency_ms", o.latency_ms}, {"inliers", o.inliers},
                         {"support", o.support},     {"confidence", o.confidence}, {"mode", o.mode},
                         {"server_ms", o.server_ms},   {"window_warp_m", o.window_warp_m},
-                        {"window_warp_deg", o.window_warp_deg}, {"window_points", o.window_points}};
+                        {"window_warp_deg", o.window_warp_deg}, {"window_points", o.window_points},
+                        {"method", o.method}, {"rejected_by_tracker", o.rejected}};
+    if (o.has_covariance) q["sigma_h_m"] = o.sigma_h_m, q["mahalanobis_h"] = o.mahalanobis_h;
     if (o.localized) {
       const Eigen::Quaterniond r(o.T_map_sensor.linear());
       const Eigen::Vector3d& t = o.T_map_sensor.translation();

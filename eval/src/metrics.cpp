@@ -1,5 +1,8 @@
 #include "segmatch/eval/metrics.h"
 
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+
 #include <algorithm>
 #include <cmath>
 #include <functional>
@@ -18,6 +21,18 @@ void score(QueryOutcome& o, const Pose3d& T_map_sensor_estimate, const Pose3d& T
   const Eigen::Matrix3d dR = T_map_sensor_estimate.linear().transpose() * T_map_sensor_truth.linear();
   o.error_deg = Eigen::AngleAxisd(dR).angle() * 180.0 / M_PI;
   o.correct = o.error_m <= t.false_translation_m && o.error_deg <= t.false_rotation_deg;
+}
+
+void score_covariance(QueryOutcome& o, const Eigen::Matrix<double, 6, 6>& covariance) {
+  o.has_covariance = false;
+  if (!o.localized || covariance.isZero()) return;
+  const Eigen::Matrix2d horizontal = covariance.block<2, 2>(3, 3);
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> solver(horizontal);
+  if (!(solver.eigenvalues()(0) > 0.0)) return;
+  const Eigen::Vector2d e = (o.estimate_xy - o.truth_xy).head<2>();
+  o.has_covariance = true;
+  o.sigma_h_m = std::sqrt(solver.eigenvalues()(1));
+  o.mahalanobis_h = std::sqrt(e.dot(horizontal.ldlt().solve(e)));
 }
 
 Distribution distribution_of(std::vector<double> v) {
@@ -74,13 +89,21 @@ PxCurve px_curve(const std::vector<QueryOutcome>& outcomes) {
 
 Summary summarize(const std::vector<QueryOutcome>& outcomes) {
   Summary s;
-  std::vector<double> err_m, err_deg, latency;
+  std::vector<double> err_m, err_deg, latency, sigma_h;
   for (const QueryOutcome& o : outcomes) {
     ++s.queries;
     s.mapped_queries += o.mapped;
     latency.push_back(o.latency_ms);
     if (!o.localized) continue;
+    s.rejected += o.rejected;
+    s.rejected_false += o.rejected && !o.correct;
     ++s.localized;
+    ++s.localized_by_method[o.method.empty() ? "unknown" : o.method];
+    if (o.has_covariance) {
+      ++s.with_covariance;
+      s.within_3_sigma += o.mahalanobis_h <= 3.0;
+      sigma_h.push_back(o.sigma_h_m);
+    }
     if (o.correct) {
       ++s.correct;
       err_m.push_back(o.error_m);
@@ -93,6 +116,7 @@ Summary summarize(const std::vector<QueryOutcome>& outcomes) {
   s.error_deg = distribution_of(err_deg);
   s.latency_ms = distribution_of(latency);
   s.px = px_curve(outcomes);
+  s.sigma_h_m = distribution_of(sigma_h);
   return s;
 }
 

@@ -8,13 +8,26 @@ namespace eval {
 
 QueryPriors::QueryPriors(const LocalizationRunConfig& config, const Poses& truth)
     : config_(config), truth_(truth), gnss_rng_(config.gnss_seed) {
-  if (config.track && config.gnss_sigma_m > 0.0) throw std::runtime_error("--track and --gnss-sigma-m exclude each other");
+  if ((config.track ? 1 : 0) + (config.gnss_sigma_m > 0.0 ? 1 : 0) + (config.wrong_prior_m > 0.0 ? 1 : 0) > 1)
+    throw std::runtime_error("--track, --gnss-sigma-m and --wrong-prior-m exclude each other");
+  if (!(config.wrong_prior_m >= 0.0) || !std::isfinite(config.wrong_prior_m) || !(config.wrong_prior_radius_m > 0.0) ||
+      !std::isfinite(config.wrong_prior_radius_m))
+    throw std::runtime_error("--wrong-prior-m must be finite and >= 0, --wrong-prior-radius-m finite and > 0");
   if (!(config.gnss_sigma_m >= 0.0) || !std::isfinite(config.gnss_sigma_m))
     throw std::runtime_error("--gnss-sigma-m must be a finite number >= 0");
 }
 
 std::string QueryPriors::prepare(api::LocalizeRequest& request, const io::ReplayQuery& q) {
   if (config_.track) return api::to_string(tracker_.prepare(request, q.odometer_m));
+  if (config_.wrong_prior_m > 0.0) {
+    const double angle = 2.0 * M_PI * gnss_rng_.uniform();
+    Pose3d T_map_sensor = truth_[q.frame];
+    T_map_sensor.translation() += config_.wrong_prior_m * Eigen::Vector3d(std::cos(angle), std::sin(angle), 0.0);
+    request.flags |= api::kFlagHasPrior;
+    request.T_map_local_prior = T_map_sensor * q.T_odom_sensor.inverse();
+    request.prior_radius_m = config_.wrong_prior_radius_m;
+    return "wrong";
+  }
   if (config_.gnss_sigma_m <= 0.0) return "global";
   // A GNSS fix: the true position with Gaussian noise per horizontal axis, heading kept (an
   // INS gives it far better than GNSS gives position); search radius 3 sigma.
@@ -27,8 +40,8 @@ std::string QueryPriors::prepare(api::LocalizeRequest& request, const io::Replay
   return "gnss";
 }
 
-void QueryPriors::update(const api::LocalizeReply& reply, const io::ReplayQuery& q) {
-  if (config_.track) tracker_.update(reply, q.odometer_m);
+bool QueryPriors::update(const api::LocalizeReply& reply, const io::ReplayQuery& q) {
+  return config_.track && tracker_.update(reply, q.odometer_m) == api::TrackUpdate::kRejected;
 }
 
 void PriorComparison::add(const api::LocalizeRequest& request, const api::LocalizeReply& reply,

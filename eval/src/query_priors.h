@@ -20,7 +20,8 @@ class QueryPriors {
   QueryPriors(const LocalizationRunConfig& config, const Poses& truth);
   // Sets the request's prior (if any); returns the mode: "global", "tracked" or "gnss".
   std::string prepare(api::LocalizeRequest& request, const io::ReplayQuery& q);
-  void update(const api::LocalizeReply& reply, const io::ReplayQuery& q);
+  // True when the tracker's gate rejected a LOCALIZED reply (api::Tracker).
+  bool update(const api::LocalizeReply& reply, const io::ReplayQuery& q);
 
  private:
   const LocalizationRunConfig& config_;

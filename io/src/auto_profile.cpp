@@ -73,9 +73,10 @@ PipelineConfig auto_pipeline_config(const InputMeasurements& m) {
     // With a prior (tracking, GNSS) the poses are confined to where the vehicle is: on
     // riverside02 0-140 tracked, fitness >= 0.1 instead of 0.3 took 31 -> 36 of 45, 0 false;
     // support 8 instead of 14 gave 2 false in 141-280, so support stays. With 30 m GNSS priors
-    // one pose 4 m off passed at confidence 0.07 (true ones: >= 0.12), hence a floor of 0.1.
+    // one pose 4 m off passed at confidence 0.07 (true ones: >= 0.12), hence a floor of 0.1;
+    // since raised to the default's 0.35 (wrong priors, see PipelineConfig()).
     c.localizer.min_refine_fitness_with_prior = 0.1f;
-    c.localizer.min_confidence_with_prior = 0.1f;
+    c.localizer.min_confidence_with_prior = 0.35f;
   } else if (sensor == "narrow-fov") {
     fit_segmentation_to_spacing(c, m);
     // A small field of view sees few segments: a cylinder of three times the median range
@@ -92,6 +93,11 @@ PipelineConfig auto_pipeline_config(const InputMeasurements& m) {
     c.localizer.matcher.l2_threshold = 3.0f;
     c.localizer.verification.resolution_m = 0.7f;
     c.localizer.min_support = 4;
+    // With a prior the ambiguity check no longer sees the look-alikes elsewhere: on hku-mb,
+    // priors 4-10 m off (radius 3 m, --wrong-prior-m) were answered at support 6-13, all false,
+    // GNSS-like priors (sigma 3 and 10 m) at 38 or more when true, 9 when false: 14, as the
+    // sparse-spinning profile asks everywhere.
+    c.localizer.min_support_with_prior = 14;
     // The L2 gate at 3.0 passes most candidates, so verification grows with k: on hku-mb
     // (even / odd keyframes) k 200 -> 50 took it from 682 to 57 ms per query for 38 -> 37 of
     // 39 localized; hku-loop1's revisit 2 -> 3 of 6, loops 3 -> 2 true, 0 false on both.

@@ -106,6 +106,21 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("max_segment_points", l.refine.max_segment_points);
   v("recent_window_m", l.refine.recent_window_m);
   v("min_recent_points", l.refine.min_recent_points);
+  v.section("registration");
+  v("enabled", l.registration.enabled);
+  v("window_m", l.registration.window_m);
+  v("coarse_correspondence_m", l.registration.coarse_correspondence_m);
+  v("max_prior_radius_m", l.registration.max_prior_radius_m);
+  v("min_query_points", l.registration.min_query_points);
+  v("max_last_step_m", l.registration.max_last_step_m);
+  v("min_support", l.registration.min_support);
+  v("min_matched_segments", l.registration.min_matched_segments);
+  v("min_fitness", l.registration.min_fitness);
+  v("min_axis_share", l.registration.min_axis_share);
+  v.section("covariance");
+  v("scale", l.covariance.scale);
+  v("floor_m", l.covariance.floor_m);
+  v("floor_deg", l.covariance.floor_deg);
   v.section("localizer");
   v("support_radius_m", l.support_radius_m);
   v("min_support", l.min_support);
@@ -253,12 +268,16 @@ void PipelineConfig::validate() const {
 // was not chosen on (seed 2, README "What we measured").
 PipelineConfig::PipelineConfig() {
   localizer.min_confidence = 0.8f;
-  // With a prior (tracking, GNSS) look-alikes elsewhere cannot pass, so no confidence floor and
-  // a low fitness floor. (Chosen when the demo's tracked refusals on mapped streets showed a
-  // fitness of 0.22-0.25 at support 57-86: that was refinement counting a quarter of its
-  // points when it stopped in its coarse phase, since fixed; the floors stay as they were.)
+  // With a prior (tracking, GNSS) look-alikes far away cannot pass, so a low fitness floor.
+  // (Chosen when the demo's tracked refusals on mapped streets showed a fitness of 0.22-0.25
+  // at support 57-86: that was refinement counting a quarter of its points when it stopped in
+  // its coarse phase, since fixed; the floor stays as it was.) But a wrong prior can: with
+  // priors 6 m off (radius 3 m, `segmatch-eval localize --wrong-prior-m 6`) segment matching
+  // answered within them at confidence 0.25-0.31 (demo 1, hku-mb 3: all false), while true
+  // answers under priors had >= 0.50 on the demo, riverside02, hku-mb and hku-loop1 but one
+  // (riverside02, 0.22): 0.35 (README, "continuous localization").
   localizer.min_refine_fitness_with_prior = 0.2f;
-  localizer.min_confidence_with_prior = 0.0f;
+  localizer.min_confidence_with_prior = 0.35f;
 }
 
 std::vector<std::string> pipeline_preset_names() {

@@ -7,7 +7,7 @@ import enum
 
 MAGIC = b"SGMQ"
 VERSION = 1  # the frame header's version
-REVISION = 6  # the document's revision: additions since version 1 (docs/protocol.md 8)
+REVISION = 7  # the document's revision: additions since version 1 (docs/protocol.md 8)
 HEADER_BYTES = 12
 MAX_PAYLOAD_BYTES = 64 << 20  # the server's default --max-frame-mb
 

@@ -166,6 +166,24 @@ class ReplyDetail:
     window_warp_m: float = 0.0
     window_warp_deg: float = 0.0
     window_points: int = 0
+    # Revision 7: what answered (0 segments, 1 registration) and the upper triangle, row by row,
+    # of the sensor pose's 6x6 covariance (rotation about the map axes, rad; position, m). None:
+    # a revision-6 server's reply (unknown, not zero uncertainty).
+    method: Optional[int] = None
+    covariance_upper: Optional[List[float]] = None
+
+    @property
+    def method_name(self) -> str:
+        return {None: "unknown", 0: "segments", 1: "registration"}.get(self.method, "unknown")
+
+    @property
+    def covariance(self) -> Optional[np.ndarray]:
+        """The 6x6 covariance (symmetric), or None when the reply has none."""
+        if self.covariance_upper is None:
+            return None
+        c = np.zeros((6, 6))
+        c[np.triu_indices(6)] = self.covariance_upper
+        return c + np.triu(c, 1).T
 
 
 @dataclass
@@ -217,10 +235,18 @@ class LocalizeReply:
         for f in fields(Timings):
             w.f32(getattr(self.timings, f.name))
         if self.detail is not None:
-            w.u16(REPLY_DETAIL_BYTES)
-            w.f32(self.detail.window_warp_m)
-            w.f32(self.detail.window_warp_deg)
-            w.u32(self.detail.window_points)
+            d = self.detail
+            estimate = d.method is not None
+            w.u16(REPLY_DETAIL_ESTIMATE_BYTES if estimate else REPLY_DETAIL_BYTES)
+            w.f32(d.window_warp_m)
+            w.f32(d.window_warp_deg)
+            w.u32(d.window_points)
+            if estimate:  # revision 7
+                w.u8(d.method)
+                for _ in range(3):
+                    w.u8(0)
+                for c in d.covariance_upper or [0.0] * 21:
+                    w.f32(c)
 
     @classmethod
     def _get(cls, r: Reader) -> "LocalizeReply":
@@ -244,6 +270,7 @@ class LocalizeReply:
 
 
 REPLY_DETAIL_BYTES = 12  # revision 6's fields; a later revision's block is longer
+REPLY_DETAIL_ESTIMATE_BYTES = 100  # with revision 7's: method and covariance
 
 
 def _get_detail(r: Reader) -> ReplyDetail:
@@ -256,7 +283,16 @@ def _get_detail(r: Reader) -> ReplyDetail:
     if size < REPLY_DETAIL_BYTES:
         raise DecodeError(DecodeStatus.BAD_FIELD, f"detail block of {size} bytes (at least {REPLY_DETAIL_BYTES})")
     d = ReplyDetail(r.f32(), r.f32(), r.u32())
-    for _ in range(size - REPLY_DETAIL_BYTES):
+    known = REPLY_DETAIL_BYTES
+    if size >= REPLY_DETAIL_ESTIMATE_BYTES:  # revision 7
+        d.method = r.u8()
+        for _ in range(3):
+            r.u8()  # reserved
+        d.covariance_upper = [r.f32() for _ in range(21)]
+        if not all(math.isfinite(c) for c in d.covariance_upper):
+            raise DecodeError(DecodeStatus.NON_FINITE, "covariance")
+        known = REPLY_DETAIL_ESTIMATE_BYTES
+    for _ in range(size - known):
         r.u8()  # a later revision's fields
     if not (math.isfinite(d.window_warp_m) and math.isfinite(d.window_warp_deg)):
         raise DecodeError(DecodeStatus.NON_FINITE, "window warp")

@@ -188,8 +188,16 @@ api::LocalizeReply reply_of(const LoadedMap& map, const LocalizationResult& r, u
   for (const Match& m : r.inliers)
     if (m.target >= 0 && static_cast<size_t>(m.target) < targets.size()) reply.matched_segment_ids.push_back(targets[m.target].id);
   copy_timings(r.timings, reply.timings);
-  if (prior.detail) reply.detail = api::ReplyDetail{r.window_warp_m, r.window_warp_deg, static_cast<uint32_t>(r.window_points)};
+  if (!r.localized() && !r.registration_reason.empty()) reply.reason += " (registration: " + r.registration_reason + ")";
   check_prior(prior, reply);
+  if (prior.detail) {
+    reply.detail = api::ReplyDetail{r.window_warp_m, r.window_warp_deg, static_cast<uint32_t>(r.window_points), {}};
+    api::ReplyDetail::Estimate e;  // revision 7
+    e.method = static_cast<uint8_t>(r.method == LocalizationMethod::kRegistration ? api::ReplyMethod::kRegistration
+                                                                                : api::ReplyMethod::kSegments);
+    if (reply.status == api::LocalizeStatus::kLocalized) e.covariance_upper = api::covariance_upper(r.covariance);
+    reply.detail->estimate = e;
+  }
   reply.timings.server_total =
       std::chrono::duration<float, std::milli>(std::chrono::steady_clock::now() - start).count();
   return reply;

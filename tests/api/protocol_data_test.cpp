@@ -96,7 +96,7 @@ const std::set<std::string> kFiles = {
     "localize_global.bin", "localize_prior_voxelized.bin", "localize_segments.bin",
     "localize_reply_localized.bin", "localize_reply_not_localized.bin", "localize_reply_outside_prior.bin",
     "localize_refusal_code.bin", "localize_reply_refused.bin", "localize_detail.bin", "localize_reply_detail.bin",
-    "error.bin"};
+    "localize_reply_estimate.bin", "error.bin"};
 
 }  // namespace
 
@@ -241,12 +241,34 @@ TEST(ProtocolData, LocalizeDetail) {
   check_file<LocalizeRequest>("localize_detail.bin", asks, [](const LocalizeRequest& m) { EXPECT_EQ(m.flags, 16u); });
 
   LocalizeReply with = localized_reply(13);
-  with.detail = ReplyDetail{0.375f, 0.25f, 1234};
+  with.detail = ReplyDetail{0.375f, 0.25f, 1234, {}};
   check_file<LocalizeReply>("localize_reply_detail.bin", with, [](const LocalizeReply& m) {
     ASSERT_TRUE(m.detail.has_value());
+    EXPECT_FALSE(m.detail->estimate.has_value()) << "a revision-6 block (D = 12) has no method or covariance";
     EXPECT_EQ(m.detail->window_warp_m, 0.375f);
     EXPECT_EQ(m.detail->window_warp_deg, 0.25f);
     EXPECT_EQ(m.detail->window_points, 1234u);
+  });
+}
+
+// Revision 7: the detail block with the answer's method and covariance (D = 100).
+TEST(ProtocolData, LocalizeEstimate) {
+  LocalizeReply with = localized_reply(14);
+  ReplyDetail d{0.125f, 0.0625f, 2000, {}};
+  ReplyDetail::Estimate e;
+  e.method = static_cast<uint8_t>(ReplyMethod::kRegistration);
+  for (size_t k = 0; k < e.covariance_upper.size(); ++k) e.covariance_upper[k] = static_cast<float>(k + 1) / 4096.0f;
+  d.estimate = e;
+  with.detail = d;
+  check_file<LocalizeReply>("localize_reply_estimate.bin", with, [](const LocalizeReply& m) {
+    ASSERT_TRUE(m.detail.has_value());
+    ASSERT_TRUE(m.detail->estimate.has_value());
+    EXPECT_EQ(m.detail->estimate->method, 1u);
+    const Eigen::Matrix<double, 6, 6> c = covariance_matrix(m.detail->estimate->covariance_upper);
+    EXPECT_EQ(c(0, 5), 6.0 / 4096.0);
+    EXPECT_EQ(c(5, 0), 6.0 / 4096.0);
+    EXPECT_EQ(c(5, 5), 21.0 / 4096.0);
+    EXPECT_EQ(covariance_upper(c), m.detail->estimate->covariance_upper);
   });
 }
 

@@ -65,6 +65,8 @@ EXPECTED = {
     "localize_detail.bin": p.Localize(13, p.FLAG_DETAIL, (0.25, -1.5, 1.75), (0.5, 0.5, -0.5, 0.5),
                                       points=pts([[1, 2, 3], [-4.5, 0.25, 10], [12.125, -7, 0.5], [0.1, 0.2, 0.3]])),
     "localize_reply_detail.bin": localized_reply(request_id=13, detail=p.ReplyDetail(0.375, 0.25, 1234)),
+    "localize_reply_estimate.bin": localized_reply(request_id=14, detail=p.ReplyDetail(
+        0.125, 0.0625, 2000, method=1, covariance_upper=[(k + 1) / 4096.0 for k in range(21)])),
     "error.bin": p.Error(ErrorCode.NON_FINITE, "NaN or Inf value"),
 }
 

@@ -24,7 +24,7 @@ constexpr std::array<uint8_t, 4> kMagic = {'S', 'G', 'M', 'Q'};
 constexpr uint16_t kProtocolVersion = 1;
 // The protocol document's revision (docs/protocol.md, History): messages, flag bits and error
 // codes added compatibly since version 1. The frame header still says kProtocolVersion.
-constexpr int kProtocolRevision = 6;
+constexpr int kProtocolRevision = 7;
 constexpr size_t kHeaderBytes = 12;
 
 enum class MessageType : uint16_t {
@@ -223,8 +223,22 @@ struct ReplyDetail {
   // vehicle odometry's warp over the cloud), and the window's query points (0: no window).
   float window_warp_m = 0.f, window_warp_deg = 0.f;
   uint32_t window_points = 0;
+  // Revision 7: what answered and how uncertain it is. Absent in a revision-6 server's reply.
+  struct Estimate {
+    uint8_t method = 0;  // ReplyMethod's values; others: a method this revision cannot name
+    // The upper triangle, row by row, of the sensor pose's 6x6 covariance (docs/protocol.md
+    // 6.4): rotation (rad, map axes through the sensor), then position (m, map). All zero: none.
+    std::array<float, 21> covariance_upper{};
+  };
+  std::optional<Estimate> estimate;
 };
-constexpr size_t kReplyDetailBytes = 12;  // revision 6's fields
+constexpr size_t kReplyDetailBytes = 12;           // revision 6's fields
+constexpr size_t kReplyDetailEstimateBytes = 100;  // with revision 7's
+enum class ReplyMethod : uint8_t { kSegments = 0, kRegistration = 1 };
+const char* to_string(ReplyMethod method);
+// The covariance as a matrix, and back (the upper triangle; the matrix is symmetric).
+Eigen::Matrix<double, 6, 6> covariance_matrix(const std::array<float, 21>& upper);
+std::array<float, 21> covariance_upper(const Eigen::Matrix<double, 6, 6>& covariance);
 
 struct LocalizeReply {
   uint64_t request_id = 0;

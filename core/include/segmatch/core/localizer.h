@@ -7,6 +7,7 @@
 #include "segmatch/core/descriptors.h"
 #include "segmatch/core/matcher.h"
 #include "segmatch/core/preprocess.h"
+#include "segmatch/core/registration.h"
 #include "segmatch/core/retrieval.h"
 #include "segmatch/core/segment.h"
 #include "segmatch/core/segmenter.h"
@@ -33,6 +34,10 @@ struct LocalizerConfig {
   MatcherConfig matcher;
   VerificationConfig verification;
   RefineConfig refine;
+  // Beyond the paper: a query with a prior is first registered to the map around it
+  // (registration.h); segment matching answers when that does not.
+  RegistrationConfig registration;
+  CovarianceConfig covariance;  // of every localized answer
   // Beyond the paper: each verified hypothesis is ranked by its support (support.h), the
   // number of query segments that land within support_radius_m of a map segment under it.
   // The best must have at least min_support, and no other distinct hypothesis may reach
@@ -67,6 +72,11 @@ struct LocalizerConfig {
 
 enum class LocalizationStatus { kLocalized, kNotLocalized };
 const char* to_string(LocalizationStatus status);
+
+// What answered: segment matching (the paper's pipeline, and the global path), or the
+// registration to the map around a prior (registration.h).
+enum class LocalizationMethod { kSegments, kRegistration };
+const char* to_string(LocalizationMethod method);
 
 // Why a query was not localized, stage by stage (LocalizationResult::reason says it in words).
 enum class Refusal {
@@ -103,6 +113,15 @@ struct LocalizationResult {
   // or too few points and the whole cloud's pose stands).
   float window_warp_m = 0.0f, window_warp_deg = 0.0f;
   size_t window_points = 0;
+  LocalizationMethod method = LocalizationMethod::kSegments;
+  // The pose's 6x6 covariance (pose_covariance in registration.h): rotation in radians about
+  // the map frame's axes through the sensor, then the sensor's position in metres, map frame.
+  // Zero when there is none (not localized, or point-to-point refinement).
+  Matrix6d covariance = Matrix6d::Zero();
+  // With a prior and registration on: why registration did not answer (kNone: it did, or it
+  // was not tried), typed and in words.
+  RegistrationRefusal registration_refusal = RegistrationRefusal::kNone;
+  std::string registration_reason;
   size_t query_segments = 0, candidates = 0, matches = 0;
   size_t hypotheses = 0;                            // distinct verified poses considered
   size_t support = 0, runner_up_support = 0;        // of the chosen and the next-best pose

@@ -108,11 +108,23 @@ struct RefineResult {
   int iterations = 0;
   float rmse_m = 0;   // point-to-point RMSE of the correspondences within max_correspondence_m
   float fitness = 0;  // fraction of (used) query points with a target neighbour within max_correspondence_m
+  // How far the last iteration moved the estimate (translation plus rotation in radians, as
+  // convergence_m): small when the loop ended settled, whether or not below convergence_m.
+  float last_step_m = 0;
+  // Point-to-plane only, at the returned pose: the Gauss-Newton information sum J J^T over the
+  // correspondences with a normal, J = [(p - pivot) x n, n] (a rotation about the pivot, then a
+  // translation, both in the target frame), their number and RMS residual n . (p - q). It is
+  // what a covariance and a degeneracy check are made from (registration.h).
+  Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Zero();
+  size_t plane_correspondences = 0;
+  float plane_rmse_m = 0;
 };
 
 // ICP of the query points onto the target points starting at `initial` (T_target_query).
 // With fewer than 6 correspondences the result keeps the last estimate, converged = false.
+// pivot_target: where RefineResult::information is taken (target frame; e.g. the sensor).
 RefineResult refine_alignment(const PointCloud& query_points, const PointCloud& target_points,
-                              const Pose3d& initial, const RefineConfig& config);
+                              const Pose3d& initial, const RefineConfig& config,
+                              const Eigen::Vector3d& pivot_target = Eigen::Vector3d::Zero());
 
 }  // namespace segmatch

@@ -46,6 +46,10 @@ struct LocalizationRunConfig {
   // metres per horizontal axis (seeded), radius 3 sigma. 0: none. Excludes track.
   double gnss_sigma_m = 0.0;
   uint64_t gnss_seed = 1;
+  // A stress test (issue 33: a wrong prior must never become a fix): every query's prior is the
+  // true pose moved wrong_prior_m in a random horizontal direction (seeded by gnss_seed), with
+  // radius wrong_prior_radius_m. 0: off. Excludes track and gnss_sigma_m.
+  double wrong_prior_m = 0.0, wrong_prior_radius_m = 3.0;
   // Same-run A/B: every query sent with a prior is also sent without one (not scored), and the
   // server times of both are reported.
   bool compare_global = false;
@@ -62,8 +66,10 @@ struct LocalizationRun {
   std::string cloud_poses_file;  // the poses file the local clouds were built with
   std::string reference_file;    // the poses file the answers are scored against (--query)
   // From the first localization on (tracking's figure: a pose carried by odometry alone is not
-  // a localization): queries, and those the server answered LOCALIZED.
+  // a localization): queries on mapped streets, and those the server answered LOCALIZED; the
+  // queries on unmapped streets apart (a map cannot answer for a street it never saw).
   size_t after_first_fix = 0, localized_after_first_fix = 0;
+  size_t unmapped_after_first_fix = 0, unmapped_localized_after_first_fix = 0;
   std::map<std::string, Distribution> server_ms_by_mode;  // server_total per query mode
   // With compare_global, over the queries sent with a prior: server_total and retrieve +
   // classify + verify, with the prior and for the same query without it.

@@ -1,0 +1,120 @@
+// Registration to the map around a prior (beyond the paper). The paper localizes every query
+// by segment matching; localizers that fleets run use place recognition only to find a first
+// pose, and between fixes register the local cloud to the map around the predicted pose. Here a
+// query with a prior is first registered, by the point-to-plane ICP of refine.cpp, to the map
+// segments' points near the prior; segment matching is the fallback and the global path.
+//
+// A registration answers only when it is well posed and well supported: its query points lie
+// on the map's surfaces (fitness, RMS), it stayed within the prior, and the surfaces it used
+// constrain every direction (a straight corridor of walls leaves the motion along it free; the
+// Gauss-Newton information along its weakest axis shows that). Every answer carries a 6x6
+// covariance from that information.
+#pragma once
+
+#include "segmatch/core/types.h"
+#include "segmatch/core/verification.h"
+
+#include <Eigen/Core>
+
+#include <string>
+
+namespace segmatch {
+
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+
+struct RegistrationConfig {
+  bool enabled = true;
+  // Query points within this horizontal distance of the sensor are registered: the odometry
+  // that built the local cloud drifts along it, near the sensor least.
+  float window_m = 40.0f;
+  // A first ICP with this correspondence distance brings a prior that is off by a metre or two
+  // within reach of the fine one (RefineConfig::max_correspondence_m).
+  float coarse_correspondence_m = 1.5f;
+  // Priors wider than this are not a starting point for ICP (its basin is a metre or two): such
+  // queries go to segment matching directly. On riverside02 with GNSS-like priors (sigma 10 m,
+  // radius 30 m) registration found wrong minima along the street, 1-15 m off with fitness up
+  // to 0.82 (README); a tracker's prior (3 m after a fix, growing 5 % of the distance) is a
+  // metre or less off.
+  float max_prior_radius_m = 10.0f;
+  int min_query_points = 300;
+  // The fine ICP must have settled: converged, or its last iteration moved the pose by at most
+  // this (m + rad). From priors 4 m off (outside the basin) it was still being dragged when it
+  // stopped, and answered 1.5 m off (riverside02, --wrong-prior-m 4).
+  float max_last_step_m = 0.01f;
+  // At least this many query segments land on a map segment under the registered pose (their
+  // centroids within LocalizerConfig::support_radius_m, support.h), as the segment path asks of
+  // its poses: the surfaces of a street's facades can agree at a wrong place, its objects not.
+  int min_support = 10;
+  // ... and at least this many of those pairs pass the matcher (the classifier, as in segment
+  // matching): segments that land on a map segment by coincidence are other objects. Measured
+  // (README): true registrations had 2 or more (riverside02 2, demo 6, hku-mb 32 at the
+  // least), registrations from priors 6 m off 0.
+  int min_matched_segments = 3;
+  // At least this fraction of the query points within the fine correspondence distance of the
+  // map's surfaces.
+  float min_fitness = 0.55f;
+  // Degeneracy: the translation information per correspondence along the weakest axis (the
+  // smallest eigenvalue of the translation block, rotation marginalised, divided by the
+  // number of correspondences: the share of the surface normals that point along it, 0..1/3).
+  float min_axis_share = 0.02f;
+  void validate() const;  // throws std::invalid_argument naming the field
+};
+
+// How a refined pose's covariance is made (pose_covariance): scale * s^2 * inverse(information),
+// s the RMS point-to-plane residual, plus a floor. The ICP term alone is what independent point
+// errors would give; neighbouring points' errors are correlated (the information of N points
+// is far less than N independent ones: the scale), and errors the points cannot see remain:
+// the map's own poses, the odometry's warp across the window (the floor). Both are calibrated
+// on data (README, "continuous localization").
+struct CovarianceConfig {
+  float scale = 25.0f;
+  float floor_m = 0.05f;    // standard deviation added on each position axis
+  float floor_deg = 0.2f;   // ... and on each rotation axis
+  void validate() const;
+};
+
+enum class RegistrationRefusal {
+  kNone,            // accepted
+  kWidePrior,       // the prior's radius exceeds max_prior_radius_m
+  kFewPoints,       // fewer than min_query_points query points in the window, or no map points
+  kNotConverged,    // the ICP was still moving after RefineConfig::max_iterations
+  kLowFitness,      // the query points do not lie on the map's surfaces
+  kHighRmse,        // ... not closely enough
+  kOutsidePrior,    // the registered sensor left the prior's radius, or turned past its tolerance
+  kDegenerate,      // some direction is not constrained
+  kLowSupport,      // too few query segments land on (and match) map segments (the localizer's check)
+};
+const char* to_string(RegistrationRefusal refusal);
+
+struct RegistrationResult {
+  RegistrationRefusal refusal = RegistrationRefusal::kFewPoints;
+  std::string reason;  // the refusal in words
+  Pose3d T_map_query = Pose3d::Identity();
+  float fitness = 0.0f, rmse_m = 0.0f;
+  size_t query_points = 0, map_points = 0;
+  float weakest_axis_share = 0.0f;                // see RegistrationConfig::min_axis_share
+  Eigen::Vector3d weakest_axis = Eigen::Vector3d::Zero();  // its direction (map frame)
+  Matrix6d covariance = Matrix6d::Zero();          // see pose_covariance
+  bool accepted() const { return refusal == RegistrationRefusal::kNone; }
+};
+
+// The 6x6 covariance of a refined pose: rotation (rad, about the map frame's axes, through
+// `pivot`) then position of `pivot` (m, map frame), pivot being where RefineResult::information
+// was taken (refine_alignment's pivot_target; the sensor). Zero if the information is singular.
+Matrix6d pose_covariance(const RefineResult& refined, const CovarianceConfig& config);
+
+// The translation information per correspondence along its weakest axis (rotation
+// marginalised), and that axis.
+float weakest_axis_share(const RefineResult& refined, Eigen::Vector3d* axis = nullptr);
+
+// Registers query_points (query frame) to map_points (map frame) starting at T_map_query_prior.
+// sensor_query: the sensor in the query frame (the window's centre; the covariance's pivot).
+// The answer must stay within prior_radius_m and prior_rotation_deg of the prior.
+// max_rmse_m: the localizer's RMS floor (LocalizerConfig::max_refine_rmse_voxels), 0: off.
+RegistrationResult register_to_map(const PointCloud& query_points, const PointCloud& map_points,
+                                   const Pose3d& T_map_query_prior, const Eigen::Vector3d& sensor_query,
+                                   double prior_radius_m, double prior_rotation_deg, float max_rmse_m,
+                                   const RegistrationConfig& config, const RefineConfig& refine,
+                                   const CovarianceConfig& covariance = {});
+
+}  // namespace segmatch

@@ -1,0 +1,117 @@
+#include "localizer_stages.h"
+
+#include "segmatch/core/registration.h"
+
+#include <Eigen/Geometry>
+
+#include <cmath>
+#include <string>
+
+namespace segmatch {
+namespace detail {
+
+// The map segments whose centroids lie within radius_m of center, horizontally.
+std::vector<int> targets_within_disc(const Segments& targets, const Eigen::Vector3d& center, double radius_m) {
+  std::vector<int> out;
+  for (size_t t = 0; t < targets.size(); ++t)
+    if ((targets[t].centroid.cast<double>() - center).head<2>().norm() <= radius_m) out.push_back(static_cast<int>(t));
+  return out;
+}
+
+
+// Points of the segments on one side of the matches, for the refinement: every stride-th point
+// of each segment (segment_point_stride).
+// With `source`, a target's points come from there (the same points, in the same order).
+PointCloud gather(const Segments& segments, const Matches& inliers, bool query_side, size_t stride,
+                  const TargetPoints* source) {
+  PointCloud out;
+  std::vector<bool> taken(segments.size(), false);
+  for (const Match& m : inliers) {
+    const int i = query_side ? m.query : m.target;
+    if (taken[i]) continue;
+    taken[i] = true;
+    if (source) {
+      source->append(static_cast<size_t>(i), &out);
+      continue;
+    }
+    const PointCloud& points = segments[i].points;
+    for (size_t k = 0; k < points.size(); k += stride) out.push_back(points[k]);
+  }
+  return out;
+}
+
+
+// The recent window's points (RefineConfig::recent_window_m): every query segment's points
+// near the sensor, and every map segment's near where the pose puts the sensor (a margin for
+// segments that straddle the window's edge). The window has fewer matched segments than the
+// whole cloud, so it takes all it has, not only the supporting ones.
+WindowPoints window_points(const Segments& query, const Segments& targets, const TargetPoints* source,
+                           const Eigen::Vector3d& sensor, const Pose3d& T_map_query, size_t stride, float window_m) {
+  constexpr double kMarginM = 10.0;
+  Matches all_query, near_targets;
+  for (size_t i = 0; i < query.size(); ++i) all_query.push_back({static_cast<int>(i), 0});
+  for (int t : targets_within_disc(targets, T_map_query * sensor, window_m + kMarginM)) near_targets.push_back({0, t});
+  return {crop_cylinder(gather(query, all_query, true, stride), sensor, window_m),
+          gather(targets, near_targets, false, 1, source)};
+}
+
+// The sensor's pose now: the window refined alone from the whole cloud's pose. The odometry
+// that built the cloud drifted between its oldest scans and the sensor; near the sensor that
+// drift is small.
+void refine_recent_window(const WindowPoints& points, const Eigen::Vector3f& sensor, float min_fitness,
+                          const RefineConfig& config, const CovarianceConfig& covariance, LocalizationResult& r) {
+  const Eigen::Vector3d s = sensor.cast<double>();
+  const PointCloud& recent = points.query;
+  if (recent.size() < static_cast<size_t>(config.min_recent_points)) return;
+  const RefineResult window = refine_alignment(recent, points.targets, r.T_map_query, config, r.T_map_query * s);
+  if (window.fitness < min_fitness) return;
+  r.covariance = pose_covariance(window, covariance);
+  r.window_points = recent.size();
+  r.window_warp_m = static_cast<float>((window.T_target_query * s - r.T_map_query * s).norm());
+  const Eigen::AngleAxisd turn(window.T_target_query.linear() * r.T_map_query.linear().transpose());
+  r.window_warp_deg = static_cast<float>(std::abs(turn.angle()) * 180.0 / M_PI);
+  r.T_map_query = window.T_target_query;
+}
+
+// Tracking by registration (registration.h): every query segment's points near the sensor onto
+// the map segments' near where the prior puts it. Localized, or the reason it did not answer.
+void register_near_prior(const Segments& targets, const TargetPoints* source, const CentroidIndex& centroids,
+                         const RandomForestMatcher* classifier, const LocalizerConfig& config, const PosePrior& prior,
+                         const Eigen::Vector3f& sensor, LocalizationResult& r) {
+  constexpr double kMarginM = 10.0;  // map segments straddling the window's edge
+  const Eigen::Vector3d s = sensor.cast<double>();
+  Matches all_query, near_targets;
+  for (size_t i = 0; i < r.query.size(); ++i) all_query.push_back({static_cast<int>(i), 0});
+  const double reach = config.registration.window_m + prior.radius_m + kMarginM;
+  for (int t : targets_within_disc(targets, prior.T_map_query * s, reach)) near_targets.push_back({0, t});
+  const size_t stride = segment_point_stride(r.query, static_cast<size_t>(config.refine.max_segment_points));
+  const float max_rmse_m = config.max_refine_rmse_voxels * config.segmentation.voxel.leaf_m;
+  const RegistrationResult reg =
+      register_to_map(gather(r.query, all_query, true, stride), gather(targets, near_targets, false, 1, source),
+                      prior.T_map_query, s, prior.radius_m, prior.max_rotation_deg, max_rmse_m, config.registration,
+                      config.refine, config.covariance);
+  r.registration_refusal = reg.refusal;
+  r.registration_reason = reg.reason;
+  r.refine_fitness = reg.fitness;
+  r.refine_rmse_m = reg.rmse_m;
+  if (!reg.accepted()) return;
+  const Support support = support_of(r.query, centroids, reg.T_map_query, config.support_radius_m);
+  r.support = support.count();
+  r.inliers = filter_matches(r.query, targets, support.pairs, config.matcher, classifier);
+  const RegistrationConfig& c = config.registration;
+  if (r.support < static_cast<size_t>(c.min_support) || r.inliers.size() < static_cast<size_t>(c.min_matched_segments)) {
+    r.registration_refusal = RegistrationRefusal::kLowSupport;
+    r.registration_reason = std::to_string(r.support) + " query segments land on map segments under the registered pose, " +
+                            std::to_string(r.inliers.size()) + " of them matched (at least " + std::to_string(c.min_support) +
+                            " and " + std::to_string(c.min_matched_segments) + ")";
+    return;
+  }
+  r.status = LocalizationStatus::kLocalized;
+  r.method = LocalizationMethod::kRegistration;
+  r.T_map_query = reg.T_map_query;
+  r.covariance = reg.covariance;
+  r.confidence = reg.fitness;
+}
+
+}  // namespace detail
+}  // namespace segmatch

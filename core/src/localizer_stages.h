@@ -1,0 +1,40 @@
+// The localizer's point stages (localizer.cpp): gathering segment points, the recent window's
+// refinement and the registration around a prior. Private to the core.
+#pragma once
+
+#include "segmatch/core/localizer.h"
+#include "segmatch/core/support.h"
+
+#include <vector>
+
+namespace segmatch {
+namespace detail {
+
+// The map segments whose centroids lie within radius_m of center, horizontally.
+std::vector<int> targets_within_disc(const Segments& targets, const Eigen::Vector3d& center, double radius_m);
+
+// Points of the segments on one side of the matches, for the refinement: every stride-th point
+// of each segment (segment_point_stride).
+// With `source`, a target's points come from there (the same points, in the same order).
+PointCloud gather(const Segments& segments, const Matches& inliers, bool query_side, size_t stride = 1,
+                  const TargetPoints* source = nullptr);
+
+// The recent window's points (RefineConfig::recent_window_m), see localizer_stages.cpp.
+struct WindowPoints {
+  PointCloud query, targets;
+};
+WindowPoints window_points(const Segments& query, const Segments& targets, const TargetPoints* source,
+                           const Eigen::Vector3d& sensor, const Pose3d& T_map_query, size_t stride, float window_m);
+
+// The sensor's pose now: the window refined alone from the whole cloud's pose (sets the
+// result's pose, window fields and covariance when the window fits).
+void refine_recent_window(const WindowPoints& points, const Eigen::Vector3f& sensor, float min_fitness,
+                          const RefineConfig& config, const CovarianceConfig& covariance, LocalizationResult& r);
+
+// Tracking by registration (registration.h): localizes r, or says in r why registration did not.
+void register_near_prior(const Segments& targets, const TargetPoints* source, const CentroidIndex& centroids,
+                         const RandomForestMatcher* classifier, const LocalizerConfig& config, const PosePrior& prior,
+                         const Eigen::Vector3f& sensor, LocalizationResult& r);
+
+}  // namespace detail
+}  // namespace segmatch

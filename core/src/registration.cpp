@@ -1,0 +1,151 @@
+#include "segmatch/core/registration.h"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <Eigen/LU>
+
+#include <cmath>
+#include <cstdio>
+#include <stdexcept>
+
+namespace segmatch {
+
+void RegistrationConfig::validate() const {
+  auto positive = [](float v, const char* name) {
+    if (!(v > 0.0f) || !std::isfinite(v)) throw std::invalid_argument(std::string("RegistrationConfig.") + name + " must be finite and > 0");
+  };
+  positive(window_m, "window_m");
+  positive(coarse_correspondence_m, "coarse_correspondence_m");
+  positive(max_prior_radius_m, "max_prior_radius_m");
+  positive(max_last_step_m, "max_last_step_m");
+  if (min_support < 0) throw std::invalid_argument("RegistrationConfig.min_support must be >= 0");
+  if (min_matched_segments < 0) throw std::invalid_argument("RegistrationConfig.min_matched_segments must be >= 0");
+  if (min_query_points < 6) throw std::invalid_argument("RegistrationConfig.min_query_points must be >= 6");
+  if (!(min_fitness >= 0.0f && min_fitness <= 1.0f)) throw std::invalid_argument("RegistrationConfig.min_fitness must be in 0..1");
+  if (!(min_axis_share >= 0.0f && min_axis_share <= 1.0f / 3.0f))
+    throw std::invalid_argument("RegistrationConfig.min_axis_share must be in 0..1/3");
+}
+
+void CovarianceConfig::validate() const {
+  if (!(scale > 0.0f) || !std::isfinite(scale)) throw std::invalid_argument("CovarianceConfig.scale must be finite and > 0");
+  if (!(floor_m >= 0.0f) || !std::isfinite(floor_m)) throw std::invalid_argument("CovarianceConfig.floor_m must be finite and >= 0");
+  if (!(floor_deg >= 0.0f) || !std::isfinite(floor_deg))
+    throw std::invalid_argument("CovarianceConfig.floor_deg must be finite and >= 0");
+}
+
+const char* to_string(RegistrationRefusal refusal) {
+  switch (refusal) {
+    case RegistrationRefusal::kNone: return "none";
+    case RegistrationRefusal::kWidePrior: return "wide_prior";
+    case RegistrationRefusal::kFewPoints: return "few_points";
+    case RegistrationRefusal::kLowFitness: return "low_fitness";
+    case RegistrationRefusal::kHighRmse: return "high_rmse";
+    case RegistrationRefusal::kOutsidePrior: return "outside_prior";
+    case RegistrationRefusal::kDegenerate: return "degenerate";
+    case RegistrationRefusal::kLowSupport: return "low_support";
+    case RegistrationRefusal::kNotConverged: return "not_converged";
+  }
+  return "unknown";
+}
+
+Matrix6d pose_covariance(const RefineResult& refined, const CovarianceConfig& config) {
+  if (refined.plane_correspondences < 6) return Matrix6d::Zero();
+  const Eigen::LDLT<Matrix6d> ldlt(refined.information);
+  if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().array() > 0.0).all()) return Matrix6d::Zero();
+  const double s2 = static_cast<double>(refined.plane_rmse_m) * refined.plane_rmse_m;
+  Matrix6d cov = config.scale * s2 * ldlt.solve(Matrix6d::Identity());
+  if (!cov.allFinite()) return Matrix6d::Zero();
+  cov = 0.5 * (cov + cov.transpose());
+  const double floor_rad = config.floor_deg * M_PI / 180.0;
+  cov.diagonal().head<3>().array() += floor_rad * floor_rad;
+  cov.diagonal().tail<3>().array() += static_cast<double>(config.floor_m) * config.floor_m;
+  return cov;
+}
+
+float weakest_axis_share(const RefineResult& refined, Eigen::Vector3d* axis) {
+  if (refined.plane_correspondences < 6) return 0.0f;
+  const Matrix6d& A = refined.information;
+  // Schur complement: the translation information once rotation is free to absorb what it can.
+  const Eigen::Matrix3d Arr = A.topLeftCorner<3, 3>() + 1e-9 * Eigen::Matrix3d::Identity();
+  const Eigen::Matrix3d S = A.bottomRightCorner<3, 3>() - A.bottomLeftCorner<3, 3>() * Arr.ldlt().solve(A.topRightCorner<3, 3>());
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(0.5 * (S + S.transpose()));
+  if (axis) *axis = solver.eigenvectors().col(0);
+  return static_cast<float>(std::max(0.0, solver.eigenvalues()(0)) / static_cast<double>(refined.plane_correspondences));
+}
+
+namespace {
+
+// The fine stage may need more iterations than a refinement from verified centroids: its start
+// is the coarse stage's, from a prior, and it must end settled (max_last_step_m).
+constexpr int kMinFineIterations = 50;
+
+RegistrationResult refused(RegistrationResult r, RegistrationRefusal why, std::string reason) {
+  r.refusal = why;
+  r.reason = std::move(reason);
+  return r;
+}
+
+std::string fmt(const char* format, double a, double b) {
+  char buf[160];
+  std::snprintf(buf, sizeof(buf), format, a, b);
+  return buf;
+}
+
+}  // namespace
+
+RegistrationResult register_to_map(const PointCloud& query_points, const PointCloud& map_points,
+                                   const Pose3d& T_map_query_prior, const Eigen::Vector3d& sensor_query,
+                                   double prior_radius_m, double prior_rotation_deg, float max_rmse_m,
+                                   const RegistrationConfig& config, const RefineConfig& refine,
+                                   const CovarianceConfig& covariance) {
+  config.validate();
+  covariance.validate();
+  RegistrationResult r;
+  r.T_map_query = T_map_query_prior;
+  if (prior_radius_m > config.max_prior_radius_m)
+    return refused(r, RegistrationRefusal::kWidePrior, fmt("the prior's radius %.1f m exceeds %.1f m", prior_radius_m, config.max_prior_radius_m));
+  const double w2 = static_cast<double>(config.window_m) * config.window_m;
+  PointCloud window;
+  window.reserve(query_points.size());
+  for (const Point& p : query_points) {
+    const double dx = p.x - sensor_query.x(), dy = p.y - sensor_query.y();
+    if (dx * dx + dy * dy <= w2) window.push_back(p);
+  }
+  r.query_points = window.size();
+  r.map_points = map_points.size();
+  if (window.size() < static_cast<size_t>(config.min_query_points) || map_points.empty())
+    return refused(r, RegistrationRefusal::kFewPoints, fmt("%.0f query points in the window and %.0f map points near the prior", double(window.size()), double(map_points.size())));
+  const Eigen::Vector3d pivot_prior = T_map_query_prior * sensor_query;
+  RefineConfig coarse = refine, fine_config = refine;
+  coarse.max_correspondence_m = std::max(config.coarse_correspondence_m, refine.max_correspondence_m);
+  fine_config.max_iterations = std::max(refine.max_iterations, kMinFineIterations);
+  const RefineResult first = refine_alignment(window, map_points, T_map_query_prior, coarse, pivot_prior);
+  const RefineResult fine = refine_alignment(window, map_points, first.T_target_query, fine_config,
+                                             first.T_target_query * sensor_query);
+  r.T_map_query = fine.T_target_query;
+  r.fitness = fine.fitness;
+  r.rmse_m = fine.rmse_m;
+  r.weakest_axis_share = weakest_axis_share(fine, &r.weakest_axis);
+  r.covariance = pose_covariance(fine, covariance);
+  // Still moving when the iterations ran out: a prior outside the basin, being dragged along.
+  if (!fine.converged && fine.last_step_m > config.max_last_step_m)
+    return refused(r, RegistrationRefusal::kNotConverged, fmt("registration still moving %.3f m per iteration after %.0f iterations", fine.last_step_m, double(fine.iterations)));
+  if (fine.fitness < config.min_fitness)
+    return refused(r, RegistrationRefusal::kLowFitness, fmt("registration fitness %.2f below %.2f", fine.fitness, config.min_fitness));
+  if (max_rmse_m > 0.0f && fine.rmse_m > max_rmse_m)
+    return refused(r, RegistrationRefusal::kHighRmse, fmt("registered surfaces %.3f m apart (RMS, at most %.3f)", fine.rmse_m, max_rmse_m));
+  const double moved = (fine.T_target_query * sensor_query - pivot_prior).norm();
+  if (moved > prior_radius_m)
+    return refused(r, RegistrationRefusal::kOutsidePrior, fmt("registration moved the sensor %.1f m from the prior (radius %.1f m)", moved, prior_radius_m));
+  const double turned_deg =
+      Eigen::AngleAxisd(fine.T_target_query.linear() * T_map_query_prior.linear().transpose()).angle() * 180.0 / M_PI;
+  if (turned_deg > prior_rotation_deg)
+    return refused(r, RegistrationRefusal::kOutsidePrior, fmt("registration turned the sensor %.1f deg from the prior (at most %.1f)", turned_deg, prior_rotation_deg));
+  if (r.weakest_axis_share < config.min_axis_share || r.covariance.isZero())
+    return refused(r, RegistrationRefusal::kDegenerate, fmt("degenerate: %.3f of the surface information along the weakest axis (at least %.3f)", r.weakest_axis_share, config.min_axis_share));
+  r.refusal = RegistrationRefusal::kNone;
+  return r;
+}
+
+}  // namespace segmatch
