@@ -96,7 +96,8 @@ PipelineConfig auto_pipeline_config(const InputMeasurements& m) {
     // With a prior the ambiguity check no longer sees the look-alikes elsewhere: on hku-mb,
     // priors 4-10 m off (radius 3 m, --wrong-prior-m) were answered at support 6-13, all false,
     // GNSS-like priors (sigma 3 and 10 m) at 38 or more when true, 9 when false: 14, as the
-    // sparse-spinning profile asks everywhere.
+    // sparse-spinning profile asks everywhere. Chosen on hku-mb; on hku-loop1's revisit (few
+    // queries) tracking still localizes 4 of 6, as before, registration answering under priors.
     c.localizer.min_support_with_prior = 14;
     // The L2 gate at 3.0 passes most candidates, so verification grows with k: on hku-mb
     // (even / odd keyframes) k 200 -> 50 took it from 682 to 57 ms per query for 38 -> 37 of

@@ -33,8 +33,9 @@ struct RegistrationConfig {
   // Priors wider than this are not a starting point for ICP (its basin is a metre or two): such
   // queries go to segment matching directly. On riverside02 with GNSS-like priors (sigma 10 m,
   // radius 30 m) registration found wrong minima along the street, 1-15 m off with fitness up
-  // to 0.82 (README); a tracker's prior (3 m after a fix, growing 5 % of the distance) is a
-  // metre or less off.
+  // to 0.82, and on hku-mb (sigma 3 m, radius 9 m) one 1.1 m off (README); a tracker's prior
+  // (api::Tracker, at least 3 m) is a metre or less off after a fix, and wider than 10 m only
+  // after some 160 m without one.
   float max_prior_radius_m = 10.0f;
   int min_query_points = 300;
   // The fine ICP must have settled: converged, or its last iteration moved the pose by at most
