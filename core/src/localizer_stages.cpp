@@ -86,10 +86,14 @@ void register_near_prior(const Segments& targets, const TargetPoints* source, co
   for (int t : targets_within_disc(targets, prior.T_map_query * s, reach)) near_targets.push_back({0, t});
   const size_t stride = segment_point_stride(r.query, static_cast<size_t>(config.refine.max_segment_points));
   const float max_rmse_m = config.max_refine_rmse_voxels * config.segmentation.voxel.leaf_m;
+  // A prior too wide to start from is refused before any point is gathered (register_to_map
+  // checks the radius first and says why).
+  const bool wide = prior.radius_m > config.registration.max_prior_radius_m;
   const RegistrationResult reg =
-      register_to_map(gather(r.query, all_query, true, stride), gather(targets, near_targets, false, 1, source),
-                      prior.T_map_query, s, prior.radius_m, prior.max_rotation_deg, max_rmse_m, config.registration,
-                      config.refine, config.covariance);
+      register_to_map(wide ? PointCloud{} : gather(r.query, all_query, true, stride),
+                      wide ? PointCloud{} : gather(targets, near_targets, false, 1, source), prior.T_map_query, s,
+                      prior.radius_m, prior.max_rotation_deg, max_rmse_m, config.registration, config.refine,
+                      config.covariance);
   r.registration_refusal = reg.refusal;
   r.registration_reason = reg.reason;
   r.refine_fitness = reg.fitness;
