@@ -41,18 +41,35 @@ PointCloud gather(const Segments& segments, const Matches& inliers, bool query_s
 }
 
 
+namespace {
+
+constexpr double kWindowMarginM = 10.0;  // map segments straddling a window's edge
+
+// Every query segment's points (every stride-th of each).
+PointCloud all_query_points(const Segments& query, size_t stride) {
+  Matches all;
+  for (size_t i = 0; i < query.size(); ++i) all.push_back({static_cast<int>(i), 0});
+  return gather(query, all, true, stride);
+}
+
+// The points of every map segment whose centroid lies within radius_m of center, horizontally.
+PointCloud map_points_near(const Segments& targets, const TargetPoints* source, const Eigen::Vector3d& center,
+                           double radius_m) {
+  Matches near;
+  for (int t : targets_within_disc(targets, center, radius_m)) near.push_back({0, t});
+  return gather(targets, near, false, 1, source);
+}
+
+}  // namespace
+
 // The recent window's points (RefineConfig::recent_window_m): every query segment's points
 // near the sensor, and every map segment's near where the pose puts the sensor (a margin for
 // segments that straddle the window's edge). The window has fewer matched segments than the
 // whole cloud, so it takes all it has, not only the supporting ones.
 WindowPoints window_points(const Segments& query, const Segments& targets, const TargetPoints* source,
                            const Eigen::Vector3d& sensor, const Pose3d& T_map_query, size_t stride, float window_m) {
-  constexpr double kMarginM = 10.0;
-  Matches all_query, near_targets;
-  for (size_t i = 0; i < query.size(); ++i) all_query.push_back({static_cast<int>(i), 0});
-  for (int t : targets_within_disc(targets, T_map_query * sensor, window_m + kMarginM)) near_targets.push_back({0, t});
-  return {crop_cylinder(gather(query, all_query, true, stride), sensor, window_m),
-          gather(targets, near_targets, false, 1, source)};
+  return {crop_cylinder(all_query_points(query, stride), sensor, window_m),
+          map_points_near(targets, source, T_map_query * sensor, window_m + kWindowMarginM)};
 }
 
 // The sensor's pose now: the window refined alone from the whole cloud's pose. The odometry
@@ -78,20 +95,16 @@ void refine_recent_window(const WindowPoints& points, const Eigen::Vector3f& sen
 void register_near_prior(const Segments& targets, const TargetPoints* source, const CentroidIndex& centroids,
                          const RandomForestMatcher* classifier, const LocalizerConfig& config, const PosePrior& prior,
                          const Eigen::Vector3f& sensor, LocalizationResult& r) {
-  constexpr double kMarginM = 10.0;  // map segments straddling the window's edge
   const Eigen::Vector3d s = sensor.cast<double>();
-  Matches all_query, near_targets;
-  for (size_t i = 0; i < r.query.size(); ++i) all_query.push_back({static_cast<int>(i), 0});
-  const double reach = config.registration.window_m + prior.radius_m + kMarginM;
-  for (int t : targets_within_disc(targets, prior.T_map_query * s, reach)) near_targets.push_back({0, t});
+  const double reach = config.registration.window_m + prior.radius_m + kWindowMarginM;
   const size_t stride = segment_point_stride(r.query, static_cast<size_t>(config.refine.max_segment_points));
   const float max_rmse_m = config.max_refine_rmse_voxels * config.segmentation.voxel.leaf_m;
   // A prior too wide to start from is refused before any point is gathered (register_to_map
   // checks the radius first and says why).
   const bool wide = prior.radius_m > config.registration.max_prior_radius_m;
   const RegistrationResult reg =
-      register_to_map(wide ? PointCloud{} : gather(r.query, all_query, true, stride),
-                      wide ? PointCloud{} : gather(targets, near_targets, false, 1, source), prior.T_map_query, s,
+      register_to_map(wide ? PointCloud{} : all_query_points(r.query, stride),
+                      wide ? PointCloud{} : map_points_near(targets, source, prior.T_map_query * s, reach), prior.T_map_query, s,
                       prior.radius_m, prior.max_rotation_deg, max_rmse_m, config.registration, config.refine,
                       config.covariance);
   r.registration_refusal = reg.refusal;

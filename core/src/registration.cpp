@@ -1,5 +1,7 @@
 #include "segmatch/core/registration.h"
 
+#include "segmatch/core/localizer.h"  // crop_cylinder
+
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
@@ -32,21 +34,6 @@ void CovarianceConfig::validate() const {
   if (!(floor_m >= 0.0f) || !std::isfinite(floor_m)) throw std::invalid_argument("CovarianceConfig.floor_m must be finite and >= 0");
   if (!(floor_deg >= 0.0f) || !std::isfinite(floor_deg))
     throw std::invalid_argument("CovarianceConfig.floor_deg must be finite and >= 0");
-}
-
-const char* to_string(RegistrationRefusal refusal) {
-  switch (refusal) {
-    case RegistrationRefusal::kNone: return "none";
-    case RegistrationRefusal::kWidePrior: return "wide_prior";
-    case RegistrationRefusal::kFewPoints: return "few_points";
-    case RegistrationRefusal::kLowFitness: return "low_fitness";
-    case RegistrationRefusal::kHighRmse: return "high_rmse";
-    case RegistrationRefusal::kOutsidePrior: return "outside_prior";
-    case RegistrationRefusal::kDegenerate: return "degenerate";
-    case RegistrationRefusal::kLowSupport: return "low_support";
-    case RegistrationRefusal::kNotConverged: return "not_converged";
-  }
-  return "unknown";
 }
 
 Matrix6d pose_covariance(const RefineResult& refined, const CovarianceConfig& config) {
@@ -105,15 +92,7 @@ RegistrationResult register_to_map(const PointCloud& query_points, const PointCl
   r.T_map_query = T_map_query_prior;
   if (prior_radius_m > config.max_prior_radius_m)
     return refused(r, RegistrationRefusal::kWidePrior, fmt("the prior's radius %.1f m exceeds %.1f m", prior_radius_m, config.max_prior_radius_m));
-  const double w2 = static_cast<double>(config.window_m) * config.window_m;
-  PointCloud window;
-  window.reserve(query_points.size());
-  for (const Point& p : query_points) {
-    const double dx = p.x - sensor_query.x(), dy = p.y - sensor_query.y();
-    if (dx * dx + dy * dy <= w2) window.push_back(p);
-  }
-  r.query_points = window.size();
-  r.map_points = map_points.size();
+  const PointCloud window = crop_cylinder(query_points, sensor_query, config.window_m);
   if (window.size() < static_cast<size_t>(config.min_query_points) || map_points.empty())
     return refused(r, RegistrationRefusal::kFewPoints, fmt("%.0f query points in the window and %.0f map points near the prior", double(window.size()), double(map_points.size())));
   const Eigen::Vector3d pivot_prior = T_map_query_prior * sensor_query;

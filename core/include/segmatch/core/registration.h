@@ -85,14 +85,12 @@ enum class RegistrationRefusal {
   kDegenerate,      // some direction is not constrained
   kLowSupport,      // too few query segments land on (and match) map segments (the localizer's check)
 };
-const char* to_string(RegistrationRefusal refusal);
 
 struct RegistrationResult {
   RegistrationRefusal refusal = RegistrationRefusal::kFewPoints;
   std::string reason;  // the refusal in words
   Pose3d T_map_query = Pose3d::Identity();
   float fitness = 0.0f, rmse_m = 0.0f;
-  size_t query_points = 0, map_points = 0;
   float weakest_axis_share = 0.0f;                // see RegistrationConfig::min_axis_share
   Eigen::Vector3d weakest_axis = Eigen::Vector3d::Zero();  // its direction (map frame)
   Matrix6d covariance = Matrix6d::Zero();          // see pose_covariance
