@@ -3,8 +3,10 @@
 // descriptors) to a temporary folder, then times a full load and a segments_near() query,
 // median over several runs with the file in the page cache; then opens it for serving
 // (storage_serving.h) with the points read lazily and with every point in memory, and answers
-// the same queries in both modes.
+// the same queries in both modes. The map carries a synthetic surface layer along its route
+// (storage_surfaces.h): its MB per km, and the time to read it near a place.
 #include "storage_serving.h"
+#include "storage_surfaces.h"
 
 #include <segmatch/io/pipeline_config.h>
 #include <segmatch/server/map_service.h>
@@ -128,11 +130,34 @@ std::vector<storage::Keyframe> tiled_trajectory(const Tiles& tiles, int segments
 struct WriteResult {
   double seconds = 0;
   double commit_seconds = 0;  // COMMIT + fsync + rename, part of seconds
+  double surface_seconds = 0;  // set_surfaces, part of seconds
   size_t points = 0;
+  double route_km = 0;  // without the jumps between tiled copies
   std::vector<Eigen::Vector3f> centroids;
 };
 
-WriteResult write_map(const std::string& path, int segments, float area_m, const Tiles* tiles) {
+// The route: a straight line of a keyframe per metre for synthetic segments, else the tiles'.
+std::vector<storage::Keyframe> bench_trajectory(int segments, const Tiles* tiles) {
+  if (tiles) return tiled_trajectory(*tiles, segments);
+  std::vector<storage::Keyframe> trajectory(size_t(segments / 50 + 1));
+  for (size_t k = 0; k < trajectory.size(); ++k) {
+    trajectory[k].index = uint32_t(k);
+    trajectory[k].time_s = 0.1 * double(k);
+    trajectory[k].T_map_sensor.translation() = Eigen::Vector3d(double(k), 0.0, 0.0);
+  }
+  return trajectory;
+}
+
+double route_km(const std::vector<storage::Keyframe>& trajectory) {
+  double m = 0;
+  for (size_t k = 1; k < trajectory.size(); ++k) {
+    const double step = (trajectory[k].T_map_sensor.translation() - trajectory[k - 1].T_map_sensor.translation()).norm();
+    if (step <= 50.0) m += step;
+  }
+  return m / 1000.0;
+}
+
+WriteResult write_map(const std::string& path, int segments, float area_m, const Tiles* tiles, float surface_tile_m) {
   storage::MapMetadata metadata;
   metadata.name = "storage bench";
   metadata.tool_version = "segmatch-bench-storage";
@@ -156,13 +181,15 @@ WriteResult write_map(const std::string& path, int segments, float area_m, const
     writer.add_segments(batch, keyframes);
     result.seconds += seconds_since(t);
   }
-  std::vector<storage::Keyframe> trajectory(size_t(segments / 50 + 1));
-  for (size_t k = 0; k < trajectory.size(); ++k) {
-    trajectory[k].index = uint32_t(k);
-    trajectory[k].time_s = 0.1 * double(k);
-    trajectory[k].T_map_sensor.translation() = Eigen::Vector3d(double(k), 0.0, 0.0);
+  const std::vector<storage::Keyframe> trajectory = bench_trajectory(segments, tiles);
+  result.route_km = route_km(trajectory);
+  if (surface_tile_m > 0.f) {
+    const PointCloud surfaces = bench::synthetic_surfaces(trajectory, 0.25f);
+    const auto s = Clock::now();
+    writer.set_surfaces(surfaces, 0.25f, surface_tile_m);
+    result.surface_seconds = seconds_since(s);
+    result.seconds += result.surface_seconds;
   }
-  if (tiles) trajectory = tiled_trajectory(*tiles, segments);
   const auto t = Clock::now();
   writer.set_trajectory(trajectory);
   std::ifstream model(SEGMATCH_SOURCE_DIR "/maps/models/default-rf.yml", std::ios::binary);
@@ -265,7 +292,10 @@ int main(int argc, char** argv) {
   app.add_option("--segments", segments, "segments in the map")->check(CLI::Range(1, 10000000));
   app.add_option("--runs", runs, "timed runs (median reported)")->check(CLI::Range(1, 100));
   app.add_option("--area", area_m, "side of the square city in metres");
-  app.add_option("--radius", radius_m, "segments_near() radius in metres");
+  app.add_option("--radius", radius_m, "segments_near() and surface near() radius in metres");
+  float surface_tile_m = 32.f;
+  app.add_option("--surface-tile", surface_tile_m,
+                 "tile size of the synthetic surface layer (ground and facades along the route, 0.25 m); 0: none");
   app.add_option("--dir", folder, "scratch folder (removed afterwards unless --keep)");
   bool keep = false;
   std::string from;
@@ -295,7 +325,7 @@ int main(int argc, char** argv) {
   const std::string path = (fs::path(folder) / "bench.segmap").string();
   std::optional<Tiles> tiles;
   if (!from.empty()) tiles = read_tiles(from);
-  const WriteResult written = write_map(path, segments, area_m, tiles ? &*tiles : nullptr);
+  const WriteResult written = write_map(path, segments, area_m, tiles ? &*tiles : nullptr, surface_tile_m);
   const double size_mb = double(fs::file_size(path)) / 1e6;
   std::printf("map: %d segments, %zu points (%.0f per segment), %.0f x %.0f m\n", segments,
               written.points, double(written.points) / segments, area_m, area_m);
@@ -306,11 +336,12 @@ int main(int argc, char** argv) {
     std::printf("tiled from %s: %zu segments and %.3f km a copy: %.1f MB per km\n", from.c_str(),
                 tiles->segments.size(), tiles->km, size_mb / km);
   }
-  std::printf("write (add_segments + trajectory + classifier + commit): %.2f s, of which commit "
-              "(COMMIT + fsync + rename) %.2f s\n",
-              written.seconds, written.commit_seconds);
+  std::printf("write (add_segments + surfaces + trajectory + classifier + commit): %.2f s, of which set_surfaces "
+              "%.2f s, commit (COMMIT + fsync + rename) %.2f s\n",
+              written.seconds, written.surface_seconds, written.commit_seconds);
 
   if (!time_reads(path, written, segments, runs, radius_m)) return 1;
+  if (surface_tile_m > 0.f) bench::report_surfaces(path, written.route_km, runs, radius_m);
   report_serving(path, drop_caches);
   std::error_code ec;
   if (!keep) fs::remove_all(folder, ec);

@@ -15,6 +15,7 @@ struct ReplayOptions {
   bool track = false;        // api::Tracker: the last fix is the next query's prior
   std::string odometry;      // poses file to accumulate with (default: odom_poses.txt, else poses.txt)
   bool segments = false;     // LOCALIZE_SEGMENTS: segment here, send the segments
+  double newest_m = 10.0;    // LOCALIZE: also send the scans of the last this many metres (0: none)
 };
 
 // Replays a recorded sequence like a vehicle: accumulates its scans into a local cloud from

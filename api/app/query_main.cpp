@@ -71,6 +71,11 @@ int main(int argc, char** argv) {
   rep->add_option("--odometry", replay.odometry,
                   "the vehicle's odometry poses file, KITTI or TUM (default: the sequence's odom_poses.txt, else its "
                   "poses.txt, said on the first line)");
+  rep->add_option("--newest-m", replay.newest_m,
+                  "with each cloud also send the scans of the last this many metres, thinned, so that the server answers "
+                  "the sensor's pose now rather than the odometry-warped cloud's (protocol revision 8; 0: none)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   rep->add_flag("--segments", replay.segments,
                 "query by segments (LOCALIZE_SEGMENTS): segment and describe each local cloud here with the map's "
                 "parameters and send the segments (a few hundred KB) instead of the cloud (MB)");

@@ -80,6 +80,7 @@ int replay(api::Client& client, const ReplayOptions& options) {
   config.every_m = options.every_m;
   config.first = options.first;
   config.last = options.last;
+  config.newest_m = options.segments ? 0.0 : options.newest_m;  // LOCALIZE_SEGMENTS has no such field
   const api::InfoReply info = client.info();
   const io::PipelineConfig map_parameters = parameters_of(info);
   // --segments: the vehicle's side (throws, naming the problem, if the parameters do not parse).
@@ -99,6 +100,10 @@ int replay(api::Client& client, const ReplayOptions& options) {
     request.sensor_position_local = q.T_odom_sensor.translation();
     request.sensor_orientation_local = Eigen::Quaterniond(q.T_odom_sensor.linear()).normalized();
     request.points = q.cloud_odom;
+    if (!q.newest_odom.empty()) {
+      request.flags |= api::kFlagNewestScans;  // revision 8: the answer is the sensor's pose now
+      request.newest_points = q.newest_odom;
+    }
     ++queries;
     const api::TrackMode mode = options.track ? tracker.prepare(request, q.odometer_m) : api::TrackMode::kGlobal;
     tracked += mode == api::TrackMode::kTracked;

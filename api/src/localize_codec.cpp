@@ -102,6 +102,10 @@ std::vector<uint8_t> encode(const LocalizeRequest& m) {
     for (const Point& p : m.points) w.f32s(&p.x, 3);
   }
   if (m.flags & kFlagPriorHeading) w.f64(m.prior_heading_tolerance_deg);
+  if (m.flags & kFlagNewestScans) {  // revision 8
+    w.u32(static_cast<uint32_t>(m.newest_points.size()));
+    for (const Point& p : m.newest_points) w.f32s(&p.x, 3);
+  }
   return detail::frame(type_of(m), w);
 }
 
@@ -116,8 +120,9 @@ DecodeStatus decode(const uint8_t* payload, size_t size, const Limits&, Localize
   if (m.point_stride != 3 && m.point_stride != 4) return DecodeStatus::kBadStride;
   // 64-bit arithmetic: count * stride * 4 cannot overflow.
   const uint64_t trailer = (m.flags & kFlagPriorHeading) ? 8 : 0;
-  if (kLocalizeFixedBytes + static_cast<uint64_t>(count) * m.point_stride * 4 + trailer != size)
-    return DecodeStatus::kBadPointCount;
+  const uint64_t points_end = kLocalizeFixedBytes + static_cast<uint64_t>(count) * m.point_stride * 4 + trailer;
+  // With the newest scans (revision 8) their count follows; it is checked once read.
+  if ((m.flags & kFlagNewestScans) ? points_end + 4 > size : points_end != size) return DecodeStatus::kBadPointCount;
   DecodeStatus s = s_head;
   if (s != DecodeStatus::kOk) return s;
   if (!std::isfinite(m.prior_radius_m)) return DecodeStatus::kNonFinite;
@@ -128,6 +133,12 @@ DecodeStatus decode(const uint8_t* payload, size_t size, const Limits&, Localize
     m.prior_heading_tolerance_deg = r.f64();
     if (!std::isfinite(m.prior_heading_tolerance_deg)) return DecodeStatus::kNonFinite;
     if (m.prior_heading_tolerance_deg < 0.0) return DecodeStatus::kBadField;
+  }
+  if (m.flags & kFlagNewestScans) {
+    const uint64_t newest = r.u32();
+    if (newest * 12 != r.remaining()) return DecodeStatus::kBadPointCount;
+    s = get_points(r, static_cast<uint32_t>(newest), 3, m.newest_points);
+    if (s != DecodeStatus::kOk) return s;
   }
   s = detail::finish(r);
   if (s == DecodeStatus::kOk) out = std::move(m);

@@ -192,6 +192,7 @@ void LocalizerConfig::validate() const {
   refine.validate();
   registration.validate();
   covariance.validate();
+  newest.validate();
   if (!(min_refine_fitness >= 0.0f && min_refine_fitness <= 1.0f))
     throw std::invalid_argument("min_refine_fitness must be in 0..1");
   if (!(max_refine_rmse_voxels >= 0.0f) || !std::isfinite(max_refine_rmse_voxels))
@@ -247,8 +248,13 @@ Segments extract_segments_from_voxels(const PointCloud& voxels, const Eigen::Vec
 }
 
 Localizer::Localizer(const LocalizerConfig& config, Segments targets,
-                     std::shared_ptr<const RandomForestMatcher> classifier, std::shared_ptr<const TargetPoints> points)
-    : config_(config), targets_(std::move(targets)), classifier_(std::move(classifier)), points_(std::move(points)) {
+                     std::shared_ptr<const RandomForestMatcher> classifier, std::shared_ptr<const TargetPoints> points,
+                     std::shared_ptr<const MapSurfaces> surfaces)
+    : config_(config),
+      targets_(std::move(targets)),
+      classifier_(std::move(classifier)),
+      points_(std::move(points)),
+      surfaces_(std::move(surfaces)) {
   config_.validate();
   centroids_ = CentroidIndex(targets_, config_.support_radius_m);
   if (config_.matcher.type == MatcherType::kRandomForest && !(classifier_ && classifier_->trained()))
@@ -388,6 +394,14 @@ LocalizationResult Localizer::localize_segments(Segments query, const Eigen::Vec
   }
   r.status = LocalizationStatus::kLocalized;
   return finish(std::move(r));
+}
+
+void Localizer::refine_to_newest_scans(const PointCloud& newest, const Eigen::Vector3f& sensor_position,
+                                       LocalizationResult& r) const {
+  if (!config_.newest.enabled || !r.localized() || newest.empty()) return;
+  Stopwatch clock;
+  detail::refine_to_newest(newest, targets_, points_.get(), surfaces_.get(), config_, sensor_position, r);
+  r.timings.refine_ms += clock.lap();
 }
 
 }  // namespace segmatch

@@ -1,9 +1,11 @@
 #include "localizer_stages.h"
 
+#include "segmatch/core/preprocess.h"
 #include "segmatch/core/registration.h"
 
 #include <Eigen/Geometry>
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -128,6 +130,41 @@ void register_near_prior(const Segments& targets, const TargetPoints* source, co
   r.T_map_query = reg.T_map_query;
   r.covariance = reg.covariance;
   r.confidence = reg.fitness;
+}
+
+// The newest scans are raw points, ground included. Onto the map's surface layer they register
+// whole: the ground holds height, roll and pitch. Without a layer the map holds segments only,
+// and ground points near a segment's foot would pull the pose down onto it: ground goes first.
+void refine_to_newest(const PointCloud& newest, const Segments& targets, const TargetPoints* source,
+                      const MapSurfaces* surfaces, const LocalizerConfig& config, const Eigen::Vector3f& sensor,
+                      LocalizationResult& r) {
+  const NewestScansConfig& c = config.newest;
+  const Eigen::Vector3d s = sensor.cast<double>();
+  VoxelGridConfig thin;
+  thin.leaf_m = c.leaf_m;
+  thin.min_points_per_voxel = 1;
+  PointCloud points = voxel_filter(crop_cylinder(newest, s, c.window_m), thin);
+  if (!surfaces) points = remove_ground(points, config.segmentation.ground, sensor);
+  if (points.size() < static_cast<size_t>(c.min_points)) return;
+  const Eigen::Vector3d centre = r.T_map_query * s;
+  const double reach = c.window_m + kWindowMarginM;
+  const PointCloud map = surfaces ? crop_cylinder(surfaces->near(centre, reach), centre, reach)
+                                  : map_points_near(targets, source, centre, reach);
+  RegistrationConfig settle = config.registration;  // one stage at the fine distance: the start is an answer
+  settle.window_m = c.window_m;
+  settle.coarse_correspondence_m = config.refine.max_correspondence_m;
+  settle.min_query_points = c.min_points;
+  settle.min_fitness = c.min_fitness;
+  const float max_rmse_m = config.max_refine_rmse_voxels * config.segmentation.voxel.leaf_m;
+  const RegistrationResult now = register_to_map(points, map, r.T_map_query, s, c.max_shift_m, c.max_turn_deg,
+                                                 std::max(max_rmse_m, c.leaf_m), settle, config.refine, config.covariance);
+  if (!now.accepted()) return;
+  r.window_points = points.size();
+  r.window_warp_m = static_cast<float>((now.T_map_query * s - centre).norm());
+  const Eigen::AngleAxisd turn(now.T_map_query.linear() * r.T_map_query.linear().transpose());
+  r.window_warp_deg = static_cast<float>(std::abs(turn.angle()) * 180.0 / M_PI);
+  r.T_map_query = now.T_map_query;
+  r.covariance = now.covariance;
 }
 
 }  // namespace detail

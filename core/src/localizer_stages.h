@@ -36,5 +36,13 @@ void register_near_prior(const Segments& targets, const TargetPoints* source, co
                          const RandomForestMatcher* classifier, const LocalizerConfig& config, const PosePrior& prior,
                          const Eigen::Vector3f& sensor, LocalizationResult& r);
 
+// The sensor's pose now from the vehicle's newest scans (NewestScansConfig): sets r's pose,
+// covariance and window fields when they agree with it.
+// With the map's surface layer the scans keep their ground and register onto it; without, onto
+// the segments' points, ground removed.
+void refine_to_newest(const PointCloud& newest, const Segments& targets, const TargetPoints* source,
+                      const MapSurfaces* surfaces, const LocalizerConfig& config, const Eigen::Vector3f& sensor,
+                      LocalizationResult& r);
+
 }  // namespace detail
 }  // namespace segmatch

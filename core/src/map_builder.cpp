@@ -26,6 +26,7 @@ void MapBuilderConfig::validate() const {
   local_cloud.validate();
   segmentation.validate();
   segment_map.validate();
+  surfaces.validate();
   if (!(map_every_m > 0.0) || !std::isfinite(map_every_m))
     throw std::invalid_argument("MapBuilderConfig.map_every_m must be positive");
 }
@@ -33,7 +34,8 @@ void MapBuilderConfig::validate() const {
 MapBuilder::MapBuilder(const MapBuilderConfig& config)
     : config_((config.validate(), config)),
       local_(without_age_limit(config.local_cloud), config.segmentation.voxel),
-      map_(resolving(config.segment_map)) {}
+      map_(resolving(config.segment_map)),
+      surfaces_(config.surfaces) {}
 
 bool MapBuilder::add_scan(const PointCloud& points_sensor, const Pose3d& T_world_sensor, uint32_t scan_index,
                           const std::vector<uint32_t>* labels) {
@@ -44,6 +46,7 @@ bool MapBuilder::add_scan(const PointCloud& points_sensor, const Pose3d& T_world
   has_labels_ = has_labels_ || labels != nullptr;
   const auto start = std::chrono::steady_clock::now();
   local_.add_scan(points_sensor, T_world_sensor, labels);
+  surfaces_.add_scan(points_sensor, T_world_sensor);
   timings_.accumulate_ms += ms_since(start);
   if (odometer_m_ - segmented_at_m_ < config_.map_every_m) return false;
   segment_local_cloud();

@@ -29,6 +29,18 @@ void RegistrationConfig::validate() const {
     throw std::invalid_argument("RegistrationConfig.min_axis_share must be in 0..1/3");
 }
 
+void NewestScansConfig::validate() const {
+  auto positive = [](float v, const char* name) {
+    if (!(v > 0.0f) || !std::isfinite(v)) throw std::invalid_argument(std::string("NewestScansConfig.") + name + " must be finite and > 0");
+  };
+  positive(window_m, "window_m");
+  positive(leaf_m, "leaf_m");
+  positive(max_shift_m, "max_shift_m");
+  positive(max_turn_deg, "max_turn_deg");
+  if (min_points < 6) throw std::invalid_argument("NewestScansConfig.min_points must be >= 6");
+  if (!(min_fitness >= 0.0f && min_fitness <= 1.0f)) throw std::invalid_argument("NewestScansConfig.min_fitness must be in 0..1");
+}
+
 void CovarianceConfig::validate() const {
   if (!(scale > 0.0f) || !std::isfinite(scale)) throw std::invalid_argument("CovarianceConfig.scale must be finite and > 0");
   if (!(floor_m >= 0.0f) || !std::isfinite(floor_m)) throw std::invalid_argument("CovarianceConfig.floor_m must be finite and >= 0");

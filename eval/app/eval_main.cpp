@@ -214,6 +214,9 @@ int main(int argc, char** argv) {
   loc->add_option("--max-scan-age-m", lc.max_scan_age_m,
                   "the vehicle's local cloud holds each scan for this many metres of driving instead of the map's "
                   "local_cloud.max_scan_age_m (0: until it leaves the cylinder); a what-if");
+  loc->add_option("--newest-m", lc.replay.newest_m,
+                  "each query also carries the scans of the last this many metres, to which the server refines its "
+                  "answer (the sensor's pose now; default 10, 0: none)");
   bool segments = false;
   loc->add_flag("--segments", segments,
                 "query by segments (LOCALIZE_SEGMENTS): segment and describe each local cloud here, as a vehicle would, "
@@ -253,6 +256,7 @@ int main(int argc, char** argv) {
         if (!server.empty()) throw std::runtime_error("--recent-window-m is for in-process runs (the server serves its map's)");
         load.recent_window_m = recent_window_m;
       }
+      if (segments) lc.replay.newest_m = 0.0;  // LOCALIZE_SEGMENTS carries no newest scans
       return run_localize(lc, server, token_file, out_dir, segments, load);
     }
     if (*fun) {

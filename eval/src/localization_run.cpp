@@ -64,6 +64,10 @@ api::LocalizeRequest request_of(const io::ReplayQuery& q) {
   r.sensor_position_local = q.T_odom_sensor.translation();
   r.sensor_orientation_local = Eigen::Quaterniond(q.T_odom_sensor.linear()).normalized();
   r.points = q.cloud_odom;
+  if (!q.newest_odom.empty()) {
+    r.flags |= api::kFlagNewestScans;
+    r.newest_points = q.newest_odom;
+  }
   return r;
 }
 

@@ -121,6 +121,14 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("scale", l.covariance.scale);
   v("floor_m", l.covariance.floor_m);
   v("floor_deg", l.covariance.floor_deg);
+  v.section("newest");
+  v("enabled", l.newest.enabled);
+  v("window_m", l.newest.window_m);
+  v("leaf_m", l.newest.leaf_m);
+  v("min_points", l.newest.min_points);
+  v("min_fitness", l.newest.min_fitness);
+  v("max_shift_m", l.newest.max_shift_m);
+  v("max_turn_deg", l.newest.max_turn_deg);
   v.section("localizer");
   v("support_radius_m", l.support_radius_m);
   v("min_support", l.min_support);
@@ -134,6 +142,11 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("min_confidence_with_prior", l.min_confidence_with_prior);
   v.section("segment_map");
   v("duplicate_distance_m", c.segment_map.duplicate_distance_m);
+  v.section("surfaces");
+  v("enabled", c.surfaces.enabled);
+  v("leaf_m", c.surfaces.leaf_m);
+  v("max_range_m", c.surfaces.max_range_m);
+  v("tile_m", c.surfaces.tile_m);
 }
 
 class Writer {
@@ -260,6 +273,7 @@ void PipelineConfig::validate() const {
   local_cloud.validate();
   localizer.validate();
   segment_map.validate();
+  surfaces.validate();
 }
 
 // The core's structs hold the paper's parameters; the product adds a confidence floor. On the

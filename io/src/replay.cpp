@@ -4,6 +4,7 @@
 #include "segmatch/io/error.h"
 
 #include <cmath>
+#include <deque>
 #include <filesystem>
 #include <stdexcept>
 
@@ -15,9 +16,48 @@ void ReplayConfig::validate() const {
   if (!(warmup_m >= 0.0) || !std::isfinite(warmup_m)) throw std::invalid_argument("ReplayConfig.warmup_m must be >= 0");
   if (stride == 0) throw std::invalid_argument("ReplayConfig.stride must be >= 1");
   if (last < first) throw std::invalid_argument("ReplayConfig.last must be >= first");
+  if (!(newest_m >= 0.0) || !std::isfinite(newest_m)) throw std::invalid_argument("ReplayConfig.newest_m must be >= 0");
+  if (!(newest_leaf_m > 0.0f) || !std::isfinite(newest_leaf_m))
+    throw std::invalid_argument("ReplayConfig.newest_leaf_m must be > 0");
   local_cloud.validate();
   voxel.validate();
 }
+
+namespace {
+
+// The scans of the last newest_m of driving, each thinned (odometry frame).
+class NewestScans {
+ public:
+  explicit NewestScans(const ReplayConfig& config) : config_(config) {
+    grid_.leaf_m = config.newest_leaf_m;
+    grid_.min_points_per_voxel = 1;
+  }
+  void add(const PointCloud& scan_sensor, const Pose3d& T_odom_sensor, double odometer_m) {
+    if (config_.newest_m <= 0.0) return;
+    PointCloud odom = voxel_filter(scan_sensor, grid_);
+    for (Point& p : odom) {
+      const Eigen::Vector3d q = T_odom_sensor * Eigen::Vector3d(p.x, p.y, p.z);
+      p.x = static_cast<float>(q.x()), p.y = static_cast<float>(q.y()), p.z = static_cast<float>(q.z());
+    }
+    scans_.push_back({odometer_m, std::move(odom)});
+    while (scans_.size() > kMaxScans || (!scans_.empty() && scans_.front().first < odometer_m - config_.newest_m - 1e-9))
+      scans_.pop_front();
+  }
+  PointCloud points() const {
+    if (scans_.empty()) return {};
+    PointCloud all;
+    for (const auto& [at_m, scan] : scans_) all.insert(all.end(), scan.begin(), scan.end());
+    return voxel_filter(all, grid_);
+  }
+
+ private:
+  static constexpr size_t kMaxScans = 64;  // a vehicle standing still
+  const ReplayConfig& config_;
+  VoxelGridConfig grid_;
+  std::deque<std::pair<double, PointCloud>> scans_;
+};
+
+}  // namespace
 
 const char* to_string(CloudPoses poses) { return poses == CloudPoses::kOdometry ? "odometry" : "reference"; }
 
@@ -53,6 +93,7 @@ void replay_sequence(const Sequence& sequence, const ReplayConfig& config,
   // One of the two accumulates, as configured.
   LocalCloud raw(config.local_cloud);
   VoxelAccumulator voxels(config.local_cloud, config.voxel);
+  NewestScans newest(config);
   double odometer_m = 0.0, next_query_m = std::max(config.warmup_m, 0.0);
   Eigen::Vector3d previous = sequence.poses()[config.first].translation();
   size_t done = 0;
@@ -64,6 +105,7 @@ void replay_sequence(const Sequence& sequence, const ReplayConfig& config,
     const PointCloud scan = sequence.scan(i).points;
     if (config.voxelize) voxels.add_scan(scan, T_odom_sensor);
     else raw.add_scan(scan, T_odom_sensor);
+    newest.add(scan, T_odom_sensor, odometer_m);
     if (progress) progress(++done, total);
     if (odometer_m + 1e-9 < next_query_m) continue;
     next_query_m = odometer_m + config.every_m;
@@ -74,6 +116,7 @@ void replay_sequence(const Sequence& sequence, const ReplayConfig& config,
     q.T_world_sensor = T_world_sensor;
     q.cloud_odom = config.voxelize ? voxels.crop(T_odom_sensor) : raw.crop(T_odom_sensor);
     q.voxelized = config.voxelize;
+    q.newest_odom = newest.points();
     if (!visit(q)) return;
   }
 }

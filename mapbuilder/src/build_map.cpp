@@ -59,6 +59,7 @@ MapBuilderConfig builder_config(const io::PipelineConfig& pipeline, double map_e
   c.local_cloud = pipeline.local_cloud;
   c.segmentation = pipeline.localizer.segmentation;
   c.segment_map = pipeline.segment_map;
+  c.surfaces = pipeline.surfaces;
   c.map_every_m = map_every_m;
   try {
     c.validate();

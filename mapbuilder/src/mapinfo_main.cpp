@@ -16,6 +16,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <limits>
+#include <optional>
 
 namespace fs = std::filesystem;
 using namespace segmatch;
@@ -36,11 +37,30 @@ void print_metadata(const storage::MapReader& map) {
     std::printf("schema version: %d\n", map.schema_version());
 }
 
+// The surface layer in one line (schema 4; older maps and maps upgraded from them have none).
+void print_surfaces(const storage::MapReader& map) {
+  const std::optional<storage::SurfaceLayer> layer = map.surfaces();
+  if (layer) {
+    std::printf("surfaces:       leaf %.2f m, tile %.1f m, %llu tiles, %llu points, %.2f MB\n", layer->leaf_m,
+                layer->tile_m, static_cast<unsigned long long>(layer->tile_count),
+                static_cast<unsigned long long>(layer->point_count), static_cast<double>(layer->stored_bytes) / 1e6);
+  } else if (map.schema_version() < 4) {
+    std::printf("surfaces:       no surface layer (map written before schema 4; rebuild it to get one)\n");
+  } else {
+    std::printf("surfaces:       no surface layer (built without one, or upgraded from a map written before schema 4; "
+                "rebuild the map from its traversal to get one)\n");
+  }
+}
+
 int upgrade(const std::string& old_path, const std::string& new_path, bool overwrite) {
   const int from = storage::upgrade_map(old_path, new_path, overwrite);
   std::printf("upgraded %s (schema %d, %.2f MB) -> %s (schema %d, %.2f MB)\n", old_path.c_str(), from,
               static_cast<double>(fs::file_size(old_path)) / 1e6, new_path.c_str(), storage::kSchemaVersion,
               static_cast<double>(fs::file_size(new_path)) / 1e6);
+  if (!storage::MapReader::open(new_path).surfaces()) {
+    std::printf("the new map has no surface layer (the old map holds no scans to make one from): rebuild the map "
+                "from its traversal (segmatch-mapbuilder) to get one\n");
+  }
   return 0;
 }
 
@@ -62,6 +82,7 @@ void print_stats(const storage::MapReader& map, const Segments& segments) {
   std::printf("classifier:     %s\n",
               classifier ? (classifier->format + ", " + std::to_string(classifier->bytes.size()) + " bytes").c_str()
                          : "none");
+  print_surfaces(map);
   std::printf("file size:      %.2f MB\n", static_cast<double>(fs::file_size(map.path())) / 1e6);
 }
 

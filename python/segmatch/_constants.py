@@ -7,7 +7,7 @@ import enum
 
 MAGIC = b"SGMQ"
 VERSION = 1  # the frame header's version
-REVISION = 7  # the document's revision: additions since version 1 (docs/protocol.md 8)
+REVISION = 8  # the document's revision: additions since version 1 (docs/protocol.md 8)
 HEADER_BYTES = 12
 MAX_PAYLOAD_BYTES = 64 << 20  # the server's default --max-frame-mb
 
@@ -17,7 +17,9 @@ FLAG_VOXELIZED = 1 << 1  # the points are centroids of the map's voxel grid
 FLAG_PRIOR_HEADING = 1 << 2  # revision 2: the prior's heading tolerance follows the points
 FLAG_REFUSAL_CODE = 1 << 3  # revision 5: the reply carries a RefusalCode (servers of revision <= 4: MALFORMED)
 FLAG_DETAIL = 1 << 4  # revision 6: the reply carries a detail block (servers of revision <= 5: MALFORMED)
-KNOWN_FLAGS = FLAG_HAS_PRIOR | FLAG_VOXELIZED | FLAG_PRIOR_HEADING | FLAG_REFUSAL_CODE | FLAG_DETAIL
+# Revision 8: the vehicle's newest scans follow the points (servers of revision <= 7: MALFORMED).
+FLAG_NEWEST_SCANS = 1 << 5
+KNOWN_FLAGS = FLAG_HAS_PRIOR | FLAG_VOXELIZED | FLAG_PRIOR_HEADING | FLAG_REFUSAL_CODE | FLAG_DETAIL | FLAG_NEWEST_SCANS
 LOCALIZE_FIXED_BYTES = 140  # payload bytes before the points
 
 

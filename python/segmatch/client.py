@@ -96,7 +96,8 @@ class Client:
 
     def localize(self, points, sensor_position: Sequence[float] = (0.0, 0.0, 0.0),
                  sensor_orientation=(1.0, 0.0, 0.0, 0.0), prior: Optional[Prior] = None, voxelized: bool = False,
-                 request_id: Optional[int] = None, T_local_sensor=None, refusal_code: bool = False) -> p.LocalizeReply:
+                 request_id: Optional[int] = None, T_local_sensor=None, refusal_code: bool = False,
+                 newest_points=None) -> p.LocalizeReply:
         """Localizes a local cloud; returns the LOCALIZE_REPLY (.status, .reason, .T_map_local
         4x4, .inliers, .confidence, .support, .matched_segment_ids, .timings).
 
@@ -109,6 +110,11 @@ class Client:
         request_id: u64 echoed in the reply; by default 1, 2, 3, ... per client.
         refusal_code: ask for the reply's RefusalCode (.refusal, .refusal_name; revision 5). A
             server of revision 4 or older answers ServerError MALFORMED to it.
+        newest_points: (M, 3) or (M, 4) points of the vehicle's newest scans (the last few metres,
+            local frame; intensity dropped), sent behind FLAG_NEWEST_SCANS (revision 8): the server
+            refines its answer to them, the sensor's pose now rather than the odometry-warped
+            cloud's. None or empty: not sent. A server of revision 7 or older answers ServerError
+            MALFORMED to it (resend without them).
         """
         m = p.Localize(request_id=next(self._ids) if request_id is None else _check_u64(request_id, "request_id"))
         if T_local_sensor is not None:
@@ -122,6 +128,11 @@ class Client:
             m.flags |= p.FLAG_VOXELIZED
         if refusal_code:
             m.flags |= p.FLAG_REFUSAL_CODE
+        if newest_points is not None:
+            newest = _points(newest_points, "newest_points")
+            if newest.shape[0] > 0:  # empty: nothing to send, the flag stays clear
+                m.flags |= p.FLAG_NEWEST_SCANS
+                m.newest_points = newest[:, :3]
         if prior is not None:
             if not isinstance(prior, Prior):
                 raise TypeError(f"prior must be a segmatch.Prior, got {type(prior).__name__}")
@@ -314,18 +325,18 @@ def _non_negative(v, name: str) -> float:
     return float(v)
 
 
-def _points(points) -> np.ndarray:
+def _points(points, name: str = "points") -> np.ndarray:
     a = np.asarray(points)
     if a.ndim != 2 or a.shape[1] not in (3, 4):
-        raise ValueError(f"points must be an (N, 3) x y z or (N, 4) x y z intensity array, got shape {a.shape}")
+        raise ValueError(f"{name} must be an (N, 3) x y z or (N, 4) x y z intensity array, got shape {a.shape}")
     if not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
-        raise ValueError(f"points must be numbers, got dtype {a.dtype}")
+        raise ValueError(f"{name} must be numbers, got dtype {a.dtype}")
     if a.shape[0] > 0xFFFFFFFF:
-        raise ValueError(f"{a.shape[0]} points do not fit one frame")
+        raise ValueError(f"{a.shape[0]} {name} do not fit one frame")
     with np.errstate(over="ignore"):
         f = np.ascontiguousarray(a, dtype="<f4")
     bad = ~np.all(np.isfinite(f), axis=1)
     if bad.any():
-        raise ValueError(f"points must be finite in float32: {int(bad.sum())} are not, the first at row "
+        raise ValueError(f"{name} must be finite in float32: {int(bad.sum())} are not, the first at row "
                          f"{int(np.argmax(bad))}: {a[int(np.argmax(bad))]}")
     return f

@@ -12,7 +12,8 @@ from typing import ClassVar, List, Optional, Tuple
 
 import numpy as np
 
-from ._constants import FLAG_PRIOR_HEADING, KNOWN_FLAGS, LOCALIZE_FIXED_BYTES, LocalizeStatus, MessageType, RefusalCode
+from ._constants import (FLAG_NEWEST_SCANS, FLAG_PRIOR_HEADING, KNOWN_FLAGS, LOCALIZE_FIXED_BYTES, LocalizeStatus,
+                         MessageType, RefusalCode)
 from ._wire import Reader, Writer, all_finite
 from .errors import DecodeError, DecodeStatus
 from .pose import QUATERNION_NORM_TOLERANCE, Pose, unit_quaternion
@@ -67,6 +68,10 @@ def _empty_points() -> np.ndarray:
     return np.zeros((0, 4), dtype=np.float32)
 
 
+def _empty_newest_points() -> np.ndarray:
+    return np.zeros((0, 3), dtype=np.float32)
+
+
 @dataclass(eq=False)
 class RequestHead:
     """The fields LOCALIZE and LOCALIZE_SEGMENTS share (put_request_head / get_request_head):
@@ -86,10 +91,12 @@ class RequestHead:
 @dataclass(eq=False)  # eq=False: points are an array; compare encode() bytes instead
 class Localize(RequestHead):
     """LOCALIZE (docs/protocol.md 5.4): the head, then points: float32 (N, 3) or (N, 4) with
-    intensity; the stride on the wire is the number of columns."""
+    intensity; the stride on the wire is the number of columns. With FLAG_NEWEST_SCANS
+    (revision 8) the vehicle's newest scans follow last: float32 (M, 3)."""
 
     TYPE: ClassVar[MessageType] = MessageType.LOCALIZE
     points: np.ndarray = field(default_factory=_empty_points)
+    newest_points: np.ndarray = field(default_factory=_empty_newest_points)  # sent only with FLAG_NEWEST_SCANS
 
     def _put(self, w: Writer) -> None:
         pts = np.asarray(self.points)
@@ -101,6 +108,12 @@ class Localize(RequestHead):
         w.array(pts, "<f4")
         if self.flags & FLAG_PRIOR_HEADING:
             w.f64(self.prior_heading_tolerance_deg)
+        if self.flags & FLAG_NEWEST_SCANS:  # revision 8
+            newest = np.asarray(self.newest_points)
+            if newest.ndim != 2 or newest.shape[1] != 3:
+                raise ValueError(f"newest_points must be an (M, 3) array, got shape {newest.shape}")
+            w.u32(newest.shape[0])
+            w.array(newest, "<f4")
 
     @classmethod
     def _get(cls, r: Reader) -> "Localize":
@@ -115,7 +128,9 @@ class Localize(RequestHead):
         if stride not in (3, 4):
             raise DecodeError(DecodeStatus.BAD_STRIDE, f"stride {stride}")
         trailer = 8 if m.flags & FLAG_PRIOR_HEADING else 0
-        if LOCALIZE_FIXED_BYTES + count * stride * 4 + trailer != size:
+        points_end = LOCALIZE_FIXED_BYTES + count * stride * 4 + trailer
+        # With the newest scans (revision 8) their count follows; it is checked once read.
+        if (points_end + 4 > size) if m.flags & FLAG_NEWEST_SCANS else (points_end != size):
             raise DecodeError(DecodeStatus.BAD_POINT_COUNT, f"{count} points of {stride} floats in {size} bytes")
         if head_status:
             raise DecodeError(head_status, "sensor pose or prior")
@@ -132,6 +147,13 @@ class Localize(RequestHead):
                 raise DecodeError(DecodeStatus.NON_FINITE, "heading tolerance")
             if m.prior_heading_tolerance_deg < 0:
                 raise DecodeError(DecodeStatus.BAD_FIELD, "negative heading tolerance")
+        if m.flags & FLAG_NEWEST_SCANS:  # revision 8
+            newest = r.u32()
+            if newest * 12 != r.remaining():
+                raise DecodeError(DecodeStatus.BAD_POINT_COUNT, f"{newest} newest points in {r.remaining()} bytes")
+            m.newest_points = r.array("<f4", newest * 3).reshape(newest, 3)
+            if not np.all(np.isfinite(m.newest_points)):
+                raise DecodeError(DecodeStatus.NON_FINITE, "newest point")
         r.finish()
         return m
 

@@ -213,8 +213,11 @@ LocalizationResult localize_cloud(const LoadedMap& map, const api::LocalizeReque
       crop_cylinder(request.points, request.sensor_position_local, map.config.local_cloud.radius_m);
   const CloudKind kind = (request.flags & api::kFlagVoxelized) ? CloudKind::kVoxelized : CloudKind::kRaw;
   const std::optional<PosePrior> prior = pose_prior_of(request_fields(request));
-  return map.localizer->localize(cloud, request.sensor_position_local.cast<float>(), kind, prior ? &*prior : nullptr,
-                                 deadline);
+  LocalizationResult r = map.localizer->localize(cloud, request.sensor_position_local.cast<float>(), kind,
+                                                 prior ? &*prior : nullptr, deadline);
+  if ((request.flags & api::kFlagNewestScans) && !deadline.passed())
+    map.localizer->refine_to_newest_scans(request.newest_points, request.sensor_position_local.cast<float>(), r);
+  return r;
 }
 
 Outcome outcome_of(const LoadedMap& map, const LocalizationResult& r, uint64_t request_id, const RequestFields& prior,

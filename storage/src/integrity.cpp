@@ -1,6 +1,7 @@
 // MapReader::check_integrity(): everything a damaged or hand-edited map file can get wrong.
 #include "reader_impl.h"
 #include "segment_rows.h"
+#include "surface_rows.h"
 
 #include <functional>
 
@@ -96,7 +97,8 @@ std::vector<std::string> check_integrity(const MapReader::Impl& impl) {
   // Each part runs even when another one failed: the report lists everything found.
   const std::function<void(const MapReader::Impl&, std::vector<std::string>*)> parts[] = {
       sqlite_structure, counts, rows,
-      [](const MapReader::Impl& i, std::vector<std::string>*) { read_classifier(i); }};
+      [](const MapReader::Impl& i, std::vector<std::string>*) { read_classifier(i); },
+      [](const MapReader::Impl& i, std::vector<std::string>* p) { check_surfaces(i, kMaxRowProblems, p); }};
   for (const auto& part : parts) {
     try {
       part(impl, &problems);

@@ -4,6 +4,7 @@
 #include "reader_impl.h"
 #include "schema.h"
 #include "segment_rows.h"
+#include "surface_rows.h"
 
 #include <sys/stat.h>
 
@@ -145,6 +146,26 @@ bool open_connections(MapReader::Impl* impl) {
 
 }  // namespace
 
+std::unique_ptr<Statement> StatementPool::take(const MapReader::Impl& impl) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!idle_.empty()) {
+    std::unique_ptr<Statement> st = std::move(idle_.back());
+    idle_.pop_back();
+    return st;
+  }
+  const size_t k = made_++ % (1 + impl.loaders.size());
+  sqlite3* db = k == 0 ? impl.db.get() : impl.loaders[k - 1].get();
+  return std::make_unique<Statement>(db, sql_, impl.path);
+}
+
+void StatementPool::give_back(std::unique_ptr<Statement> st) {
+  st->reset();
+  std::lock_guard<std::mutex> lock(mutex_);
+  idle_.push_back(std::move(st));
+}
+
+MapReader::Impl::Impl() : point_reads(kSelectPointsSql), tile_reads(kSelectSurfaceTileSql) {}
+
 MapReader MapReader::open(const std::string& path) {
   auto impl = std::make_unique<Impl>();
   impl->path = path;
@@ -153,6 +174,7 @@ MapReader MapReader::open(const std::string& path) {
   }
   check_tables(impl->db.get(), path, impl->schema_version);
   load_metadata(impl.get());
+  impl->surfaces = read_surface_layer(impl->db.get(), path, impl->schema_version);
   return MapReader(std::move(impl));
 }
 
@@ -191,25 +213,29 @@ PointCloud MapReader::read_points(size_t index) const {
     decode_segment(stored, impl_->path, &segment);
     return std::move(segment.points);
   }
-  std::unique_ptr<Statement> st;
-  {
-    std::lock_guard<std::mutex> lock(impl_->point_reads_mutex);
-    if (!impl_->idle_point_reads.empty()) {
-      st = std::move(impl_->idle_point_reads.back());
-      impl_->idle_point_reads.pop_back();
-    } else {
-      const size_t k = impl_->point_reads_made++ % (1 + impl_->loaders.size());
-      sqlite3* db = k == 0 ? impl_->db.get() : impl_->loaders[k - 1].get();
-      st = std::make_unique<Statement>(db, kSelectPointsSql, impl_->path);
-    }
-  }
+  std::unique_ptr<Statement> st = impl_->point_reads.take(*impl_);
   st->bind_int(1, row);
   if (!st->step()) fail(impl_->path, "no segment row " + std::to_string(row));
   decode_points_row(*st, row, impl_->path, &points);  // throws: the statement is dropped
-  st->reset();
-  std::lock_guard<std::mutex> lock(impl_->point_reads_mutex);
-  impl_->idle_point_reads.push_back(std::move(st));
+  impl_->point_reads.give_back(std::move(st));
   return points;
+}
+
+std::optional<SurfaceLayer> MapReader::surfaces() const { return impl_->surfaces; }
+
+PointCloud MapReader::surface_tile(int32_t tile_x, int32_t tile_y) const {
+  PointCloud points;
+  if (!impl_->surfaces) return points;
+  std::unique_ptr<Statement> st = impl_->tile_reads.take(*impl_);
+  st->bind_int(1, tile_x);
+  st->bind_int(2, tile_y);
+  if (st->step()) decode_surface_row(*st, 0, tile_x, tile_y, impl_->path, &points);  // throws: dropped
+  impl_->tile_reads.give_back(std::move(st));
+  return points;
+}
+
+std::vector<std::pair<int32_t, int32_t>> MapReader::surface_tile_keys() const {
+  return read_surface_tile_keys(*impl_);
 }
 
 Segments MapReader::segments_near(const Eigen::Vector3f& center, float radius_m,

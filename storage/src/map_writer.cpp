@@ -7,6 +7,7 @@
 #include "schema.h"
 #include "segment_codec.h"
 #include "sqlite_util.h"
+#include "surface_rows.h"
 
 #include <unistd.h>
 
@@ -323,6 +324,13 @@ void MapWriter::set_classifier(const ClassifierBlob& classifier) {
     insert.bind_int(3, static_cast<int64_t>(classifier_checksum(classifier)));
     insert.run();
   });
+}
+
+void MapWriter::set_surfaces(const PointCloud& points_map, float leaf_m, float tile_m) {
+  impl_->require_writable("set_surfaces");
+  validate_surfaces(points_map, leaf_m, tile_m);
+  impl_->write("set_surfaces",
+               [&] { write_surfaces(impl_->db.get(), impl_->temporary_path, points_map, leaf_m, tile_m); });
 }
 
 void MapWriter::commit() {

@@ -66,6 +66,8 @@ Contexts& contexts() {
   return c;
 }
 
+}  // namespace
+
 void compress_into(const std::vector<uint8_t>& in, std::vector<uint8_t>* out) {
   const size_t at = out->size();
   out->resize(at + ZSTD_compressBound(in.size()));
@@ -86,6 +88,8 @@ std::string decompress(const uint8_t* in, size_t in_size, size_t size, std::vect
   if (n != size) return "packed data decompressed to " + std::to_string(n) + " bytes, expected " + std::to_string(size);
   return {};
 }
+
+namespace {
 
 size_t point_size(uint32_t encoding) { return encoding == kInt16 ? 8 : encoding == kFloat32 ? 16 : 0; }
 

@@ -39,6 +39,12 @@ std::vector<uint8_t> pack_esf_sparse(const EsfDescriptor& esf);
 // Empty string on success, else what is wrong with the blob.
 std::string unpack_esf_sparse(BlobView packed, EsfDescriptor* esf);
 
+// `in` compressed with zstd at the level of every packed BLOB, appended to `out`.
+void compress_into(const std::vector<uint8_t>& in, std::vector<uint8_t>* out);
+// Decompresses a frame that must hold exactly `size` bytes into `out`; empty string on
+// success, else what is wrong.
+std::string decompress(const uint8_t* in, size_t in_size, size_t size, std::vector<uint8_t>* out);
+
 // The classifier's bytes (an OpenCV YAML forest: text, ~8x smaller packed).
 std::vector<uint8_t> pack_bytes(const std::string& plain);
 // At most max_size bytes (checked before anything is allocated).

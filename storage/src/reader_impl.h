@@ -15,6 +15,24 @@
 namespace segmatch {
 namespace storage {
 
+// Prepared statements of one read that queries repeat (a segment's points, a surface tile):
+// preparing costs more than the read itself, so they are kept for reuse, and new ones are spread
+// over the reader's connections so that threads reading at once share the connections' locks.
+class StatementPool {
+ public:
+  explicit StatementPool(const char* sql) : sql_(sql) {}
+  // An idle statement, or a new one on the next connection in turn.
+  std::unique_ptr<detail::Statement> take(const MapReader::Impl& impl);
+  // Back for reuse after a read that succeeded (a read that threw lets its statement go).
+  void give_back(std::unique_ptr<detail::Statement> st);
+
+ private:
+  const char* sql_;
+  std::mutex mutex_;
+  std::vector<std::unique_ptr<detail::Statement>> idle_;
+  size_t made_ = 0;
+};
+
 struct MapReader::Impl {
   std::string path;
   detail::Connection db;  // read-only, serialised (SQLITE_OPEN_FULLMUTEX)
@@ -24,11 +42,11 @@ struct MapReader::Impl {
   int schema_version = 0;
   // Row counts recorded by the writer at commit.
   uint64_t segment_count = 0, point_count = 0, keyframe_count = 0;
-  // Prepared point reads (read_points), kept for reuse: preparing the statement costs more than
-  // reading a segment's points. Declared after the connections: finalized before they close.
-  mutable std::mutex point_reads_mutex;
-  mutable std::vector<std::unique_ptr<detail::Statement>> idle_point_reads;
-  mutable size_t point_reads_made = 0;  // spreads new statements over db and loaders
+  std::optional<SurfaceLayer> surfaces;  // schema 4 with a layer
+  // Reads of read_points() and surface_tile(). Declared after the connections: finalized before
+  // they close.
+  mutable StatementPool point_reads, tile_reads;
+  Impl();
 };
 
 namespace detail {

@@ -23,7 +23,7 @@ namespace {
 // both back and compares them with kApplicationId / kSchemaVersion.
 const char* const kSchemaSql = R"sql(
 PRAGMA application_id = 1399278960;
-PRAGMA user_version = 3;
+PRAGMA user_version = 4;
 CREATE TABLE map_info (
   singleton INTEGER PRIMARY KEY CHECK (singleton = 1),
   name TEXT NOT NULL, frame TEXT NOT NULL, created_utc TEXT NOT NULL,
@@ -50,11 +50,19 @@ CREATE TABLE trajectory (
 CREATE TABLE classifier (
   singleton INTEGER PRIMARY KEY CHECK (singleton = 1),
   format TEXT NOT NULL, bytes BLOB NOT NULL, checksum INTEGER NOT NULL);
+CREATE TABLE surface_layer (
+  singleton INTEGER PRIMARY KEY CHECK (singleton = 1),
+  leaf_m REAL NOT NULL, tile_m REAL NOT NULL,
+  tile_count INTEGER NOT NULL, point_count INTEGER NOT NULL, stored_bytes INTEGER NOT NULL);
+CREATE TABLE surface_tiles (
+  tile_x INTEGER NOT NULL, tile_y INTEGER NOT NULL, point_count INTEGER NOT NULL,
+  checksum INTEGER NOT NULL, points BLOB NOT NULL, PRIMARY KEY (tile_x, tile_y));
 )sql";
 
 const char* const kTables[] = {"map_info", "segments", "segment_rtree", "trajectory",
                                        "classifier"};
 const char* const kTablesSince2[] = {"segment_points"};
+const char* const kTablesSince4[] = {"surface_layer", "surface_tiles"};
 
 int64_t pragma_value(sqlite3* db, const char* sql, const std::string& path) {
   Statement pragma(db, sql, path);
@@ -158,6 +166,7 @@ void check_tables(sqlite3* db, const std::string& path, int schema_version) {
   while (tables.step()) found.insert(tables.column_text(0));
   std::vector<std::string> expected(std::begin(kTables), std::end(kTables));
   if (schema_version >= 2) expected.insert(expected.end(), std::begin(kTablesSince2), std::end(kTablesSince2));
+  if (schema_version >= 4) expected.insert(expected.end(), std::begin(kTablesSince4), std::end(kTablesSince4));
   for (const std::string& table : expected) {
     if (!found.count(table)) fail(path, "the map file is incomplete or damaged: no table " + table);
   }

@@ -96,7 +96,7 @@ const std::set<std::string> kFiles = {
     "localize_global.bin", "localize_prior_voxelized.bin", "localize_segments.bin",
     "localize_reply_localized.bin", "localize_reply_not_localized.bin", "localize_reply_outside_prior.bin",
     "localize_refusal_code.bin", "localize_reply_refused.bin", "localize_detail.bin", "localize_reply_detail.bin",
-    "localize_reply_estimate.bin", "error.bin"};
+    "localize_reply_estimate.bin", "localize_newest.bin", "error.bin"};
 
 }  // namespace
 
@@ -166,6 +166,26 @@ TEST(ProtocolData, LocalizeWithPriorVoxelizedAndHeading) {
     EXPECT_EQ(m.prior_heading_tolerance_deg, 15.0);
     EXPECT_NEAR(m.T_map_local_prior(0, 1), -1.0, 1e-15) << "yaw +90 deg: x_map = -y_local + 100";
     EXPECT_EQ(m.points[1].intensity, 1.f);
+  });
+}
+
+// Revision 8: the vehicle's newest scans after the points (bit 5).
+TEST(ProtocolData, LocalizeNewest) {
+  LocalizeRequest r;
+  r.request_id = 11;
+  r.flags = kFlagHasPrior | kFlagNewestScans;
+  r.sensor_position_local = Eigen::Vector3d(1.0, 2.0, 0.5);
+  r.T_map_local_prior = pose(0.0, Eigen::Vector3d(100.0, 200.0, 0.0));
+  r.prior_radius_m = 5.0;
+  r.point_stride = 3;
+  r.points = {{1.f, 0.f, 0.f, 0.f}, {0.f, 1.f, 0.f, 0.f}, {0.f, 0.f, 1.f, 0.f}};
+  r.newest_points = {{1.5f, -2.f, 0.25f, 0.f}, {3.f, 4.f, -0.5f, 0.f}};
+  check_file<LocalizeRequest>("localize_newest.bin", r, [](const LocalizeRequest& m) {
+    EXPECT_EQ(m.flags, 33u);
+    ASSERT_EQ(m.points.size(), 3u);
+    ASSERT_EQ(m.newest_points.size(), 2u);
+    EXPECT_EQ(m.newest_points[1].y, 4.f);
+    EXPECT_EQ(m.newest_points[1].z, -0.5f);
   });
 }
 

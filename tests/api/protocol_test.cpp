@@ -274,7 +274,7 @@ TEST(Protocol, RejectsReservedFlagsAndOverlongStrings) {
   std::vector<uint8_t> f = encode(some_request());
   put_u32(f, kOffFlags, 0x80000001u);
   EXPECT_EQ(decode_request(f), DecodeStatus::kBadField);
-  put_u32(f, kOffFlags, 1u << 5);  // the first bit not defined by revision 6 (docs/protocol.md 8)
+  put_u32(f, kOffFlags, 1u << 6);  // the first bit not defined by revision 8 (docs/protocol.md 8)
   EXPECT_EQ(decode_request(f), DecodeStatus::kBadField);
   put_u32(f, kOffFlags, kFlagRefusalCode);  // revision 5's bit 3, no trailer
   EXPECT_EQ(decode_request(f), DecodeStatus::kOk);
@@ -344,4 +344,45 @@ TEST(Protocol, HeadingToleranceTravelsBehindItsFlagBit) {
   EXPECT_EQ(decode_request(bad), DecodeStatus::kNonFinite);
   // Without the bit, the field is not on the wire and decodes to its default.
   EXPECT_EQ(round_trip(some_request()).prior_heading_tolerance_deg, 10.0);
+}
+
+// Revision 8: the newest scans travel last, behind flag bit 5, after the heading tolerance when
+// both are set; their count must match the payload, their coordinates be finite.
+TEST(Protocol, NewestScansTravelBehindTheirFlagBit) {
+  LocalizeRequest r = some_request();
+  r.flags |= kFlagNewestScans | kFlagPriorHeading;
+  r.prior_heading_tolerance_deg = 4.5;
+  r.newest_points = {{1.5f, -2.f, 0.25f, 9.f}, {3.f, 4.f, -0.5f, 0.f}};
+  const std::vector<uint8_t> f = encode(r);
+  EXPECT_EQ(f.size(), encode(some_request()).size() + 8 + 4 + 2 * 12);
+  const LocalizeRequest back = round_trip(r);
+  EXPECT_EQ(back.prior_heading_tolerance_deg, 4.5);
+  ASSERT_EQ(back.newest_points.size(), 2u);
+  EXPECT_EQ(back.newest_points[0].x, 1.5f);
+  EXPECT_EQ(back.newest_points[0].intensity, 0.f) << "x y z only on the wire";
+  EXPECT_EQ(back.newest_points[1].z, -0.5f);
+  EXPECT_EQ(back.points.size(), r.points.size());
+  auto decode_payload = [](std::vector<uint8_t> frame) {
+    LocalizeRequest out;
+    return decode(frame.data() + kHeaderBytes, frame.size() - kHeaderBytes, kLimits, out);
+  };
+  std::vector<uint8_t> shorter = f;
+  shorter.resize(f.size() - 12);  // one newest point fewer than counted
+  EXPECT_EQ(decode_payload(shorter), DecodeStatus::kBadPointCount);
+  std::vector<uint8_t> longer = f;
+  longer.resize(f.size() + 4, 0);
+  EXPECT_EQ(decode_payload(longer), DecodeStatus::kBadPointCount);
+  std::vector<uint8_t> no_count = encode(some_request());
+  put_u32(no_count, kOffFlags, kFlagNewestScans);  // the bit, but not even a count
+  EXPECT_EQ(decode_payload(no_count), DecodeStatus::kBadPointCount);
+  std::vector<uint8_t> nan = f;
+  nan[nan.size() - 2] = 0xC0, nan[nan.size() - 1] = 0x7F;  // the last point's z: a float NaN (LE 00 00 C0 7F)
+  nan[nan.size() - 4] = nan[nan.size() - 3] = 0;
+  EXPECT_EQ(decode_payload(nan), DecodeStatus::kNonFinite);
+  r.newest_points.clear();  // zero newest points: the count alone
+  EXPECT_EQ(round_trip(r).newest_points.size(), 0u);
+  // Without the bit nothing follows the points, whatever the field holds.
+  LocalizeRequest without = some_request();
+  without.newest_points = {{1.f, 2.f, 3.f, 0.f}};
+  EXPECT_EQ(encode(without), encode(some_request()));
 }

@@ -56,6 +56,7 @@ class ScriptedServer:
         self.error_code, self.nonce_offset, self.id_offset = error_code, nonce_offset, id_offset
         self.connections = 0
         self.log = []  # (connection number, MessageType name) of every frame read
+        self.received = []  # the decoded messages, as log
         self._lock = threading.Lock()
         self._listener = socket.create_server(("127.0.0.1", 0))
         self.port = self._listener.getsockname()[1]
@@ -110,6 +111,7 @@ class ScriptedServer:
                 message = p.decode_payload(header.type, payload)
                 with self._lock:
                     self.log.append((number, p.MessageType(header.type).name))
+                    self.received.append(message)
                     drop = not isinstance(message, p.Hello) and self.drops > 0
                     self.drops -= drop
                 if drop:

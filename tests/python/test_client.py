@@ -14,6 +14,7 @@ import segmatch
 from _support import ScriptedServer
 from segmatch import (ClientTimeout, ConnectError, ConnectionLost, ErrorCode, LocalizeStatus, Prior, ProtocolError,
                       ServerError)
+from segmatch import protocol as p
 
 CLOUD = np.zeros((10, 3), dtype=np.float32)
 
@@ -127,6 +128,29 @@ class RetryPolicy(unittest.TestCase):
             segmatch.Client("127.0.0.1", port, connect_timeout_s=1)
 
 
+class NewestScans(unittest.TestCase):
+    """Revision 8: newest_points go behind FLAG_NEWEST_SCANS, x y z only; none sent, no flag."""
+
+    def test_newest_points_are_sent_behind_their_flag(self):
+        newest = np.arange(20, dtype=np.float64).reshape(5, 4)  # intensity dropped
+        with ScriptedServer() as s, segmatch.Client("127.0.0.1", s.port) as c:
+            c.localize(CLOUD, newest_points=newest, prior=Prior(np.eye(4), 5.0, 10.0))
+            c.localize(CLOUD, newest_points=np.zeros((0, 3)))
+            c.localize(CLOUD)
+        sent = [m for m in s.received if isinstance(m, p.Localize)]
+        self.assertEqual([bool(m.flags & p.FLAG_NEWEST_SCANS) for m in sent], [True, False, False])
+        np.testing.assert_array_equal(sent[0].newest_points, newest[:, :3])
+        self.assertEqual(sent[0].prior_heading_tolerance_deg, 10.0, "after the heading tolerance")
+        self.assertEqual(sent[1].newest_points.shape, (0, 3))
+
+    def test_a_server_of_revision_7_answers_malformed(self):
+        with ScriptedServer(error_code=ErrorCode.MALFORMED) as s, segmatch.Client("127.0.0.1", s.port) as c:
+            with self.assertRaises(ServerError) as ctx:
+                c.localize(CLOUD, newest_points=CLOUD)
+            self.assertEqual(ctx.exception.code, ErrorCode.MALFORMED)
+            self.assertFalse(c.broken, "the connection is kept: resend without the newest scans")
+
+
 class BadArguments(unittest.TestCase):
     """Bad input raises ValueError/TypeError naming the argument, and sends nothing."""
 
@@ -154,6 +178,8 @@ class BadArguments(unittest.TestCase):
         self.check("finite", points=np.array([[0, 0, np.nan]]))
         self.check("finite in float32", points=np.array([[0, 0, 1e39]]))  # overflows float32
         self.check("numbers", points=np.array([["a", "b", "c"]]))
+        self.check("newest_points must be an", newest_points=np.zeros((5, 5)))
+        self.check("newest_points must be finite", newest_points=np.array([[0, np.inf, 0]]))
 
     def test_poses(self):
         self.check("w x y z", sensor_orientation=(1, 0, 0))

@@ -109,3 +109,47 @@ TEST(ServerLocalization, OnlyPointsInTheLocalCylinderAreUsed) {
   EXPECT_EQ(coded.refusal, api::RefusalCode::kTooFewSegments) << coded.reason;
   EXPECT_EQ(coded.reason, r.reason) << "the words stay";
 }
+
+// Revision 8 (LOCALIZE bit 5): the vehicle's newest scans travel with the cloud and the server
+// refines its answer to them; the detail block says by how much and with how many points.
+// Newest points that belong elsewhere (the cloud lifted 5 m) leave the answer as it was.
+TEST(ServerLocalization, NewestScansRefineTheAnswerOverTheWire) {
+  const TestWorld& w = test_world();
+  RunningServer s;
+  api::Client c = s.client();
+  size_t refined = 0, localized = 0;
+  for (const Query& q : w.queries()) {
+    api::LocalizeRequest plain = q.request;
+    plain.flags |= api::kFlagDetail;
+    const api::LocalizeReply without = c.localize(plain);
+    if (without.status != api::LocalizeStatus::kLocalized) continue;
+    ++localized;
+    api::LocalizeRequest newest = plain;
+    newest.flags |= api::kFlagNewestScans;
+    newest.newest_points = crop_cylinder(q.request.points, q.request.sensor_position_local, 25.0);
+    const api::LocalizeReply with = c.localize(newest);
+    ASSERT_EQ(with.status, api::LocalizeStatus::kLocalized) << "the newest scans never refuse a query";
+    ASSERT_TRUE(with.detail.has_value());
+    refined += with.detail->window_points > 0;
+    const Pose3d T_map_sensor = with.T_map_local * q.T_local_sensor;
+    EXPECT_LE(position_error_m(T_map_sensor, q.T_world_sensor), 0.2) << "frame " << q.frame;
+    EXPECT_LE(angle_error_deg(T_map_sensor, q.T_world_sensor), 1.0) << "frame " << q.frame;
+    if (with.detail->window_points > 0) {
+      EXPECT_NEAR(with.detail->window_warp_m,
+                  ((with.T_map_local.translation() - without.T_map_local.translation()) +
+                   (with.T_map_local.linear() - without.T_map_local.linear()) * q.request.sensor_position_local)
+                      .norm(),
+                  1e-3)
+          << "the warp is how far the newest scans moved the answer at the sensor";
+    }
+    api::LocalizeRequest elsewhere = newest;
+    for (Point& p : elsewhere.newest_points) p.z += 5.0f;
+    const api::LocalizeReply lifted = c.localize(elsewhere);
+    ASSERT_EQ(lifted.status, api::LocalizeStatus::kLocalized);
+    EXPECT_TRUE(lifted.T_map_local.isApprox(without.T_map_local, 1e-9)) << "frame " << q.frame;
+    EXPECT_EQ(lifted.detail->window_points, 0u);
+  }
+  std::printf("[server] newest scans: %zu of %zu localized queries refined to them\n", refined, localized);
+  ASSERT_GE(localized, 4u);
+  EXPECT_GE(refined * 2, localized) << "most answers are refined to the newest scans";
+}

@@ -51,6 +51,8 @@ TEST(StorageUpgrade, SchemaOneMapComesBackBitForBit) {
   const MapReader now = MapReader::open(upgraded);
   EXPECT_EQ(now.schema_version(), kSchemaVersion);
   EXPECT_TRUE(now.check_integrity().empty());
+  EXPECT_FALSE(old.surfaces());
+  EXPECT_FALSE(now.surfaces()) << "an old map holds no scans to make a surface layer from";
 
   std::vector<uint32_t> old_keyframes, new_keyframes;
   const Segments before = old.load_segments(&old_keyframes), after = now.load_segments(&new_keyframes);

@@ -24,7 +24,7 @@ constexpr std::array<uint8_t, 4> kMagic = {'S', 'G', 'M', 'Q'};
 constexpr uint16_t kProtocolVersion = 1;
 // The protocol document's revision (docs/protocol.md, History): messages, flag bits and error
 // codes added compatibly since version 1. The frame header still says kProtocolVersion.
-constexpr int kProtocolRevision = 7;
+constexpr int kProtocolRevision = 8;
 constexpr size_t kHeaderBytes = 12;
 
 enum class MessageType : uint16_t {
@@ -131,7 +131,11 @@ constexpr uint32_t kFlagPriorHeading = 1u << 2;
 constexpr uint32_t kFlagRefusalCode = 1u << 3;
 // Revision 6: the reply carries a ReplyDetail block (docs/protocol.md 6.4).
 constexpr uint32_t kFlagDetail = 1u << 4;
-constexpr uint32_t kKnownFlags = kFlagHasPrior | kFlagVoxelized | kFlagPriorHeading | kFlagRefusalCode | kFlagDetail;
+// Revision 8: the vehicle's newest scans follow (docs/protocol.md 5.4): the server refines the
+// answer to them, the sensor's pose now rather than the drift-warped whole cloud's.
+constexpr uint32_t kFlagNewestScans = 1u << 5;
+constexpr uint32_t kKnownFlags =
+    kFlagHasPrior | kFlagVoxelized | kFlagPriorHeading | kFlagRefusalCode | kFlagDetail | kFlagNewestScans;
 
 struct LocalizeRequest {
   uint64_t request_id = 0;
@@ -148,6 +152,9 @@ struct LocalizeRequest {
   double prior_heading_tolerance_deg = 10.0;
   uint32_t point_stride = 4;  // floats per point on the wire: 3 (x y z) or 4 (x y z intensity)
   PointCloud points;          // local frame; intensity 0 when the stride is 3
+  // Sent only with kFlagNewestScans: the points of the scans of the last few metres (local
+  // frame, x y z; raw or thinned), a subset in time of the cloud above.
+  PointCloud newest_points;
 };
 
 // ---- LOCALIZE_SEGMENTS (revision 3, docs/protocol.md 5.5) ----------------------------------

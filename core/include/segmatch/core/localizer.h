@@ -38,6 +38,7 @@ struct LocalizerConfig {
   // (registration.h); segment matching answers when that does not.
   RegistrationConfig registration;
   CovarianceConfig covariance;  // of every localized answer
+  NewestScansConfig newest;     // the sensor's pose now, when the query has its newest scans
   // Beyond the paper: each verified hypothesis is ranked by its support (support.h), the
   // number of query segments that land within support_radius_m of a map segment under it.
   // The best must have at least min_support, and no other distinct hypothesis may reach
@@ -192,14 +193,30 @@ class TargetPoints {
   virtual void append(size_t index, PointCloud* out) const = 0;
 };
 
+// The map's surface layer (beyond the paper): every surface the mapping run saw, ground and
+// walls included, thinned to a voxel grid, in tiles (a server reads them from the map file on
+// demand). Registration onto it holds the height, roll and pitch that segments alone (no ground)
+// leave weak. Null when the map has none (maps written before it).
+class MapSurfaces {
+ public:
+  virtual ~MapSurfaces() = default;
+  // The layer's points (map frame) within radius_m of center horizontally (more may come: the
+  // caller crops). Called from many queries at once; throws (naming the tile) when they cannot
+  // be read.
+  virtual PointCloud near(const Eigen::Vector3d& center, double radius_m) const = 0;
+};
+
 class Localizer {
  public:
   // targets: the map's described segments (map frame). classifier: required for the random
   // forest matcher, ignored for L2. points: where refinement reads the targets' points; null
   // when the targets hold them (given, the targets' own points are not read).
+  // surfaces: the map's surface layer, onto which the newest scans are registered (null: onto
+  // the segments' points, ground removed from the scans).
   Localizer(const LocalizerConfig& config, Segments targets,
             std::shared_ptr<const RandomForestMatcher> classifier = nullptr,
-            std::shared_ptr<const TargetPoints> points = nullptr);
+            std::shared_ptr<const TargetPoints> points = nullptr,
+            std::shared_ptr<const MapSurfaces> surfaces = nullptr);
 
   // cloud: local cloud in the query (vehicle odometry) frame; sensor_position: the sensor in
   // that frame. Thread-safe: many queries may run at once.
@@ -220,10 +237,18 @@ class Localizer {
                                        const PosePrior* prior = nullptr, const ModuleTimings& timings = {},
                                        const Deadline& deadline = {}) const;
 
+  // The sensor's pose now (NewestScansConfig): refines a localized r with the vehicle's newest
+  // scans (query frame; raw, or thinned to config().newest.leaf_m), replacing its pose and
+  // covariance, and setting its window fields to the difference, when they agree with it.
+  // Leaves r as it is otherwise, when disabled, or when r is not localized. Thread-safe.
+  void refine_to_newest_scans(const PointCloud& newest, const Eigen::Vector3f& sensor_position,
+                              LocalizationResult& r) const;
+
   const Segments& targets() const { return targets_; }
   const LocalizerConfig& config() const { return config_; }
   const FeatureIndex& feature_index() const { return index_; }
   const RandomForestMatcher* classifier() const { return classifier_.get(); }
+  const MapSurfaces* surfaces() const { return surfaces_.get(); }
 
  private:
   LocalizerConfig config_;
@@ -232,6 +257,7 @@ class Localizer {
   CentroidIndex centroids_;
   std::shared_ptr<const RandomForestMatcher> classifier_;
   std::shared_ptr<const TargetPoints> points_;
+  std::shared_ptr<const MapSurfaces> surfaces_;
 };
 
 }  // namespace segmatch

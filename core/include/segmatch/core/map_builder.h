@@ -9,6 +9,7 @@
 #include "segmatch/core/local_cloud.h"
 #include "segmatch/core/localizer.h"
 #include "segmatch/core/segment_map.h"
+#include "segmatch/core/surface_layer.h"
 #include "segmatch/core/voxel_accumulator.h"
 
 #include <cstdint>
@@ -26,6 +27,7 @@ struct MapBuilderConfig {
   // map keeps a near-complete view of each, while segmenting only one scan position in ~50 at
   // 10 m/s and 10 Hz (segmentation dominates the cost).
   double map_every_m = 5.0;
+  SurfaceLayerConfig surfaces;  // the map's surface layer (surface_layer.h), from every scan
   void validate() const;  // throws std::invalid_argument naming the field
 };
 
@@ -68,6 +70,8 @@ class MapBuilder {
   double distance_driven_m() const { return odometer_m_; }
   const MapBuilderTimings& timings() const { return timings_; }
   const MapBuilderConfig& config() const { return config_; }
+  // The map's surface layer (world frame; empty when config.surfaces is off).
+  PointCloud surface_points() const { return surfaces_.points(); }
 
  private:
   void segment_local_cloud();
@@ -79,6 +83,7 @@ class MapBuilder {
   MapBuilderConfig config_;
   VoxelAccumulator local_;
   SegmentMap map_;
+  SurfaceAccumulator surfaces_;
   std::unordered_map<uint64_t, View> view_of_id_;
   std::vector<uint32_t> keyframe_of_segment_;  // in the map's order
   MapBuilderTimings timings_;

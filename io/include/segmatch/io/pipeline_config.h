@@ -27,6 +27,7 @@
 #include <segmatch/core/loop_closure.h>
 #include <segmatch/core/localizer.h>
 #include <segmatch/core/segment_map.h>
+#include <segmatch/core/surface_layer.h>
 
 #include <optional>
 #include <string>
@@ -41,6 +42,7 @@ struct PipelineConfig {
   LocalCloudConfig local_cloud;
   LocalizerConfig localizer;
   SegmentMapConfig segment_map;
+  SurfaceLayerConfig surfaces;  // the map's surface layer (core/surface_layer.h)
   // With the "auto" profile: what the input measured like (io/auto_profile.h). Stored in the
   // map's parameters as "measured" so that a reader sees why these values were chosen.
   std::optional<InputMeasurements> measured;

@@ -29,6 +29,11 @@ struct ReplayConfig {
   // millions of points (docs/protocol.md 5.4, flag bit 1).
   bool voxelize = true;
   VoxelGridConfig voxel;
+  // Each query also carries the scans of the last newest_m of driving (0: none), each thinned
+  // to one point per newest_leaf_m voxel: the server refines its answer to them, the sensor's
+  // pose now (docs/protocol.md 5.4, flag bit 5).
+  double newest_m = 10.0;
+  float newest_leaf_m = 0.2f;
   void validate() const;   // throws std::invalid_argument naming the field
 };
 
@@ -39,6 +44,7 @@ struct ReplayQuery {
   Pose3d T_world_sensor = Pose3d::Identity();  // the sequence's own pose of that scan
   PointCloud cloud_odom;                    // the local cylinder, odometry frame
   bool voxelized = false;                   // cloud_odom holds voxel centroids (config.voxelize)
+  PointCloud newest_odom;                   // the scans of the last newest_m, thinned (odometry frame)
 };
 
 // Which poses put a replayed query's scans into its local cloud. A vehicle has only its own

@@ -19,9 +19,11 @@
 
 #include <Eigen/Core>
 
+#include <cstdint>
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace segmatch {
@@ -62,9 +64,23 @@ class MapReader {
   std::vector<Keyframe> trajectory() const;
   std::optional<ClassifierBlob> classifier() const;
   MapStats stats() const;
+
+  // The surface layer (map_writer.h): nullopt for maps before schema 4 and for maps written
+  // without set_surfaces(). Read at open(): free to call.
+  std::optional<SurfaceLayer> surfaces() const;
+  // The points of tile (tile_x, tile_y): x in [tile_x, tile_x + 1) * tile_m, y likewise (as
+  // stored: within the quantisation error of map_writer.h), intensity 0; empty when there is
+  // no such tile or no layer. Checked against the tile's checksum (StorageError naming the tile
+  // and the file otherwise). Thread-safe as read_points().
+  PointCloud surface_tile(int32_t tile_x, int32_t tile_y) const;
+  // The keys (tile_x, tile_y) of every stored tile, ordered by x then y; empty without a layer.
+  // Reads the primary key's index only, no tile's points.
+  std::vector<std::pair<int32_t, int32_t>> surface_tile_keys() const;
+
   // Full check: PRAGMA integrity_check, row counts against map_info, the R*Tree against the
-  // centroids, every checksum and point BLOB, keyframe references. Empty = healthy; reads the
-  // whole file, so it takes about as long as load_segments().
+  // centroids, every checksum and point BLOB, keyframe references, the surface layer's counts,
+  // tile checksums and points. Empty = healthy; reads the whole file, so it takes about as long
+  // as load_segments().
   std::vector<std::string> check_integrity() const;
 
   struct Impl;  // opaque; named here so the library's internal files can share it

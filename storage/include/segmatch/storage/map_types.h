@@ -27,9 +27,10 @@ constexpr uint32_t kApplicationId = 0x53674D70u;
 // PRAGMA user_version: the schema this build writes, and the oldest one it still reads.
 // Schema 2 (2026-12-03) packs points and ESF losslessly and keeps points in their own table;
 // schema 3 (2026-12-03) stores ESF as u16 integers, sparse (storage/src/packed_blobs.h), the
-// rest as schema 2. Schema 1 and 2 maps are still read; segmatch-mapinfo --upgrade OLD NEW
-// rewrites them as schema 3.
-constexpr int kSchemaVersion = 3;
+// rest as schema 2; schema 4 (2026-12-05) adds the surface layer (map_writer.h), the rest as
+// schema 3. Schema 1 to 3 maps are still read; segmatch-mapinfo --upgrade OLD NEW rewrites them
+// as schema 4 (without a surface layer: the old file holds no scans to make one from).
+constexpr int kSchemaVersion = 4;
 constexpr int kOldestReadableSchemaVersion = 1;
 // Schema 3 stores each ESF bin as a u16 times 2^e, e in this range (core/esf_quantization.h; the
 // range of LOCALIZE_SEGMENTS, docs/protocol.md 5.5: an ESF sums to 1, so 2^0 holds any bin).
@@ -61,6 +62,16 @@ struct Keyframe {
 struct ClassifierBlob {
   std::string format;
   std::string bytes;
+};
+
+// The map's surface layer (MapWriter::set_surfaces): every surface the mapping run saw, thinned
+// to leaf_m, in square tiles of tile_m. stored_bytes: the tiles' point BLOBs as stored.
+struct SurfaceLayer {
+  float leaf_m = 0.f;
+  float tile_m = 0.f;
+  uint64_t tile_count = 0;
+  uint64_t point_count = 0;
+  uint64_t stored_bytes = 0;
 };
 
 struct MapStats {

@@ -7,7 +7,7 @@
 // the target path never holds a half-written map, and a map it held before stays intact.
 // A MapWriter is used from one thread at a time.
 //
-// File layout (schema version 3; application_id 'SgMp', user_version = schema version; 1 KiB
+// File layout (schema version 4; application_id 'SgMp', user_version = schema version; 1 KiB
 // pages):
 //   map_info       one row: metadata, the parameters JSON, descriptor sizes and row counts
 //   segments       one row per segment (rows 1..N in insertion order): id, keyframe, label,
@@ -23,6 +23,11 @@
 //                  (rotation row-major r00..r22, then tx ty tz), exact
 //   classifier     at most one row: format string, opaque bytes (zstd-packed), checksum of
 //                  the unpacked bytes
+//   surface_layer  at most one row (none: the map has no surface layer): leaf_m, tile_m, and
+//                  the tile count, point count and BLOB bytes of surface_tiles (schema 4)
+//   surface_tiles  one row per non-empty tile, primary key (tile_x, tile_y) = floor(x / tile_m),
+//                  floor(y / tile_m) in double: point count, the points (below) and an XXH64
+//                  checksum over the key, the count and the BLOB (schema 4)
 // All numbers in BLOBs are little-endian.
 //
 // Point precision. Each segment's points are stored as four int16 per point (8 bytes):
@@ -36,6 +41,17 @@
 //     non-finite value.
 // Decoding runs in float, so add float rounding: about 0.01 mm for coordinates below 100 m,
 // 0.5 mm at 10 km.
+// Surface tiles keep x y z only (the points decode with intensity 0), each axis as an int16 q
+// of 1 cm steps from an offset: x y from the tile's centre, z from the middle of its heights,
+// each moved onto the voxel grid of leaf_m (anchored at 0). The BLOB: a byte 1, the offsets
+// (3 float64), the voxel size in steps (u16, v), then a zstd frame of 12 byte planes: q = cell *
+// v + rest (0 <= rest < v), the points sorted by cell (y, x, z), the cells' deltas along them
+// (zigzag) and the rests, each as x low, x high, y low... (~1.5 bytes a point on the bench's
+// ground and facades at 0.25 m). Error <= 5 mm per axis, plus one float rounding of the
+// decoded coordinate (<= 0.004 mm below 128 m, <= 0.5 mm below 16 km), so a point may decode
+// up to that far outside its tile. A tile wider than 655 m or with heights spread over more is
+// stored exactly instead (a byte 2, then x y z float32 in 12 byte planes, zstd). The points
+// are stored as given: the caller thins them to leaf_m (recorded in surface_layer).
 // ESF bins move by at most 2^-16 of the segment's largest bin (u16 at a power-of-two scale,
 // as LOCALIZE_SEGMENTS sends them; schema 3). Everything else (ids, centroids, eigen, labels,
 // keyframes, poses, times, metadata, classifier bytes) round-trips exactly.
@@ -45,7 +61,8 @@
 // decodes to the middle of the segment's range). Schema 1 kept the points as a third BLOB of
 // the segments row, unpacked, in 64 KiB pages. Schema 3 stores the ESF quantised instead of
 // packed: decoding zstd frames was most of opening a city map. Schema 1 and 2 maps are still
-// read; upgrade_map() rewrites them.
+// read; upgrade_map() rewrites them. Schema 4 adds the surface layer; a map of schema 1 to 3
+// has none (nor does one upgraded from them: the file holds no scans to make one from).
 #pragma once
 
 #include <segmatch/core/segment.h>
@@ -79,6 +96,12 @@ class MapWriter {
   void set_trajectory(const std::vector<Keyframe>& keyframes);
   // Replaces the classifier model.
   void set_classifier(const ClassifierBlob& classifier);
+  // The map's surface layer: `points_map` (map frame, thinned to leaf_m by the caller) split
+  // into tiles of tile_m x tile_m metres, stored as above. Replaces a layer set before; a map
+  // written without calling it has no layer. An empty cloud makes a layer of no tiles.
+  // std::invalid_argument naming the problem: a non-finite point, leaf_m or tile_m not finite
+  // and > 0, a point whose tile index does not fit int32.
+  void set_surfaces(const PointCloud& points_map, float leaf_m, float tile_m);
   // Makes the map visible at the target path. The writer is finished afterwards.
   void commit();
 
@@ -97,8 +120,10 @@ class MapWriter {
 // bytes repacked, not re-quantised, so they decode to the same floats (the intensity of int16
 // points is not kept, as from schema 2 on); ESF is quantised as a schema-3 build stores it
 // (a schema-3 ESF quantises to itself). Every row's checksum
-// and BLOBs are verified first (a damaged map is refused, naming the row). Returns the old
-// schema version; StorageError when the map already has this build's schema.
+// and BLOBs are verified first (a damaged map is refused, naming the row). The new map has no
+// surface layer when the old one had none (every map before schema 4): only rebuilding the map
+// from its traversal makes one. Returns the old schema version; StorageError when the map
+// already has this build's schema.
 int upgrade_map(const std::string& old_path, const std::string& new_path, bool overwrite);
 
 }  // namespace storage

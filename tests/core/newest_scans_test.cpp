@@ -1,0 +1,169 @@
+// The sensor's pose now from the vehicle's newest scans (Localizer::refine_to_newest_scans,
+// NewestScansConfig): an answer a little off is brought to the truth by scans that agree with
+// the map, and left as it is by scans that do not, by an answer that is not localized, or when
+// the stage is off.
+#include "segmatch/core/localizer.h"
+#include "support/street_scene.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+namespace segmatch {
+namespace {
+
+using test::pole_street;
+using test::transformed;
+
+constexpr double kDeg = M_PI / 180.0;
+
+Pose3d T_query_map() {
+  Pose3d T = Pose3d::Identity();
+  T.linear() = Eigen::AngleAxisd(0.7, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  T.translation() = Eigen::Vector3d(-12.0, 30.0, 0.5);
+  return T;
+}
+
+// A localized answer whose pose is off the truth by `shift_m` along x and `turn_deg` of yaw
+// (about the sensor), as a whole cloud warped by drifting odometry would give.
+LocalizationResult answer_off(const Pose3d& T_map_query_true, const Eigen::Vector3d& sensor_query, double shift_m,
+                              double turn_deg) {
+  Pose3d offset = Pose3d::Identity();
+  offset.linear() = Eigen::AngleAxisd(turn_deg * kDeg, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  const Eigen::Vector3d s = T_map_query_true * sensor_query;
+  offset.translation() = s - offset.linear() * s + Eigen::Vector3d(shift_m, 0.0, 0.0);
+  LocalizationResult r;
+  r.status = LocalizationStatus::kLocalized;
+  r.T_map_query = offset * T_map_query_true;
+  return r;
+}
+
+// The pole street with two loading platforms: walls alone leave the height free (degenerate),
+// the platforms' tops hold it, as car roofs and kerbs do in a real street.
+PointCloud street_with_platforms() {
+  PointCloud cloud = pole_street(true);
+  for (const Eigen::Vector4f& b : {Eigen::Vector4f(5.f, 12.f, 10.f, 4.f), Eigen::Vector4f(38.f, -14.f, 8.f, 3.f)}) {
+    test::add_box(cloud, b[0], b[1], b[2], b[3], 1.2f);
+    for (float u = 0.f; u <= b[2]; u += 0.03f)
+      for (float v = 0.f; v <= b[3]; v += 0.03f) cloud.push_back(Point{b[0] + u, b[1] + v, 1.2f, 0.f});
+  }
+  return cloud;
+}
+
+struct Street {
+  LocalizerConfig config = test::street_localizer_config();
+  PointCloud map_cloud = street_with_platforms();
+  Eigen::Vector3f sensor_map{25.f, 0.f, 2.f};
+  Pose3d T_query = T_query_map();  // T_query_map: map points into the vehicle's frame
+  Localizer localizer() const {
+    return Localizer(config, extract_segments(map_cloud, sensor_map, config.segmentation));
+  }
+  Eigen::Vector3d sensor_query() const { return T_query * sensor_map.cast<double>(); }
+  PointCloud newest() const { return transformed(map_cloud, T_query); }
+};
+
+double error_m(const LocalizationResult& r, const Street& s) {
+  return (r.T_map_query * s.sensor_query() - s.sensor_map.cast<double>()).norm();
+}
+double error_deg(const LocalizationResult& r, const Street& s) {
+  return Eigen::AngleAxisd((r.T_map_query * s.T_query).linear()).angle() / kDeg;
+}
+
+TEST(NewestScans, BringAnAnswerThatIsALittleOffToTheTruth) {
+  const Street s;
+  const Localizer localizer = s.localizer();
+  LocalizationResult r = answer_off(s.T_query.inverse(), s.sensor_query(), 0.3, 0.5);
+  ASSERT_GT(error_m(r, s), 0.25);
+  localizer.refine_to_newest_scans(s.newest(), s.sensor_query().cast<float>(), r);
+  EXPECT_LT(error_m(r, s), 0.02);
+  EXPECT_LT(error_deg(r, s), 0.05);
+  EXPECT_NEAR(r.window_warp_m, 0.3, 0.03) << "the warp is how far the answer moved at the sensor";
+  EXPECT_NEAR(r.window_warp_deg, 0.5, 0.05);
+  EXPECT_GT(r.window_points, 300u);
+  EXPECT_FALSE(r.covariance.isZero()) << "the answer's covariance is the newest scans'";
+}
+
+TEST(NewestScans, LeaveTheAnswerWhenTheyDoNotQualify) {
+  const Street s;
+  const Localizer localizer = s.localizer();
+  const Eigen::Vector3f sensor = s.sensor_query().cast<float>();
+  auto unchanged = [&](LocalizationResult r, const PointCloud& newest, const Localizer& l, const char* why) {
+    const Pose3d before = r.T_map_query;
+    l.refine_to_newest_scans(newest, sensor, r);
+    EXPECT_TRUE(r.T_map_query.isApprox(before, 1e-12)) << why;
+    EXPECT_EQ(r.window_points, 0u) << why;
+  };
+  const LocalizationResult off = answer_off(s.T_query.inverse(), s.sensor_query(), 0.3, 0.5);
+  unchanged(off, {}, localizer, "no newest scans");
+  PointCloud elsewhere = transformed(s.map_cloud, T_query_map() * Pose3d(Eigen::Translation3d(0.0, 0.0, 30.0)));
+  unchanged(off, elsewhere, localizer, "scans of a place 30 m above the map fit nothing there");
+  const PointCloud all = s.newest();
+  const PointCloud few(all.begin(), all.begin() + 50);
+  unchanged(off, few, localizer, "too few points");
+  LocalizationResult refused = off;
+  refused.status = LocalizationStatus::kNotLocalized;
+  unchanged(refused, s.newest(), localizer, "not localized: nothing to refine");
+  // An answer 3 m off is not a starting point: whatever the scans fit from there, it is
+  // farther than max_shift_m from the answer, or not the truth.
+  const LocalizationResult far = answer_off(s.T_query.inverse(), s.sensor_query(), 3.0, 0.0);
+  unchanged(far, s.newest(), localizer, "the newest scans may move an answer by at most max_shift_m");
+  Street off_switch;
+  off_switch.config.newest.enabled = false;
+  unchanged(off, s.newest(), off_switch.localizer(), "disabled");
+}
+
+// The map's surface layer, in memory: the points of the street and its ground.
+class Surfaces : public MapSurfaces {
+ public:
+  explicit Surfaces(PointCloud points) : points_(std::move(points)) {}
+  PointCloud near(const Eigen::Vector3d& centre, double radius_m) const override {
+    return crop_cylinder(points_, centre, radius_m);
+  }
+
+ private:
+  PointCloud points_;
+};
+
+PointCloud with_ground(PointCloud cloud) {
+  for (float x = -10.f; x <= 60.f; x += 0.1f)
+    for (float y = -20.f; y <= 20.f; y += 0.1f) cloud.push_back(Point{x, y, 0.f, 0.f});
+  return cloud;
+}
+
+// Segments alone hold the height, roll and pitch weakly (the poles and walls are vertical);
+// with the surface layer the scans keep their ground and register onto it: an answer off in
+// height and tilted comes back to the truth.
+TEST(NewestScans, OntoTheSurfaceLayerTheGroundHoldsHeightRollAndPitch) {
+  Street s;
+  const Localizer segments_only = s.localizer();
+  const PointCloud surfaces = with_ground(s.map_cloud);
+  const Localizer layered(s.config, segments_only.targets(), nullptr, nullptr, std::make_shared<Surfaces>(surfaces));
+  LocalizationResult off = answer_off(s.T_query.inverse(), s.sensor_query(), 0.0, 0.0);
+  Pose3d tilt = Pose3d::Identity();  // 0.6 deg of roll and 0.12 m of height about the sensor
+  const Eigen::Vector3d at = s.sensor_map.cast<double>();
+  tilt.linear() = Eigen::AngleAxisd(0.6 * kDeg, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  tilt.translation() = at - tilt.linear() * at + Eigen::Vector3d(0.0, 0.0, 0.12);
+  off.T_map_query = tilt * off.T_map_query;
+  ASSERT_GT(error_m(off, s), 0.1);
+  LocalizationResult r = off;
+  layered.refine_to_newest_scans(transformed(surfaces, s.T_query), s.sensor_query().cast<float>(), r);
+  ASSERT_GT(r.window_points, 0u);
+  EXPECT_LT(error_m(r, s), 0.02);
+  EXPECT_LT(error_deg(r, s), 0.05);
+}
+
+TEST(NewestScans, ConfigRefusesBadValuesByName) {
+  NewestScansConfig c;
+  EXPECT_NO_THROW(c.validate());
+  c.leaf_m = 0.0f;
+  EXPECT_THROW(c.validate(), std::invalid_argument);
+  c = {};
+  c.min_fitness = 1.5f;
+  EXPECT_THROW(c.validate(), std::invalid_argument);
+  c = {};
+  c.max_shift_m = std::nanf("");
+  EXPECT_THROW(c.validate(), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace segmatch
