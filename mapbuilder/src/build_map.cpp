@@ -216,10 +216,13 @@ int build_map(const BuildOptions& o, const volatile std::sig_atomic_t* stop_sign
   writer.add_segments(builder.segments(), builder.keyframe_of_segment());
   writer.set_trajectory(trajectory);
   if (classifier) writer.set_classifier(*classifier);
+  const PointCloud surfaces = config.surfaces.enabled ? builder.surface_points() : PointCloud{};
+  if (config.surfaces.enabled) writer.set_surfaces(surfaces, config.surfaces.leaf_m, config.surfaces.tile_m);
   if (interrupted()) return 128 + *stop_signal;  // last chance: after commit() the map exists
   writer.commit();
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   print_summary(builder, trajectory.size(), seconds, o.output);
+  if (config.surfaces.enabled) std::printf("surfaces:     %zu points (leaf %.2f m)\n", surfaces.size(), config.surfaces.leaf_m);
   return 0;
 }
 

@@ -76,9 +76,12 @@ std::shared_ptr<const LoadedMap> load_map(const std::string& path, const MapLoad
     map->lazy_points = std::make_shared<const storage::LazyPoints>(shared_reader, options.cache_points);
   }
   fit_extent(*map, segments);
+  // The surface layer (schema 4) is always read tile by tile: it is larger than the segments and
+  // a query reads one disc of it. Maps without one register the newest scans onto segment points.
+  map->surfaces = storage::make_lazy_surfaces(shared_reader, options.cache_points);
   try {
-    map->localizer =
-        std::make_unique<const Localizer>(map->config.localizer, std::move(segments), classifier, map->lazy_points);
+    map->localizer = std::make_unique<const Localizer>(map->config.localizer, std::move(segments), classifier,
+                                                       map->lazy_points, map->surfaces);
   } catch (const std::invalid_argument& e) {
     throw std::runtime_error(path + ": cannot build the localizer: " + e.what());
   }

@@ -10,9 +10,10 @@
 namespace segmatch {
 
 struct SurfaceLayerConfig {
-  // Off until segmatch-mapbuilder stores the layer (storage's schema 4 holds it; the server does
-  // not read it yet): accumulating it costs the map build a voxel grid per scan.
-  bool enabled = false;
+  // On: the newest scans registered onto it hold roll, pitch and height (chosen on riverside02,
+  // hku-mb and the simulated demo city). Off saves the map build a voxel grid per scan and the
+  // file its tiles; the server then registers onto segment points alone.
+  bool enabled = true;
   float leaf_m = 0.25f;       // one point per voxel of this edge (the centroid of what fell in it)
   float max_range_m = 40.0f;  // of each scan: farther returns are sparse and noisy
   float tile_m = 64.0f;       // the map file's tiles (read on demand by a server)

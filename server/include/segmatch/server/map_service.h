@@ -13,6 +13,7 @@
 #include <segmatch/core/localizer.h>
 #include <segmatch/io/pipeline_config.h>
 #include <segmatch/storage/lazy_points.h>
+#include <segmatch/storage/lazy_surfaces.h>
 #include <segmatch/storage/map_types.h>
 
 #include <memory>
@@ -37,6 +38,7 @@ struct LoadedMap {
   uint64_t segments_digest = 0;
   std::vector<std::string> warnings;
   std::shared_ptr<const storage::LazyPoints> lazy_points;  // kLazy: the localizer's point source
+  std::shared_ptr<const MapSurfaces> surfaces;  // the map's surface layer, read lazily (null: none)
   int schema_version = 0;  // of the map file as read (an old one is served as it is)
   size_t segment_count() const { return localizer ? localizer->targets().size() : 0; }
 };
