@@ -98,6 +98,7 @@ const char* to_string(RefusalCode code) {
     case RefusalCode::kAmbiguous: return "AMBIGUOUS";
     case RefusalCode::kSurfacesDisagree: return "SURFACES_DISAGREE";
     case RefusalCode::kLowConfidence: return "LOW_CONFIDENCE";
+    case RefusalCode::kOffMap: return "OFF_MAP";
   }
   return "UNKNOWN";
 }

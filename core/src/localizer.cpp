@@ -173,6 +173,7 @@ const char* to_string(Refusal refusal) {
     case Refusal::kSurfacesDisagree: return "surfaces_disagree";
     case Refusal::kLowConfidence: return "low_confidence";
     case Refusal::kDeadlinePassed: return "deadline_passed";
+    case Refusal::kOffMap: return "off_map";
   }
   return "unknown";
 }

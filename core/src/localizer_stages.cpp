@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <string>
 
 namespace segmatch {
@@ -145,7 +146,11 @@ void refine_to_newest(const PointCloud& newest, const Segments& targets, const T
   thin.min_points_per_voxel = 1;
   PointCloud points = voxel_filter(crop_cylinder(newest, s, c.window_m), thin);
   if (!surfaces) points = remove_ground(points, config.segmentation.ground, sensor);
-  if (points.size() < static_cast<size_t>(c.min_points)) return;
+  if (points.size() < static_cast<size_t>(c.min_points)) {
+    r.newest_refusal = RegistrationRefusal::kFewPoints;
+    r.newest_reason = std::to_string(points.size()) + " newest points near the sensor (at least " + std::to_string(c.min_points) + ")";
+    return;
+  }
   const Eigen::Vector3d centre = r.T_map_query * s;
   const double reach = c.window_m + kWindowMarginM;
   const PointCloud map = surfaces ? crop_cylinder(surfaces->near(centre, reach), centre, reach)
@@ -158,6 +163,22 @@ void refine_to_newest(const PointCloud& newest, const Segments& targets, const T
   const float max_rmse_m = config.max_refine_rmse_voxels * config.segmentation.voxel.leaf_m;
   const RegistrationResult now = register_to_map(points, map, r.T_map_query, s, c.max_shift_m, c.max_turn_deg,
                                                  std::max(max_rmse_m, c.leaf_m), settle, config.refine, config.covariance);
+  r.newest_refusal = now.refusal;
+  r.newest_reason = now.reason;
+  // Enough newest points were given (above), so too few points here means no layer near the
+  // sensor; a registration that ended off the layer (low fitness, whether it settled or was
+  // still being dragged) found no place where they lie on it.
+  const bool off_map = now.refusal == RegistrationRefusal::kFewPoints || (!now.accepted() && now.fitness < c.min_fitness);
+  if (surfaces && c.refuse_off_map && off_map) {
+    char fit[96];
+    std::snprintf(fit, sizeof(fit), "fitness %.2f, at least %.2f", now.fitness, c.min_fitness);
+    r.status = LocalizationStatus::kNotLocalized;
+    r.refusal = Refusal::kOffMap;
+    r.reason = std::string("the vehicle's newest scans do not lie on the map's surfaces at the answer (") +
+               (now.refusal == RegistrationRefusal::kFewPoints ? now.reason : fit) + "): the sensor sees what the map never saw";
+    r.covariance.setZero();
+    return;
+  }
   if (!now.accepted()) return;
   r.window_points = points.size();
   r.window_warp_m = static_cast<float>((now.T_map_query * s - centre).norm());

@@ -129,6 +129,7 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("min_fitness", l.newest.min_fitness);
   v("max_shift_m", l.newest.max_shift_m);
   v("max_turn_deg", l.newest.max_turn_deg);
+  v("refuse_off_map", l.newest.refuse_off_map);
   v.section("localizer");
   v("support_radius_m", l.support_radius_m);
   v("min_support", l.min_support);

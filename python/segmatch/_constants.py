@@ -49,6 +49,7 @@ class RefusalCode(enum.IntEnum):
     AMBIGUOUS = 6
     SURFACES_DISAGREE = 7
     LOW_CONFIDENCE = 8
+    OFF_MAP = 9  # revision 9
 
 
 class LocalizeStatus(enum.IntEnum):

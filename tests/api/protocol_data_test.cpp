@@ -96,7 +96,7 @@ const std::set<std::string> kFiles = {
     "localize_global.bin", "localize_prior_voxelized.bin", "localize_segments.bin",
     "localize_reply_localized.bin", "localize_reply_not_localized.bin", "localize_reply_outside_prior.bin",
     "localize_refusal_code.bin", "localize_reply_refused.bin", "localize_detail.bin", "localize_reply_detail.bin",
-    "localize_reply_estimate.bin", "localize_newest.bin", "error.bin"};
+    "localize_reply_estimate.bin", "localize_newest.bin", "localize_reply_off_map.bin", "error.bin"};
 
 }  // namespace
 
@@ -289,6 +289,21 @@ TEST(ProtocolData, LocalizeEstimate) {
     EXPECT_EQ(c(5, 0), 6.0 / 4096.0);
     EXPECT_EQ(c(5, 5), 21.0 / 4096.0);
     EXPECT_EQ(covariance_upper(c), m.detail->estimate->covariance_upper);
+  });
+}
+
+// Revision 9: refusal code 9, OFF_MAP, answering a request that carried its newest scans.
+TEST(ProtocolData, LocalizeReplyOffMap) {
+  LocalizeReply off;
+  off.request_id = 11;  // the answer to localize_newest.bin
+  off.status = LocalizeStatus::kNotLocalized;
+  off.refusal = RefusalCode::kOffMap;
+  off.reason = "the vehicle's newest scans do not lie on the map's surfaces at the answer (fitness 0.53, at least 0.55)";
+  off.timings = timings();
+  check_file<LocalizeReply>("localize_reply_off_map.bin", off, [](const LocalizeReply& m) {
+    EXPECT_EQ(static_cast<int>(m.refusal), 9);
+    EXPECT_STREQ(to_string(m.refusal), "OFF_MAP");
+    EXPECT_EQ(m.status, LocalizeStatus::kNotLocalized);
   });
 }
 

@@ -152,6 +152,49 @@ TEST(NewestScans, OntoTheSurfaceLayerTheGroundHoldsHeightRollAndPitch) {
   EXPECT_LT(error_deg(r, s), 0.05);
 }
 
+// Newest scans that see what the surface layer never saw (here: buildings where the map has
+// open ground) mean the sensor is off the map, e.g. on an unmapped street: the answer, a pose
+// extrapolated through the odometry's warp, is refused by name. Off, or without a layer (the
+// segments cover too little to say it), the answer stands as it was.
+TEST(NewestScans, SeeingWhatTheSurfaceLayerNeverSawRefusesTheAnswerAsOffMap) {
+  Street s;
+  const Localizer segments_only = s.localizer();
+  const PointCloud surfaces = with_ground(s.map_cloud);
+  PointCloud unmapped;  // a block of buildings where the map has open ground
+  for (float x = 0.f; x <= 50.f; x += 10.f)
+    for (float y : {-15.f, 10.f}) test::add_box(unmapped, x, y, 6.f, 4.f, 8.f);
+  const PointCloud newest = transformed(unmapped, s.T_query);
+  const Eigen::Vector3f sensor = s.sensor_query().cast<float>();
+  const LocalizationResult answer = answer_off(s.T_query.inverse(), s.sensor_query(), 0.1, 0.2);
+
+  const Localizer layered(s.config, segments_only.targets(), nullptr, nullptr, std::make_shared<Surfaces>(surfaces));
+  LocalizationResult r = answer;
+  layered.refine_to_newest_scans(newest, sensor, r);
+  EXPECT_FALSE(r.localized());
+  EXPECT_EQ(r.refusal, Refusal::kOffMap) << r.reason;
+  EXPECT_NE(r.newest_refusal, RegistrationRefusal::kNone) << r.newest_reason;
+  EXPECT_NE(r.reason.find("newest scans do not lie on the map's surfaces"), std::string::npos) << r.reason;
+  EXPECT_NE(r.reason.find("fitness"), std::string::npos) << r.reason;
+  EXPECT_TRUE(r.covariance.isZero());
+
+  // The same scans of the mapped street are not refused: the test's scene is what decides.
+  LocalizationResult mapped = answer;
+  layered.refine_to_newest_scans(transformed(surfaces, s.T_query), sensor, mapped);
+  EXPECT_TRUE(mapped.localized());
+  EXPECT_GT(mapped.window_points, 0u);
+
+  Street off_switch;
+  off_switch.config.newest.refuse_off_map = false;
+  const Localizer lenient(off_switch.config, segments_only.targets(), nullptr, nullptr, std::make_shared<Surfaces>(surfaces));
+  for (const Localizer* l : {&lenient, &segments_only}) {
+    LocalizationResult kept = answer;
+    l->refine_to_newest_scans(newest, sensor, kept);
+    EXPECT_TRUE(kept.localized());
+    EXPECT_TRUE(kept.T_map_query.isApprox(answer.T_map_query, 1e-12));
+    EXPECT_EQ(kept.window_points, 0u);
+  }
+}
+
 TEST(NewestScans, ConfigRefusesBadValuesByName) {
   NewestScansConfig c;
   EXPECT_NO_THROW(c.validate());

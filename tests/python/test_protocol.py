@@ -72,6 +72,10 @@ EXPECTED = {
                                       Pose((1.0, 0.0, 0.0, 0.0), (100.0, 200.0, 0.0)), 5.0,
                                       points=pts([[1, 0, 0], [0, 1, 0], [0, 0, 1]]),
                                       newest_points=pts([[1.5, -2, 0.25], [3, 4, -0.5]])),
+    "localize_reply_off_map.bin": p.LocalizeReply(
+        11, p.LocalizeStatus.NOT_LOCALIZED,
+        "the vehicle's newest scans do not lie on the map's surfaces at the answer (fitness 0.53, at least 0.55)",
+        Pose(), 0, 0.0, 0, [], TIMINGS, refusal=p.RefusalCode.OFF_MAP),
     "error.bin": p.Error(ErrorCode.NON_FINITE, "NaN or Inf value"),
 }
 

@@ -213,6 +213,7 @@ enum class RefusalCode : uint16_t {
   kAmbiguous = 6,
   kSurfacesDisagree = 7,
   kLowConfidence = 8,
+  kOffMap = 9,  // revision 9: the vehicle's newest scans do not lie on the map at the answer
 };
 const char* to_string(RefusalCode code);
 

@@ -91,6 +91,7 @@ enum class Refusal {
   kSurfacesDisagree,     // refinement fitness below min_refine_fitness
   kLowConfidence,        // confidence below min_confidence
   kDeadlinePassed,       // the query's deadline passed before it was answered (Deadline)
+  kOffMap,               // the vehicle's newest scans do not lie on the map's surfaces at the answer
 };
 const char* to_string(Refusal refusal);
 
@@ -123,6 +124,10 @@ struct LocalizationResult {
   // was not tried), typed and in words.
   RegistrationRefusal registration_refusal = RegistrationRefusal::kNone;
   std::string registration_reason;
+  // With the vehicle's newest scans (refine_to_newest_scans): whether they moved the answer
+  // (kNone) or why not, typed and in words; kNone and empty when none were given.
+  RegistrationRefusal newest_refusal = RegistrationRefusal::kNone;
+  std::string newest_reason;
   size_t query_segments = 0, candidates = 0, matches = 0;
   size_t hypotheses = 0;                            // distinct verified poses considered
   size_t support = 0, runner_up_support = 0;        // of the chosen and the next-best pose

@@ -77,6 +77,13 @@ struct NewestScansConfig {
   float min_fitness = 0.55f;   // as RegistrationConfig::min_fitness
   float max_shift_m = 1.0f;    // farther from the answer at the sensor: the answer stands
   float max_turn_deg = 2.0f;   // ... or turned more than this
+  // With a surface layer (every surface the mapping run saw), newest scans that do not lie on
+  // it at the answer (fitness below min_fitness, or no layer near the sensor) mean the sensor
+  // sees what the map never saw: an unmapped street. The answer is then a pose extrapolated
+  // through the odometry's warp, unverified where the vehicle is: refused (Refusal::kOffMap).
+  // Off: such an answer stands. Without a layer the segments cover too little of the scene
+  // for their fitness to say this, and the answer stands.
+  bool refuse_off_map = true;
   void validate() const;       // throws std::invalid_argument naming the field
 };
 
