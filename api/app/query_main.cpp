@@ -73,7 +73,7 @@ int main(int argc, char** argv) {
                   "poses.txt, said on the first line)");
   rep->add_option("--newest-m", replay.newest_m,
                   "with each cloud also send the scans of the last this many metres, thinned, so that the server answers "
-                  "the sensor's pose now rather than the odometry-warped cloud's (protocol revision 8; 0: none)")
+                  "the sensor's pose now rather than the odometry-warped cloud's (protocol revision 8; with --segments revision 10; 0: none)")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
   rep->add_flag("--segments", replay.segments,

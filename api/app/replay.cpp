@@ -80,7 +80,7 @@ int replay(api::Client& client, const ReplayOptions& options) {
   config.every_m = options.every_m;
   config.first = options.first;
   config.last = options.last;
-  config.newest_m = options.segments ? 0.0 : options.newest_m;  // LOCALIZE_SEGMENTS has no such field
+  config.newest_m = options.newest_m;  // LOCALIZE_SEGMENTS carries them too (revision 10)
   const api::InfoReply info = client.info();
   const io::PipelineConfig map_parameters = parameters_of(info);
   // --segments: the vehicle's side (throws, naming the problem, if the parameters do not parse).

@@ -22,6 +22,9 @@ void put_pose(wire::Writer& w, const Pose3d& T);
 DecodeStatus get_quaternion(wire::Reader& r, Eigen::Quaterniond& q);
 DecodeStatus get_vector(wire::Reader& r, Eigen::Vector3d& v);
 DecodeStatus get_pose(wire::Reader& r, Pose3d& T);
+// `count` points of `stride` floats (3: x y z, intensity 0; 4: x y z intensity); kNonFinite if
+// any value is not finite.
+DecodeStatus get_points(wire::Reader& r, uint32_t count, uint32_t stride, PointCloud& points);
 // The first failure wins.
 DecodeStatus first_error(std::initializer_list<DecodeStatus> statuses);
 

@@ -68,7 +68,9 @@ static_assert(kLocalizeFixedBytes == 140, "docs/protocol.md documents 140 bytes"
 // Points are 4 packed floats, the wire layout of stride 4: read in one go.
 static_assert(sizeof(Point) == 4 * sizeof(float), "Point must stay x y z intensity");
 
-DecodeStatus get_points(wire::Reader& r, uint32_t count, uint32_t stride, PointCloud& points) {
+}  // namespace
+
+DecodeStatus detail::get_points(wire::Reader& r, uint32_t count, uint32_t stride, PointCloud& points) {
   points.resize(count);
   if (stride == 4) {
     if (count > 0 && !r.f32s(&points[0].x, 4 * static_cast<size_t>(count))) return DecodeStatus::kTruncated;
@@ -81,6 +83,8 @@ DecodeStatus get_points(wire::Reader& r, uint32_t count, uint32_t stride, PointC
       return DecodeStatus::kNonFinite;
   return DecodeStatus::kOk;
 }
+
+namespace {
 
 std::array<float*, kTimingCount> timing_fields(ModuleTimingsMs& t) {
   return {&t.voxel, &t.ground, &t.segment, &t.describe, &t.retrieve, &t.classify,

@@ -97,8 +97,10 @@ DecodeStatus get_segment(wire::Reader& r, bool esf, uint64_t index, Segment& s) 
 }
 
 // Walks the segments' point counts before any value is read: they must add up to `points` and
-// tile the payload exactly (else a miscount would surface as whatever garbage it misaligns).
-bool counts_add_up(const uint8_t* payload, size_t size, uint32_t count, uint32_t points, bool esf) {
+// tile the payload up to `end` exactly (else a miscount would surface as whatever garbage it
+// misaligns).
+bool counts_add_up(const uint8_t* payload, size_t end, uint32_t count, uint32_t points, bool esf) {
+  const size_t size = end;
   const uint64_t fixed = kSegmentBytes + (esf ? kEsfBytes : 0);
   uint64_t at = kSegmentsFixedBytes, seen = 0;
   for (uint32_t i = 0; i < count; ++i) {
@@ -146,6 +148,10 @@ std::vector<uint8_t> encode(const LocalizeSegmentsRequest& m) {
     if (esf) put_esf(w, s);
     put_points(w, s, e);
   }
+  if (m.flags & kSegmentsFlagNewestScans) {  // revision 10
+    w.u32(static_cast<uint32_t>(m.newest_points.size()));
+    for (const Point& p : m.newest_points) w.f32s(&p.x, 3);
+  }
   return detail::frame(type_of(m), w);
 }
 
@@ -161,10 +167,20 @@ DecodeStatus decode(const uint8_t* payload, size_t size, const Limits&, Localize
   if (m.flags & ~kKnownSegmentsFlags) return DecodeStatus::kBadField;
   const bool esf = (m.flags & kSegmentsFlagEsf) != 0;
   // 64-bit arithmetic: no overflow for any u32 counts.
-  if (kSegmentsFixedBytes + uint64_t{count} * (kSegmentBytes + (esf ? kEsfBytes : 0)) +
-          uint64_t{points} * kBytesPerSegmentPoint != size)
+  const uint64_t segments_end = kSegmentsFixedBytes + uint64_t{count} * (kSegmentBytes + (esf ? kEsfBytes : 0)) +
+                                uint64_t{points} * kBytesPerSegmentPoint;
+  // With the newest scans (revision 10) their count and points follow the segments.
+  const bool newest = (m.flags & kSegmentsFlagNewestScans) != 0;
+  uint64_t newest_count = 0;
+  if (newest) {
+    if (segments_end + 4 > size) return DecodeStatus::kBadPointCount;
+    wire::Reader n(payload + segments_end, 4);
+    newest_count = n.u32();
+    if (segments_end + 4 + newest_count * 12 != size) return DecodeStatus::kBadPointCount;
+  } else if (segments_end != size) {
     return DecodeStatus::kBadPointCount;
-  if (!counts_add_up(payload, size, count, points, esf)) return DecodeStatus::kBadPointCount;
+  }
+  if (!counts_add_up(payload, segments_end, count, points, esf)) return DecodeStatus::kBadPointCount;
   DecodeStatus s = s_head;
   if (s != DecodeStatus::kOk) return s;
   if (!std::isfinite(m.prior_radius_m) || !std::isfinite(m.prior_heading_tolerance_deg)) return DecodeStatus::kNonFinite;
@@ -172,6 +188,11 @@ DecodeStatus decode(const uint8_t* payload, size_t size, const Limits&, Localize
   m.segments.resize(count);
   for (uint32_t i = 0; i < count; ++i) {
     s = get_segment(r, esf, i, m.segments[i]);
+    if (s != DecodeStatus::kOk) return s;
+  }
+  if (newest) {
+    r.u32();  // the count, read above
+    s = detail::get_points(r, static_cast<uint32_t>(newest_count), 3, m.newest_points);
     if (s != DecodeStatus::kOk) return s;
   }
   s = detail::finish(r);

@@ -256,7 +256,6 @@ int main(int argc, char** argv) {
         if (!server.empty()) throw std::runtime_error("--recent-window-m is for in-process runs (the server serves its map's)");
         load.recent_window_m = recent_window_m;
       }
-      if (segments) lc.replay.newest_m = 0.0;  // LOCALIZE_SEGMENTS carries no newest scans
       return run_localize(lc, server, token_file, out_dir, segments, load);
     }
     if (*fun) {

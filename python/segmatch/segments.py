@@ -19,14 +19,16 @@ import numpy as np
 from ._wire import Reader, Writer, all_finite
 from .errors import DecodeError, DecodeStatus
 from ._constants import MessageType
-from .localize import RequestHead, get_request_head, put_request_head
+from .localize import RequestHead, _empty_newest_points, get_request_head, put_request_head
 from .pose import Pose
 
 SEGMENTS_FLAG_HAS_PRIOR = 1 << 0
 SEGMENTS_FLAG_ESF = 1 << 1  # every segment carries its ESF histogram
 SEGMENTS_FLAG_REFUSAL_CODE = 1 << 2  # revision 5, as LOCALIZE's FLAG_REFUSAL_CODE
 SEGMENTS_FLAG_DETAIL = 1 << 3  # revision 6, as LOCALIZE's FLAG_DETAIL
-KNOWN_SEGMENTS_FLAGS = SEGMENTS_FLAG_HAS_PRIOR | SEGMENTS_FLAG_ESF | SEGMENTS_FLAG_REFUSAL_CODE | SEGMENTS_FLAG_DETAIL
+SEGMENTS_FLAG_NEWEST_SCANS = 1 << 4  # revision 10, as LOCALIZE's FLAG_NEWEST_SCANS
+KNOWN_SEGMENTS_FLAGS = (SEGMENTS_FLAG_HAS_PRIOR | SEGMENTS_FLAG_ESF | SEGMENTS_FLAG_REFUSAL_CODE | SEGMENTS_FLAG_DETAIL
+                        | SEGMENTS_FLAG_NEWEST_SCANS)
 SEGMENTS_FIXED_BYTES = 156
 SEGMENT_BYTES = 45  # centroid, 7 eigen features, point count, step exponent
 EIGEN_FEATURES = 7
@@ -74,11 +76,13 @@ class WireSegment:
 @dataclass(eq=False)
 class LocalizeSegments(RequestHead):
     """LOCALIZE_SEGMENTS: the head (as Localize's), then parameters_digest =
-    segments_digest(JSON) and the segments."""
+    segments_digest(JSON) and the segments; with SEGMENTS_FLAG_NEWEST_SCANS (revision 10) the
+    vehicle's newest scans follow: float32 (K, 3)."""
 
     TYPE: ClassVar[MessageType] = MessageType.LOCALIZE_SEGMENTS
     parameters_digest: int = 0
     segments: List[WireSegment] = field(default_factory=list)
+    newest_points: np.ndarray = field(default_factory=_empty_newest_points)  # sent only with the flag
 
     def _put(self, w: Writer) -> None:
         esf = bool(self.flags & SEGMENTS_FLAG_ESF)
@@ -98,6 +102,12 @@ class LocalizeSegments(RequestHead):
                 w.i8(s.esf_exponent)
                 w.array(s.esf_mantissas, "<u2")
             w.array(s.offsets, "<i2")
+        if self.flags & SEGMENTS_FLAG_NEWEST_SCANS:  # revision 10
+            newest = np.asarray(self.newest_points)
+            if newest.ndim != 2 or newest.shape[1] != 3:
+                raise ValueError(f"newest_points must be an (K, 3) array, got shape {newest.shape}")
+            w.u32(newest.shape[0])
+            w.array(newest, "<f4")
 
     @classmethod
     def _get(cls, r: Reader) -> "LocalizeSegments":
@@ -112,8 +122,17 @@ class LocalizeSegments(RequestHead):
             raise DecodeError(DecodeStatus.BAD_FIELD, f"unknown flag bits 0x{m.flags & ~KNOWN_SEGMENTS_FLAGS:x}")
         esf = bool(m.flags & SEGMENTS_FLAG_ESF)
         fixed = SEGMENT_BYTES + (ESF_BYTES if esf else 0)
-        if SEGMENTS_FIXED_BYTES + count * fixed + total_points * 6 != size or \
-                not _counts_add_up(payload, size, count, total_points, fixed):
+        end = SEGMENTS_FIXED_BYTES + count * fixed + total_points * 6
+        newest = 0
+        if m.flags & SEGMENTS_FLAG_NEWEST_SCANS:  # revision 10: the newest scans' count and points follow
+            if end + 4 > size:
+                raise DecodeError(DecodeStatus.BAD_POINT_COUNT, f"{count} segments, {total_points} points in {size} bytes")
+            newest = struct.unpack_from("<I", payload, end)[0]
+            if end + 4 + newest * 12 != size:
+                raise DecodeError(DecodeStatus.BAD_POINT_COUNT, f"{newest} newest points in {size - end - 4} bytes")
+        elif end != size:
+            raise DecodeError(DecodeStatus.BAD_POINT_COUNT, f"{count} segments, {total_points} points in {size} bytes")
+        if not _counts_add_up(payload, end, count, total_points, fixed):
             raise DecodeError(DecodeStatus.BAD_POINT_COUNT, f"{count} segments, {total_points} points in {size} bytes")
         if head_status:
             raise DecodeError(head_status, "sensor pose or prior")
@@ -122,6 +141,11 @@ class LocalizeSegments(RequestHead):
         if m.prior_radius_m < 0 or m.prior_heading_tolerance_deg < 0:
             raise DecodeError(DecodeStatus.BAD_FIELD, "negative prior radius or heading tolerance")
         m.segments = [_get_segment(r, esf) for _ in range(count)]
+        if m.flags & SEGMENTS_FLAG_NEWEST_SCANS:
+            r.u32()  # the count, read above
+            m.newest_points = r.array("<f4", newest * 3).reshape(newest, 3)
+            if not np.all(np.isfinite(m.newest_points)):
+                raise DecodeError(DecodeStatus.NON_FINITE, "newest point")
         r.finish()
         return m
 

@@ -263,8 +263,10 @@ Outcome serve_localize_segments(const LoadedMap& map, api::LocalizeSegmentsReque
   const auto start = std::chrono::steady_clock::now();
   const RequestFields fields = request_fields(request);
   const std::optional<PosePrior> prior = pose_prior_of(fields);
-  const LocalizationResult r = map.localizer->localize_segments(
+  LocalizationResult r = map.localizer->localize_segments(
       std::move(request.segments), request.sensor_position_local.cast<float>(), prior ? &*prior : nullptr, {}, deadline);
+  if ((request.flags & api::kSegmentsFlagNewestScans) && !deadline.passed())  // revision 10, as LOCALIZE bit 5
+    map.localizer->refine_to_newest_scans(request.newest_points, request.sensor_position_local.cast<float>(), r);
   return outcome_of(map, r, request.request_id, fields, start);
 }
 

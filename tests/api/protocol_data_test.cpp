@@ -96,7 +96,7 @@ const std::set<std::string> kFiles = {
     "localize_global.bin", "localize_prior_voxelized.bin", "localize_segments.bin",
     "localize_reply_localized.bin", "localize_reply_not_localized.bin", "localize_reply_outside_prior.bin",
     "localize_refusal_code.bin", "localize_reply_refused.bin", "localize_detail.bin", "localize_reply_detail.bin",
-    "localize_reply_estimate.bin", "localize_newest.bin", "localize_reply_off_map.bin", "error.bin"};
+    "localize_reply_estimate.bin", "localize_newest.bin", "localize_segments_newest.bin", "localize_reply_off_map.bin", "error.bin"};
 
 }  // namespace
 
@@ -212,6 +212,30 @@ TEST(ProtocolData, LocalizeSegments) {
     ASSERT_EQ(m.segments.size(), 2u);
     EXPECT_NEAR(m.segments[1].points[1].x, 8.75f, 1e-3f);
     EXPECT_EQ(m.segments[0].esf[64], 0.0625f);
+  });
+}
+
+// Revision 10: LOCALIZE_SEGMENTS bit 4, the newest scans after the segments.
+TEST(ProtocolData, LocalizeSegmentsNewest) {
+  LocalizeSegmentsRequest r;
+  r.request_id = 15;
+  r.flags = kSegmentsFlagHasPrior | kSegmentsFlagRefusalCode | kSegmentsFlagNewestScans;
+  r.sensor_position_local = Eigen::Vector3d(1.0, 2.0, 0.5);
+  r.T_map_local_prior = pose(0.0, Eigen::Vector3d(100.0, 200.0, 0.0));
+  r.prior_radius_m = 5.0;
+  r.parameters_digest = segments_digest(kParametersJson);
+  Segment s;
+  s.points = {{4.f, 1.f, 0.5f, 0.f}, {4.75f, 1.5f, 0.25f, 0.f}};
+  for (const Point& p : s.points) s.centroid += p.xyz() / 2.f;
+  for (int i = 0; i < kEigenFeatureCount; ++i) s.eigen[i] = 0.25f * static_cast<float>(i + 1);
+  r.segments.push_back(s);
+  r.newest_points = {{1.5f, -2.f, 0.25f, 0.f}, {3.f, 4.f, -0.5f, 0.f}, {0.125f, 0.f, 8.f, 0.f}};
+  check_file<LocalizeSegmentsRequest>("localize_segments_newest.bin", r, [](const LocalizeSegmentsRequest& m) {
+    EXPECT_EQ(m.flags, 21u);
+    ASSERT_EQ(m.segments.size(), 1u);
+    ASSERT_EQ(m.newest_points.size(), 3u);
+    EXPECT_EQ(m.newest_points[2].z, 8.f);
+    EXPECT_EQ(m.newest_points[0].x, 1.5f);
   });
 }
 

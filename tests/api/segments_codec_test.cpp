@@ -220,8 +220,11 @@ TEST(SegmentsCodec, RefusesNonFiniteValuesBadFlagsAndExponents) {
   std::memcpy(&f[kOffRadius], &negative, 8);
   EXPECT_EQ(decode_request(f), DecodeStatus::kBadField);
   f = good;
-  put_u32(f, kOffFlags, kSegmentsFlagHasPrior | kSegmentsFlagEsf | 16u);  // bit 4: not defined by revision 6
+  put_u32(f, kOffFlags, kSegmentsFlagHasPrior | kSegmentsFlagEsf | 32u);  // bit 5: not defined by revision 10
   EXPECT_EQ(decode_request(f), DecodeStatus::kBadField);
+  f = good;
+  put_u32(f, kOffFlags, kSegmentsFlagHasPrior | kSegmentsFlagEsf | kSegmentsFlagNewestScans);
+  EXPECT_EQ(decode_request(f), DecodeStatus::kBadPointCount) << "bit 4 promises newest scans the payload lacks";
   f = good;
   f[kOffFirstSegment + 44] = static_cast<uint8_t>(int8_t{11});  // point step 2^11 m
   EXPECT_EQ(decode_request(f), DecodeStatus::kBadField);
@@ -231,6 +234,40 @@ TEST(SegmentsCodec, RefusesNonFiniteValuesBadFlagsAndExponents) {
   f[kOffFirstSegment + 45] = static_cast<uint8_t>(int8_t{3});  // ESF scale 8
   EXPECT_EQ(decode_request(f), DecodeStatus::kBadField);
   EXPECT_EQ(error_code_for(DecodeStatus::kBadPointCount), ErrorCode::kBadPointCount);
+}
+
+// Revision 10: the newest scans after the segments round-trip exactly (f32), and every count
+// that disagrees with the length, a truncation inside them or a non-finite one is refused.
+TEST(SegmentsCodec, NewestScansFollowTheSegments) {
+  LocalizeSegmentsRequest in = some_request(true, 2);
+  in.flags |= kSegmentsFlagNewestScans;
+  for (int i = 0; i < 40; ++i) in.newest_points.push_back({0.25f * i, -1.5f + i, 0.125f * (i % 7), 0.f});
+  const std::vector<uint8_t> good = encode(in);
+  EXPECT_EQ(good.size(), encode(some_request(true, 2)).size() + 4 + 12 * 40);
+  LocalizeSegmentsRequest out;
+  ASSERT_EQ(decode_frame(good, kLimits, out), DecodeStatus::kOk);
+  ASSERT_EQ(out.newest_points.size(), 40u);
+  for (size_t i = 0; i < 40; ++i) EXPECT_EQ(out.newest_points[i].xyz(), in.newest_points[i].xyz());
+  ASSERT_EQ(out.segments.size(), 2u);
+  EXPECT_EQ(encode(out), good);
+  const size_t count_at = good.size() - 4 - 12 * 40;
+  std::vector<uint8_t> f = good;
+  put_u32(f, count_at, 41);
+  EXPECT_EQ(decode_request(f), DecodeStatus::kBadPointCount);
+  f = good;
+  put_u32(f, count_at, 0xFFFFFFFFu);  // no 32-bit overflow
+  EXPECT_EQ(decode_request(f), DecodeStatus::kBadPointCount);
+  f = good;
+  put_f32(f, good.size() - 4, std::numeric_limits<float>::quiet_NaN());
+  EXPECT_EQ(decode_request(f), DecodeStatus::kNonFinite);
+  for (size_t cut = 1; cut <= 12 * 40 + 4; cut += 7) {
+    f.assign(good.begin(), good.end() - static_cast<std::ptrdiff_t>(cut));
+    put_u32(f, 8, static_cast<uint32_t>(f.size() - kHeaderBytes));
+    EXPECT_NE(decode_request(f), DecodeStatus::kOk) << cut;
+  }
+  f = good;  // the bit cleared: the trailing scans no longer belong to the payload
+  put_u32(f, kOffFlags, in.flags & ~kSegmentsFlagNewestScans);
+  EXPECT_EQ(decode_request(f), DecodeStatus::kBadPointCount);
 }
 
 TEST(SegmentsCodec, IsAKnownRequestType) {

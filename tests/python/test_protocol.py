@@ -17,7 +17,7 @@ import numpy as np
 from _support import GOLDEN_V1_V4, PROTOCOL_DATA
 from segmatch import protocol as p
 from segmatch import DecodeError, DecodeStatus, ErrorCode, Pose, ServerError
-from segmatch.segments import segments_digest
+from segmatch.segments import SEGMENTS_FLAG_NEWEST_SCANS, segments_digest
 
 PARAMETERS_JSON = '{"voxel":{"leaf_m":0.1,"min_points_per_voxel":2}}'
 NONCE = 0x0123456789ABCDEF
@@ -97,7 +97,7 @@ def expected_stored() -> dict:
 class StoredFrames(unittest.TestCase):
     def test_every_stored_frame_is_checked(self):
         names = {f.name for f in PROTOCOL_DATA.glob("*.bin")}
-        self.assertEqual(names, set(expected_stored()) | {"localize_segments.bin"})
+        self.assertEqual(names, set(expected_stored()) | {"localize_segments.bin", "localize_segments_newest.bin"})
 
     def test_every_frame_decodes_and_reencodes_byte_for_byte(self):
         files = sorted(PROTOCOL_DATA.glob("*.bin")) + sorted(GOLDEN_V1_V4.glob("*.bin"))
@@ -162,6 +162,20 @@ class StoredFrames(unittest.TestCase):
             self.assertEqual(s.esf[k], 0.0625)
         v3 = p.decode_frame(stored("localize_segments_v3.bin", GOLDEN_V1_V4))
         self.assertEqual(v3.request_id, 42)
+
+    def test_localize_segments_with_newest_scans(self):
+        """Revision 10: LOCALIZE_SEGMENTS bit 4, the newest scans after the segments."""
+        m = p.decode_frame(stored("localize_segments_newest.bin"))
+        self.assertEqual((m.request_id, m.flags, len(m.segments)), (15, 21, 1))
+        self.assertTrue(m.flags & SEGMENTS_FLAG_NEWEST_SCANS)
+        np.testing.assert_array_equal(m.newest_points, [[1.5, -2, 0.25], [3, 4, -0.5], [0.125, 0, 8]])
+        self.assertEqual(m.newest_points.dtype, np.float32)
+        self.assertEqual(p.encode(m), stored("localize_segments_newest.bin"))
+        data = bytearray(stored("localize_segments_newest.bin"))
+        struct.pack_into("<I", data, len(data) - 4 - 36, 4)  # one newest point more than sent
+        with self.assertRaises(DecodeError) as e:
+            p.decode_frame(bytes(data))
+        self.assertEqual(e.exception.status, DecodeStatus.BAD_POINT_COUNT)
 
 
 class ProtocolDocument(unittest.TestCase):

@@ -97,6 +97,40 @@ TEST(ServerSegments, SegmentsOverTheWireGetTheCloudPathsStatusAndPose) {
   EXPECT_EQ(s.server->counters().errors, 0u);
 }
 
+// Revision 10 (LOCALIZE_SEGMENTS bit 4): the vehicle that segments its own cloud sends its newest
+// scans too, and gets what the cloud path with LOCALIZE bit 5 gets: the answer refined to them.
+TEST(ServerSegments, NewestScansTravelWithTheSegmentsAndRefineTheAnswerAsOnTheCloudPath) {
+  const TestWorld& w = test_world();
+  RunningServer s;
+  api::Client c = s.client();
+  const vehicle::SegmentQuery v = vehicle::SegmentQuery::from_info(c.info());
+  size_t both = 0, refined = 0;
+  for (const Query& q : w.queries()) {
+    api::LocalizeRequest cloud = q.request;
+    cloud.flags |= api::kFlagDetail | api::kFlagNewestScans | api::kFlagRefusalCode;
+    const PointCloud near = crop_cylinder(q.request.points, q.request.sensor_position_local, 60.0);
+    for (size_t i = 0; i < near.size(); i += 8) cloud.newest_points.push_back(near[i]);  // thinned, as a vehicle sends
+    const api::LocalizeSegmentsRequest sr = v.make_request(cloud);
+    ASSERT_TRUE(sr.flags & api::kSegmentsFlagNewestScans);
+    ASSERT_TRUE(sr.flags & api::kSegmentsFlagRefusalCode) << "the refusal-code bit carries over";
+    ASSERT_FALSE(sr.newest_points.empty());
+    EXPECT_LT(sr.newest_points.size(), cloud.newest_points.size()) << "cropped to the map's newest.window_m";
+    const api::LocalizeReply a = c.localize(cloud);
+    const api::LocalizeReply b = c.localize_segments(sr);
+    if (a.status != api::LocalizeStatus::kLocalized || b.status != api::LocalizeStatus::kLocalized) continue;
+    ++both;
+    ASSERT_TRUE(a.detail && b.detail);
+    EXPECT_EQ(a.detail->window_points > 0, b.detail->window_points > 0) << q.frame;
+    refined += b.detail->window_points > 0;
+    EXPECT_LE(position_error_m(a.T_map_local, b.T_map_local), 0.01) << q.frame;
+    EXPECT_LE(angle_error_deg(a.T_map_local, b.T_map_local), 0.05) << q.frame;
+  }
+  std::printf("[segments] newest scans: %zu answers on both paths, %zu refined to them\n", both, refined);
+  EXPECT_GE(both * 2, w.queries().size());
+  EXPECT_GE(refined * 2, both);
+  EXPECT_EQ(s.server->counters().errors, 0u);
+}
+
 // Revision 5: LOCALIZE_SEGMENTS bit 2 asks for the reply's refusal code.
 TEST(ServerSegments, TheRefusalCodeComesWhenAskedFor) {
   const TestWorld& w = test_world();

@@ -40,7 +40,13 @@ api::LocalizeSegmentsRequest SegmentQuery::make_request(const api::LocalizeReque
   r.request_id = c.request_id;
   if (c.flags & api::kFlagHasPrior) r.flags |= api::kSegmentsFlagHasPrior;
   if (send_esf_) r.flags |= api::kSegmentsFlagEsf;
+  if (c.flags & api::kFlagRefusalCode) r.flags |= api::kSegmentsFlagRefusalCode;
   if (c.flags & api::kFlagDetail) r.flags |= api::kSegmentsFlagDetail;
+  if (c.flags & api::kFlagNewestScans) {  // revision 10: the sensor's pose now on this path too
+    r.flags |= api::kSegmentsFlagNewestScans;
+    // Only the points the server reads (its newest.window_m around the sensor) travel.
+    r.newest_points = crop_cylinder(c.newest_points, c.sensor_position_local, parameters_.localizer.newest.window_m);
+  }
   r.sensor_position_local = c.sensor_position_local;
   r.sensor_orientation_local = c.sensor_orientation_local;
   r.T_map_local_prior = c.T_map_local_prior;

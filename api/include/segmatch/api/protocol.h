@@ -167,8 +167,9 @@ constexpr uint32_t kSegmentsFlagHasPrior = 1u << 0;  // as LOCALIZE bit 0 (headi
 constexpr uint32_t kSegmentsFlagEsf = 1u << 1;       // every segment carries its ESF histogram
 constexpr uint32_t kSegmentsFlagRefusalCode = 1u << 2;  // revision 5, as LOCALIZE bit 3
 constexpr uint32_t kSegmentsFlagDetail = 1u << 3;       // revision 6, as LOCALIZE bit 4
-constexpr uint32_t kKnownSegmentsFlags =
-    kSegmentsFlagHasPrior | kSegmentsFlagEsf | kSegmentsFlagRefusalCode | kSegmentsFlagDetail;
+constexpr uint32_t kSegmentsFlagNewestScans = 1u << 4;  // revision 10, as LOCALIZE bit 5
+constexpr uint32_t kKnownSegmentsFlags = kSegmentsFlagHasPrior | kSegmentsFlagEsf | kSegmentsFlagRefusalCode |
+                                         kSegmentsFlagDetail | kSegmentsFlagNewestScans;
 constexpr int kPointStepExponentMin = -16;  // finest point step 2^-16 m (15 um)
 constexpr int kPointStepExponentMax = 10;
 constexpr int kEsfExponentMin = -64;
@@ -187,6 +188,8 @@ struct LocalizeSegmentsRequest {
   // Query (local) frame. Encoding sends centroid, eigen, ESF (with kSegmentsFlagEsf) and
   // points; ids and labels are not sent (decoded segments are numbered 0..M-1).
   Segments segments;
+  // Sent only with kSegmentsFlagNewestScans: as LocalizeRequest::newest_points (x y z, f32).
+  PointCloud newest_points;
 };
 
 // Names the parameters a vehicle's segments were made with: FNV-1a (64 bit) of the

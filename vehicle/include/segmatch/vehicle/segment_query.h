@@ -27,8 +27,10 @@ class SegmentQuery {
   // The LOCALIZE request's cloud (raw or voxelized, kFlagVoxelized), sensor pose and prior, as
   // a LOCALIZE_SEGMENTS request with the same id. The segments' points are thinned as the
   // server's refinement would thin them (thin_segment_points, the map's
-  // refine.max_segment_points): only what it reads is sent. `timings` gets voxel..describe and total
-  // (the vehicle's own work, crop included).
+  // refine.max_segment_points): only what it reads is sent. The refusal-code, detail and newest-scans
+  // bits carry over (the newest scans cropped to the map's newest.window_m around the sensor, all
+  // the server reads of them). `timings` gets voxel..describe and total (the vehicle's own work,
+  // crop included).
   api::LocalizeSegmentsRequest make_request(const api::LocalizeRequest& cloud_request,
                                             ModuleTimings* timings = nullptr) const;
 
