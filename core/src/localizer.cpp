@@ -194,6 +194,7 @@ void LocalizerConfig::validate() const {
   registration.validate();
   covariance.validate();
   newest.validate();
+  search.validate();
   if (!(min_refine_fitness >= 0.0f && min_refine_fitness <= 1.0f))
     throw std::invalid_argument("min_refine_fitness must be in 0..1");
   if (!(max_refine_rmse_voxels >= 0.0f) || !std::isfinite(max_refine_rmse_voxels))

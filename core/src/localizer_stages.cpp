@@ -1,5 +1,6 @@
 #include "localizer_stages.h"
 
+#include "segmatch/core/correlative_search.h"
 #include "segmatch/core/preprocess.h"
 #include "segmatch/core/registration.h"
 
@@ -95,6 +96,115 @@ void refine_recent_window(const WindowPoints& points, const Eigen::Vector3f& sen
 
 // Tracking by registration (registration.h): every query segment's points near the sensor onto
 // the map segments' near where the prior puts it. Localized, or the reason it did not answer.
+namespace {
+
+// The segment check of a registered pose: enough query segments land on map segments, and
+// enough of those pairs pass the matcher (RegistrationConfig::min_support, min_matched_segments).
+// Fills r's support and inliers; false, with r's registration refusal, when too few.
+bool well_supported(const Segments& targets, const CentroidIndex& centroids, const RandomForestMatcher* classifier,
+                    const LocalizerConfig& config, const Pose3d& T_map_query, LocalizationResult& r) {
+  const Support support = support_of(r.query, centroids, T_map_query, config.support_radius_m);
+  r.support = support.count();
+  r.inliers = filter_matches(r.query, targets, support.pairs, config.matcher, classifier);
+  const RegistrationConfig& c = config.registration;
+  if (r.support >= static_cast<size_t>(c.min_support) && r.inliers.size() >= static_cast<size_t>(c.min_matched_segments))
+    return true;
+  r.registration_refusal = RegistrationRefusal::kLowSupport;
+  r.registration_reason = std::to_string(r.support) + " query segments land on map segments under the registered pose, " +
+                          std::to_string(r.inliers.size()) + " of them matched (at least " + std::to_string(c.min_support) +
+                          " and " + std::to_string(c.min_matched_segments) + ")";
+  return false;
+}
+
+// Over a wide prior the support must also reach the localizer's own floors, with and without a
+// prior, whichever is higher (CorrelativeSearchConfig).
+bool supported_globally(const LocalizerConfig& config, LocalizationResult& r) {
+  const int floor = std::max({config.min_support, config.min_support_with_prior, config.registration.min_support});
+  if (r.support >= static_cast<size_t>(floor)) return true;
+  r.registration_refusal = RegistrationRefusal::kLowSupport;
+  r.registration_reason = std::to_string(r.support) + " query segments land on map segments under the registered pose (over a wide prior at least " +
+                          std::to_string(floor) + ")";
+  return false;
+}
+
+void localized_by(const RegistrationResult& reg, LocalizationResult& r) {
+  r.registration_refusal = RegistrationRefusal::kNone;
+  r.registration_reason.clear();
+  r.refine_fitness = reg.fitness;
+  r.refine_rmse_m = reg.rmse_m;
+  r.status = LocalizationStatus::kLocalized;
+  r.method = LocalizationMethod::kRegistration;
+  r.T_map_query = reg.T_map_query;
+  r.covariance = reg.covariance;
+  r.confidence = reg.fitness;
+}
+
+// A prior too wide for ICP (CorrelativeSearchConfig): the correlative search's best distinct
+// peaks are registered each from its own pose, with every gate of a narrow prior, and must stay
+// within the wide prior. One passing answers; two passing at distinct places is an ambiguity
+// (a street of look-alikes), refused.
+void register_over_wide_prior(const Segments& targets, const TargetPoints* source, const CentroidIndex& centroids,
+                              const RandomForestMatcher* classifier, const LocalizerConfig& config, const PosePrior& prior,
+                              const Eigen::Vector3d& s, LocalizationResult& r) {
+  const CorrelativeSearchConfig& search = config.search;
+  const size_t stride = segment_point_stride(r.query, static_cast<size_t>(config.refine.max_segment_points));
+  const PointCloud query = all_query_points(r.query, stride);
+  const Eigen::Vector3d centre = prior.T_map_query * s;
+  const PointCloud map = map_points_near(targets, source, centre, config.registration.window_m + prior.radius_m + kWindowMarginM);
+  const std::vector<SearchCandidate> peaks =
+      correlative_search(query, map, prior.T_map_query, s, prior.radius_m, prior.max_rotation_deg, search);
+  const float max_rmse_m = config.max_refine_rmse_voxels * config.segmentation.voxel.leaf_m;
+  // A peak is within a cell and a heading step of a minimum: the registration from it may move
+  // that far and a little more, no farther.
+  const double peak_radius_m = 2.0 * search.resolution_m, peak_turn_deg = 2.0 * search.angle_step_deg;
+  std::vector<RegistrationResult> passed;
+  LocalizationResult last = r;
+  for (const SearchCandidate& peak : peaks) {
+    LocalizationResult trial = r;
+    const Eigen::Vector3d at = peak.T_map_query * s;
+    RegistrationResult reg = register_to_map(query, crop_cylinder(map, at, config.registration.window_m + kWindowMarginM),
+                                             peak.T_map_query, s, peak_radius_m, peak_turn_deg, max_rmse_m,
+                                             config.registration, config.refine, config.covariance);
+    const Eigen::Vector3d moved = reg.T_map_query * s - centre;
+    const double turned_deg = Eigen::AngleAxisd(reg.T_map_query.linear() * prior.T_map_query.linear().transpose()).angle() * 180.0 / M_PI;
+    if (reg.accepted() && (moved.norm() > prior.radius_m || turned_deg > prior.max_rotation_deg)) {
+      reg.refusal = RegistrationRefusal::kOutsidePrior;
+      reg.reason = "registered outside the prior";
+    } else if (reg.accepted() && reg.fitness < search.min_fitness) {
+      reg.refusal = RegistrationRefusal::kLowFitness;
+      reg.reason = "registration fitness " + std::to_string(reg.fitness) + " below the wide prior's " + std::to_string(search.min_fitness);
+    }
+    trial.registration_refusal = reg.refusal;
+    trial.registration_reason = reg.reason;
+    if (reg.accepted() && well_supported(targets, centroids, classifier, config, reg.T_map_query, trial) &&
+        supported_globally(config, trial)) {
+      bool same = false;
+      for (const RegistrationResult& p : passed)
+        same = same || ((p.T_map_query * s - reg.T_map_query * s).norm() < search.min_separation_m);
+      if (!same) passed.push_back(reg);
+      if (passed.size() == 1) last = trial;  // keep the first answer's support and inliers
+      continue;
+    }
+    if (passed.empty()) last = trial;
+  }
+  r = last;
+  if (passed.size() == 1) return localized_by(passed.front(), r);
+  if (passed.size() > 1) {
+    r.status = LocalizationStatus::kNotLocalized;
+    r.registration_refusal = RegistrationRefusal::kAmbiguous;
+    r.registration_reason = std::to_string(passed.size()) + " distinct poses within the prior pass registration";
+    return;
+  }
+  if (peaks.empty()) {
+    r.registration_refusal = RegistrationRefusal::kFewPoints;
+    r.registration_reason = "no query or map points to search the prior with";
+    return;
+  }
+  r.registration_reason = "none of " + std::to_string(peaks.size()) + " search peaks registered: " + r.registration_reason;
+}
+
+}  // namespace
+
 void register_near_prior(const Segments& targets, const TargetPoints* source, const CentroidIndex& centroids,
                          const RandomForestMatcher* classifier, const LocalizerConfig& config, const PosePrior& prior,
                          const Eigen::Vector3f& sensor, LocalizationResult& r) {
@@ -102,9 +212,11 @@ void register_near_prior(const Segments& targets, const TargetPoints* source, co
   const double reach = config.registration.window_m + prior.radius_m + kWindowMarginM;
   const size_t stride = segment_point_stride(r.query, static_cast<size_t>(config.refine.max_segment_points));
   const float max_rmse_m = config.max_refine_rmse_voxels * config.segmentation.voxel.leaf_m;
+  const bool wide = prior.radius_m > config.registration.max_prior_radius_m;
+  if (wide && config.search.enabled && prior.radius_m <= config.search.max_radius_m)
+    return register_over_wide_prior(targets, source, centroids, classifier, config, prior, s, r);
   // A prior too wide to start from is refused before any point is gathered (register_to_map
   // checks the radius first and says why).
-  const bool wide = prior.radius_m > config.registration.max_prior_radius_m;
   const RegistrationResult reg =
       register_to_map(wide ? PointCloud{} : all_query_points(r.query, stride),
                       wide ? PointCloud{} : map_points_near(targets, source, prior.T_map_query * s, reach), prior.T_map_query, s,
@@ -114,23 +226,8 @@ void register_near_prior(const Segments& targets, const TargetPoints* source, co
   r.registration_reason = reg.reason;
   r.refine_fitness = reg.fitness;
   r.refine_rmse_m = reg.rmse_m;
-  if (!reg.accepted()) return;
-  const Support support = support_of(r.query, centroids, reg.T_map_query, config.support_radius_m);
-  r.support = support.count();
-  r.inliers = filter_matches(r.query, targets, support.pairs, config.matcher, classifier);
-  const RegistrationConfig& c = config.registration;
-  if (r.support < static_cast<size_t>(c.min_support) || r.inliers.size() < static_cast<size_t>(c.min_matched_segments)) {
-    r.registration_refusal = RegistrationRefusal::kLowSupport;
-    r.registration_reason = std::to_string(r.support) + " query segments land on map segments under the registered pose, " +
-                            std::to_string(r.inliers.size()) + " of them matched (at least " + std::to_string(c.min_support) +
-                            " and " + std::to_string(c.min_matched_segments) + ")";
-    return;
-  }
-  r.status = LocalizationStatus::kLocalized;
-  r.method = LocalizationMethod::kRegistration;
-  r.T_map_query = reg.T_map_query;
-  r.covariance = reg.covariance;
-  r.confidence = reg.fitness;
+  if (!reg.accepted() || !well_supported(targets, centroids, classifier, config, reg.T_map_query, r)) return;
+  localized_by(reg, r);
 }
 
 // The newest scans are raw points, ground included. Onto the map's surface layer they register

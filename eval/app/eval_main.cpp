@@ -217,6 +217,10 @@ int main(int argc, char** argv) {
   loc->add_option("--newest-m", lc.replay.newest_m,
                   "each query also carries the scans of the last this many metres, to which the server refines its "
                   "answer (the sensor's pose now; default 10, 0: none)");
+  std::string search = "map";
+  loc->add_option("--search", search,
+                  "in-process only: the wide-prior search (search.enabled) on or off instead of as the map says; a what-if")
+      ->check(CLI::IsMember({"map", "on", "off"}));
   bool segments = false;
   loc->add_flag("--segments", segments,
                 "query by segments (LOCALIZE_SEGMENTS): segment and describe each local cloud here, as a vehicle would, "
@@ -255,6 +259,10 @@ int main(int argc, char** argv) {
       if (recent_window_m >= 0.0f) {
         if (!server.empty()) throw std::runtime_error("--recent-window-m is for in-process runs (the server serves its map's)");
         load.recent_window_m = recent_window_m;
+      }
+      if (search != "map") {
+        if (!server.empty()) throw std::runtime_error("--search is for in-process runs (the server serves its map's)");
+        load.search_enabled = search == "on";
       }
       return run_localize(lc, server, token_file, out_dir, segments, load);
     }

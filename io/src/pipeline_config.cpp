@@ -130,6 +130,15 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("max_shift_m", l.newest.max_shift_m);
   v("max_turn_deg", l.newest.max_turn_deg);
   v("refuse_off_map", l.newest.refuse_off_map);
+  v.section("search");
+  v("enabled", l.search.enabled);
+  v("max_radius_m", l.search.max_radius_m);
+  v("resolution_m", l.search.resolution_m);
+  v("angle_step_deg", l.search.angle_step_deg);
+  v("max_query_points", l.search.max_query_points);
+  v("candidates", l.search.candidates);
+  v("min_separation_m", l.search.min_separation_m);
+  v("min_fitness", l.search.min_fitness);
   v.section("localizer");
   v("support_radius_m", l.support_radius_m);
   v("min_support", l.min_support);

@@ -51,6 +51,7 @@ std::shared_ptr<const LoadedMap> load_map(const std::string& path, const MapLoad
     map->config.localizer.refine.recent_window_m = *options.recent_window_m;
     map->config.localizer.refine.validate();
   }
+  if (options.search_enabled) map->config.localizer.search.enabled = *options.search_enabled;
   std::shared_ptr<const RandomForestMatcher> classifier = load_classifier(reader);
   MatcherConfig& matcher = map->config.localizer.matcher;
   if (matcher.type == MatcherType::kRandomForest && !classifier) {

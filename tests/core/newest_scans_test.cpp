@@ -38,21 +38,9 @@ LocalizationResult answer_off(const Pose3d& T_map_query_true, const Eigen::Vecto
   return r;
 }
 
-// The pole street with two loading platforms: walls alone leave the height free (degenerate),
-// the platforms' tops hold it, as car roofs and kerbs do in a real street.
-PointCloud street_with_platforms() {
-  PointCloud cloud = pole_street(true);
-  for (const Eigen::Vector4f& b : {Eigen::Vector4f(5.f, 12.f, 10.f, 4.f), Eigen::Vector4f(38.f, -14.f, 8.f, 3.f)}) {
-    test::add_box(cloud, b[0], b[1], b[2], b[3], 1.2f);
-    for (float u = 0.f; u <= b[2]; u += 0.03f)
-      for (float v = 0.f; v <= b[3]; v += 0.03f) cloud.push_back(Point{b[0] + u, b[1] + v, 1.2f, 0.f});
-  }
-  return cloud;
-}
-
 struct Street {
   LocalizerConfig config = test::street_localizer_config();
-  PointCloud map_cloud = street_with_platforms();
+  PointCloud map_cloud = test::street_with_platforms();
   Eigen::Vector3f sensor_map{25.f, 0.f, 2.f};
   Pose3d T_query = T_query_map();  // T_query_map: map points into the vehicle's frame
   Localizer localizer() const {

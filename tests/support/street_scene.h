@@ -50,6 +50,18 @@ inline PointCloud pole_street(bool with_distinct_objects) {
   return cloud;
 }
 
+// The pole street with two loading platforms: walls alone leave the height free (degenerate),
+// the platforms' tops hold it, as car roofs and kerbs do in a real street.
+inline PointCloud street_with_platforms() {
+  PointCloud cloud = pole_street(true);
+  for (const Eigen::Vector4f& b : {Eigen::Vector4f(5.f, 12.f, 10.f, 4.f), Eigen::Vector4f(38.f, -14.f, 8.f, 3.f)}) {
+    add_box(cloud, b[0], b[1], b[2], b[3], 1.2f);
+    for (float u = 0.f; u <= b[2]; u += 0.03f)
+      for (float v = 0.f; v <= b[3]; v += 0.03f) cloud.push_back(Point{b[0] + u, b[1] + v, 1.2f, 0.f});
+  }
+  return cloud;
+}
+
 inline PointCloud transformed(const PointCloud& cloud, const Pose3d& T) {
   PointCloud out = cloud;
   for (Point& p : out) {

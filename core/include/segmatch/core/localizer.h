@@ -4,6 +4,7 @@
 // matches are verified geometrically, giving the 6DOF pose of the query in the map.
 #pragma once
 
+#include "segmatch/core/correlative_search.h"
 #include "segmatch/core/descriptors.h"
 #include "segmatch/core/matcher.h"
 #include "segmatch/core/preprocess.h"
@@ -39,6 +40,7 @@ struct LocalizerConfig {
   RegistrationConfig registration;
   CovarianceConfig covariance;  // of every localized answer
   NewestScansConfig newest;     // the sensor's pose now, when the query has its newest scans
+  CorrelativeSearchConfig search;  // registration over priors too wide for ICP alone
   // Beyond the paper: each verified hypothesis is ranked by its support (support.h), the
   // number of query segments that land within support_radius_m of a map segment under it.
   // The best must have at least min_support, and no other distinct hypothesis may reach

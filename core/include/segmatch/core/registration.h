@@ -110,6 +110,7 @@ enum class RegistrationRefusal {
   kOutsidePrior,    // the registered sensor left the prior's radius, or turned past its tolerance
   kDegenerate,      // some direction is not constrained
   kLowSupport,      // too few query segments land on (and match) map segments (the localizer's check)
+  kAmbiguous,       // over a wide prior, registrations from distinct search peaks passed every gate
 };
 
 struct RegistrationResult {

@@ -54,6 +54,9 @@ struct MapLoadOptions {
   // Serve with this refine.recent_window_m instead of the map's (a what-if on a stored map:
   // segmatch-eval localize --recent-window-m). Empty: the map's.
   std::optional<float> recent_window_m;
+  // Serve with the wide-prior search (search.enabled) on or off instead of as the map says (a
+  // what-if: segmatch-eval localize --search off). Empty: the map's.
+  std::optional<bool> search_enabled;
 };
 
 // Throws (storage::StorageError, io::IoError or std::runtime_error, each naming the file) when
