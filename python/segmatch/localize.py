@@ -68,6 +68,15 @@ def _empty_points() -> np.ndarray:
     return np.zeros((0, 4), dtype=np.float32)
 
 
+def put_newest_points(w: Writer, points) -> None:
+    """The newest scans on the wire (LOCALIZE bit 5, LOCALIZE_SEGMENTS bit 4): count, then x y z f32."""
+    newest = np.asarray(points)
+    if newest.ndim != 2 or newest.shape[1] != 3:
+        raise ValueError(f"newest_points must be an (M, 3) array, got shape {newest.shape}")
+    w.u32(newest.shape[0])
+    w.array(newest, "<f4")
+
+
 def _empty_newest_points() -> np.ndarray:
     return np.zeros((0, 3), dtype=np.float32)
 
@@ -109,11 +118,7 @@ class Localize(RequestHead):
         if self.flags & FLAG_PRIOR_HEADING:
             w.f64(self.prior_heading_tolerance_deg)
         if self.flags & FLAG_NEWEST_SCANS:  # revision 8
-            newest = np.asarray(self.newest_points)
-            if newest.ndim != 2 or newest.shape[1] != 3:
-                raise ValueError(f"newest_points must be an (M, 3) array, got shape {newest.shape}")
-            w.u32(newest.shape[0])
-            w.array(newest, "<f4")
+            put_newest_points(w, self.newest_points)
 
     @classmethod
     def _get(cls, r: Reader) -> "Localize":

@@ -19,7 +19,7 @@ import numpy as np
 from ._wire import Reader, Writer, all_finite
 from .errors import DecodeError, DecodeStatus
 from ._constants import MessageType
-from .localize import RequestHead, _empty_newest_points, get_request_head, put_request_head
+from .localize import RequestHead, _empty_newest_points, get_request_head, put_newest_points, put_request_head
 from .pose import Pose
 
 SEGMENTS_FLAG_HAS_PRIOR = 1 << 0
@@ -103,11 +103,7 @@ class LocalizeSegments(RequestHead):
                 w.array(s.esf_mantissas, "<u2")
             w.array(s.offsets, "<i2")
         if self.flags & SEGMENTS_FLAG_NEWEST_SCANS:  # revision 10
-            newest = np.asarray(self.newest_points)
-            if newest.ndim != 2 or newest.shape[1] != 3:
-                raise ValueError(f"newest_points must be an (K, 3) array, got shape {newest.shape}")
-            w.u32(newest.shape[0])
-            w.array(newest, "<f4")
+            put_newest_points(w, self.newest_points)
 
     @classmethod
     def _get(cls, r: Reader) -> "LocalizeSegments":
