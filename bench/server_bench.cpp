@@ -1,5 +1,5 @@
 // segmatch-bench-server: throughput and latency of segmatch-server over loopback with 1, 4
-// and 16 concurrent clients, on a simulated tiny city mapped by its first traversal and
+// and 16 concurrent clients (and a tracked level: the same queries with a tracker's prior), on a simulated tiny city mapped by its first traversal and
 // queried with the revisit's voxelized local clouds (HDL-64E, 60 m cylinder), with the shipped
 // RF model (or --l2). Both request kinds in the same run: LOCALIZE (the cloud) and
 // LOCALIZE_SEGMENTS (the vehicle's segments, made beforehand by segmatch_vehicle and timed
@@ -57,6 +57,9 @@ std::vector<api::LocalizeRequest> revisit_requests(const sim::City& city, const 
     api::LocalizeRequest r;
     r.request_id = lc.frame;
     r.sensor_position_local = lc.T_cloud_sensor.translation();
+    // The truth's T_map_local at the sensor (map frame = world frame), for the tracked level's
+    // priors; not sent without kFlagHasPrior.
+    r.T_map_local_prior = lc.T_world_sensor * lc.T_cloud_sensor.inverse();
     r.points = lc.cloud;
     // What a vehicle sends (docs/protocol.md 5.4): its local cloud voxelized with the map's grid.
     if (voxel) {
@@ -231,12 +234,13 @@ struct BenchOptions {
   double fleet_rate = 20.0, fleet_seconds = 30.0;
 };
 
-nlohmann::json run_kind(uint16_t port, const Kind& kind, double request_bytes_median, const BenchOptions& o) {
+nlohmann::json run_kind(uint16_t port, const Kind& kind, double request_bytes_median, const BenchOptions& o,
+                        std::initializer_list<int> levels = {1, 4, 16}, bool fleet = true) {
   std::printf("%s: median request %.0f bytes\n", kind.name.c_str(), request_bytes_median);
   nlohmann::json j = {{"request_bytes_median", request_bytes_median}, {"closed_loop", nlohmann::json::array()}};
-  for (int clients : {1, 4, 16})
+  for (int clients : levels)
     j["closed_loop"].push_back(run_level(port, kind, clients, std::max(1, o.queries_per_level / clients)).to_json());
-  if (o.fleet_rate > 0.0) {
+  if (fleet && o.fleet_rate > 0.0) {
     const LevelResult f = run_fleet(port, kind, o.fleet_vehicles, o.fleet_rate, o.fleet_seconds);
     j["open_loop"] = f.to_json();
     j["open_loop"]["offered_queries_per_s"] = o.fleet_rate;
@@ -358,6 +362,19 @@ int main(int argc, char** argv) {
   out["cloud"] = run_kind(server.port(), cloud, median_bytes(requests), o.bench);
   out["segments"] = run_kind(server.port(), segments, median_bytes(segment_requests), o.bench);
   out["segments"]["client_segmenting_ms_median"] = client_ms_median;
+  // The tracked level: each query with a tracker's prior (the truth, radius 3 m: api::Tracker's
+  // least), answered by registration around it (registration.h). No newest scans: the simulated
+  // local clouds come whole.
+  std::vector<api::LocalizeRequest> tracked = requests;
+  for (api::LocalizeRequest& r : tracked) r.flags |= api::kFlagHasPrior, r.prior_radius_m = 3.0;
+  std::vector<double> tracked_client_ms;
+  const std::vector<api::LocalizeSegmentsRequest> tracked_segments = segment_like_a_vehicle(server.port(), tracked, tracked_client_ms);
+  const Kind tracked_cloud{"tracked cloud (LOCALIZE, 3 m prior)", [&](api::Client& c, size_t i) { return c.localize(tracked[i]); },
+                           tracked.size()};
+  const Kind tracked_segs{"tracked segments (LOCALIZE_SEGMENTS, 3 m prior)",
+                          [&](api::Client& c, size_t i) { return c.localize_segments(tracked_segments[i]); }, tracked_segments.size()};
+  out["tracked_cloud"] = run_kind(server.port(), tracked_cloud, median_bytes(tracked), o.bench, {1, 4}, false);
+  out["tracked_segments"] = run_kind(server.port(), tracked_segs, median_bytes(tracked_segments), o.bench, {1, 4}, false);
   out["setup"] = {{"queries", requests.size()}, {"points_mean", double(points) / requests.size()},
                   {"cores", std::thread::hardware_concurrency()}, {"matcher", o.l2 ? "L2" : "RF_eigen+shapes"}};
   server.stop();
