@@ -99,6 +99,7 @@ const char* to_string(RefusalCode code) {
     case RefusalCode::kSurfacesDisagree: return "SURFACES_DISAGREE";
     case RefusalCode::kLowConfidence: return "LOW_CONFIDENCE";
     case RefusalCode::kOffMap: return "OFF_MAP";
+    case RefusalCode::kNewestScansDisagree: return "NEWEST_SCANS_DISAGREE";
   }
   return "UNKNOWN";
 }

@@ -174,6 +174,7 @@ const char* to_string(Refusal refusal) {
     case Refusal::kLowConfidence: return "low_confidence";
     case Refusal::kDeadlinePassed: return "deadline_passed";
     case Refusal::kOffMap: return "off_map";
+    case Refusal::kNewestScansDisagree: return "newest_scans_disagree";
   }
   return "unknown";
 }

@@ -276,6 +276,16 @@ void refine_to_newest(const PointCloud& newest, const Segments& targets, const T
     r.covariance.setZero();
     return;
   }
+  // They lie on the layer, but settle farther from the answer than max_shift_m or turned past
+  // max_turn_deg: the sensor's own view puts it elsewhere, and the answer is wrong or warped
+  // beyond what the window explains.
+  if (surfaces && c.refuse_off_map && now.refusal == RegistrationRefusal::kOutsidePrior) {
+    r.status = LocalizationStatus::kNotLocalized;
+    r.refusal = Refusal::kNewestScansDisagree;
+    r.reason = "the vehicle's newest scans fit the map away from the answer (" + now.reason + ")";
+    r.covariance.setZero();
+    return;
+  }
   if (!now.accepted()) return;
   r.window_points = points.size();
   r.window_warp_m = static_cast<float>((now.T_map_query * s - centre).norm());

@@ -1,6 +1,7 @@
 #include "segmatch/core/registration.h"
 
 #include "segmatch/core/localizer.h"  // crop_cylinder
+#include "segmatch/core/preprocess.h"  // voxel_filter
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
@@ -20,6 +21,8 @@ void RegistrationConfig::validate() const {
   positive(window_m, "window_m");
   positive(coarse_correspondence_m, "coarse_correspondence_m");
   positive(max_prior_radius_m, "max_prior_radius_m");
+  if (!(coarse_leaf_m >= 0.0f) || !std::isfinite(coarse_leaf_m))
+    throw std::invalid_argument("RegistrationConfig.coarse_leaf_m must be finite and >= 0");
   positive(max_last_step_m, "max_last_step_m");
   if (min_support < 0) throw std::invalid_argument("RegistrationConfig.min_support must be >= 0");
   if (min_matched_segments < 0) throw std::invalid_argument("RegistrationConfig.min_matched_segments must be >= 0");
@@ -111,7 +114,17 @@ RegistrationResult register_to_map(const PointCloud& query_points, const PointCl
   RefineConfig coarse = refine, fine_config = refine;
   coarse.max_correspondence_m = std::max(config.coarse_correspondence_m, refine.max_correspondence_m);
   fine_config.max_iterations = std::max(refine.max_iterations, kMinFineIterations);
-  const RefineResult first = refine_alignment(window, map_points, T_map_query_prior, coarse, pivot_prior);
+  // The coarse stage looks 1.5 m around each query point: the map at full density only makes
+  // each look slower (RegistrationConfig::coarse_leaf_m).
+  PointCloud coarse_map;
+  if (config.coarse_leaf_m > 0.0f) {
+    VoxelGridConfig thin;
+    thin.leaf_m = config.coarse_leaf_m;
+    thin.min_points_per_voxel = 1;
+    coarse_map = voxel_filter(map_points, thin);
+  }
+  const RefineResult first =
+      refine_alignment(window, config.coarse_leaf_m > 0.0f ? coarse_map : map_points, T_map_query_prior, coarse, pivot_prior);
   const RefineResult fine = refine_alignment(window, map_points, first.T_target_query, fine_config,
                                              first.T_target_query * sensor_query);
   r.T_map_query = fine.T_target_query;

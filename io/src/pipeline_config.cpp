@@ -110,6 +110,7 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("enabled", l.registration.enabled);
   v("window_m", l.registration.window_m);
   v("coarse_correspondence_m", l.registration.coarse_correspondence_m);
+  v("coarse_leaf_m", l.registration.coarse_leaf_m);
   v("max_prior_radius_m", l.registration.max_prior_radius_m);
   v("min_query_points", l.registration.min_query_points);
   v("max_last_step_m", l.registration.max_last_step_m);

@@ -50,6 +50,7 @@ class RefusalCode(enum.IntEnum):
     SURFACES_DISAGREE = 7
     LOW_CONFIDENCE = 8
     OFF_MAP = 9  # revision 9
+    NEWEST_SCANS_DISAGREE = 10  # revision 9
 
 
 class LocalizeStatus(enum.IntEnum):

@@ -171,6 +171,7 @@ api::RefusalCode refusal_code_of(Refusal r) {
     case Refusal::kSurfacesDisagree: return api::RefusalCode::kSurfacesDisagree;
     case Refusal::kLowConfidence: return api::RefusalCode::kLowConfidence;
     case Refusal::kOffMap: return api::RefusalCode::kOffMap;
+    case Refusal::kNewestScansDisagree: return api::RefusalCode::kNewestScansDisagree;
     case Refusal::kDeadlinePassed: break;
   }
   return api::RefusalCode::kNone;

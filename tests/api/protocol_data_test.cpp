@@ -327,6 +327,8 @@ TEST(ProtocolData, LocalizeReplyOffMap) {
   check_file<LocalizeReply>("localize_reply_off_map.bin", off, [](const LocalizeReply& m) {
     EXPECT_EQ(static_cast<int>(m.refusal), 9);
     EXPECT_STREQ(to_string(m.refusal), "OFF_MAP");
+    EXPECT_STREQ(to_string(RefusalCode::kNewestScansDisagree), "NEWEST_SCANS_DISAGREE");
+    EXPECT_STREQ(to_string(static_cast<RefusalCode>(11)), "UNKNOWN") << "a later revision's code";
     EXPECT_EQ(m.status, LocalizeStatus::kNotLocalized);
   });
 }

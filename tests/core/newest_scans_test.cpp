@@ -171,6 +171,14 @@ TEST(NewestScans, SeeingWhatTheSurfaceLayerNeverSawRefusesTheAnswerAsOffMap) {
   EXPECT_TRUE(mapped.localized());
   EXPECT_GT(mapped.window_points, 0u);
 
+  // An answer 1.3 m off the truth: the same scans settle at the truth, farther than max_shift_m
+  // (1 m) from it. The sensor's own view puts it elsewhere: refused, by its own name.
+  LocalizationResult far = answer_off(s.T_query.inverse(), s.sensor_query(), 1.3, 0.0);
+  layered.refine_to_newest_scans(transformed(surfaces, s.T_query), sensor, far);
+  EXPECT_FALSE(far.localized());
+  EXPECT_EQ(far.refusal, Refusal::kNewestScansDisagree) << far.reason;
+  EXPECT_EQ(far.newest_refusal, RegistrationRefusal::kOutsidePrior) << far.newest_reason;
+
   Street off_switch;
   off_switch.config.newest.refuse_off_map = false;
   const Localizer lenient(off_switch.config, segments_only.targets(), nullptr, nullptr, std::make_shared<Surfaces>(surfaces));

@@ -106,6 +106,20 @@ TEST(Registration, ConvergesFromAPriorOffByAMetreAndTwoDegrees) {
 
 // A prior on another stretch of the same street (facades, boxes and poles at other places):
 // never a fix there, whichever gate stops it.
+// The coarse stage on the map thinned to 0.5 m (the default) or at full density reaches the
+// same answer: only the fine stage, on every map point, decides it.
+TEST(Registration, TheThinnedCoarseStageEndsWhereTheFullOneDoes) {
+  const PointCloud map = street(1), query = street(2);
+  RegistrationConfig full;
+  full.coarse_leaf_m = 0.0f;
+  const RegistrationResult thinned = run(map, query, pose(1.0, 0.5, 2.0) * kTruth);
+  const RegistrationResult dense = run(map, query, pose(1.0, 0.5, 2.0) * kTruth, 5.0, full);
+  ASSERT_TRUE(thinned.accepted()) << thinned.reason;
+  ASSERT_TRUE(dense.accepted()) << dense.reason;
+  EXPECT_LT((thinned.T_map_query.translation() - dense.T_map_query.translation()).norm(), 0.005);
+  EXPECT_LT(rotation_error_deg(thinned.T_map_query, dense.T_map_query), 0.02);
+}
+
 TEST(Registration, APriorFiftyMetresOffIsNeverAccepted) {
   const PointCloud map = street(1), query = street(2);
   for (double dx : {-50.0, 50.0, 20.0, -10.0}) {
@@ -185,6 +199,11 @@ TEST(Registration, ConfigValidation) {
   c = {};
   c.min_fitness = 1.5f;
   EXPECT_THROW(c.validate(), std::invalid_argument);
+  c = {};
+  c.coarse_leaf_m = -0.5f;
+  EXPECT_THROW(c.validate(), std::invalid_argument);
+  c.coarse_leaf_m = 0.0f;  // off: the coarse stage on the map at full density
+  EXPECT_NO_THROW(c.validate());
   CovarianceConfig v;
   EXPECT_NO_THROW(v.validate());
   v.scale = 0.0f;

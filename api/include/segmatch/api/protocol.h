@@ -217,6 +217,7 @@ enum class RefusalCode : uint16_t {
   kSurfacesDisagree = 7,
   kLowConfidence = 8,
   kOffMap = 9,  // revision 9: the vehicle's newest scans do not lie on the map at the answer
+  kNewestScansDisagree = 10,  // revision 9: they do, but settle away from the answer
 };
 const char* to_string(RefusalCode code);
 

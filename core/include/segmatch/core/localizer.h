@@ -94,6 +94,7 @@ enum class Refusal {
   kLowConfidence,        // confidence below min_confidence
   kDeadlinePassed,       // the query's deadline passed before it was answered (Deadline)
   kOffMap,               // the vehicle's newest scans do not lie on the map's surfaces at the answer
+  kNewestScansDisagree,  // ... they do, but settle farther from it than NewestScansConfig allows
 };
 const char* to_string(Refusal refusal);
 

@@ -30,6 +30,9 @@ struct RegistrationConfig {
   // A first ICP with this correspondence distance brings a prior that is off by a metre or two
   // within reach of the fine one (RefineConfig::max_correspondence_m).
   float coarse_correspondence_m = 1.5f;
+  // ... onto the map's points thinned to this voxel grid (0: at full density). Only the fine
+  // stage decides the answer and its gates.
+  float coarse_leaf_m = 0.5f;
   // Priors wider than this are not a starting point for ICP (its basin is a metre or two): such
   // queries go to segment matching directly. On riverside02 with GNSS-like priors (sigma 10 m,
   // radius 30 m) registration found wrong minima along the street, 1-15 m off with fitness up
@@ -81,7 +84,9 @@ struct NewestScansConfig {
   // it at the answer (fitness below min_fitness, or no layer near the sensor) mean the sensor
   // sees what the map never saw: an unmapped street. The answer is then a pose extrapolated
   // through the odometry's warp, unverified where the vehicle is: refused (Refusal::kOffMap).
-  // Off: such an answer stands. Without a layer the segments cover too little of the scene
+  // Newest scans that lie on it but settle farther than max_shift_m (or turn past max_turn_deg)
+  // from the answer put the sensor elsewhere: refused too (Refusal::kNewestScansDisagree).
+  // Off: such answers stand. Without a layer the segments cover too little of the scene
   // for their fitness to say this, and the answer stands.
   bool refuse_off_map = true;
   void validate() const;       // throws std::invalid_argument naming the field
