@@ -1,5 +1,6 @@
 #include "segmatch/core/correlative_search.h"
 
+#include "config_checks.h"
 #include "seg_grid.h"
 
 #include <Eigen/Geometry>
@@ -12,9 +13,7 @@
 namespace segmatch {
 
 void CorrelativeSearchConfig::validate() const {
-  auto positive = [](float v, const char* name) {
-    if (!(v > 0.0f) || !std::isfinite(v)) throw std::invalid_argument(std::string("CorrelativeSearchConfig.") + name + " must be finite and > 0");
-  };
+  auto positive = [](float v, const char* name) { detail::require_positive(v, "CorrelativeSearchConfig", name); };
   positive(max_radius_m, "max_radius_m");
   positive(resolution_m, "resolution_m");
   positive(angle_step_deg, "angle_step_deg");

@@ -3,6 +3,8 @@
 #include "segmatch/core/localizer.h"  // crop_cylinder
 #include "segmatch/core/preprocess.h"  // voxel_filter
 
+#include "config_checks.h"
+
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
@@ -15,9 +17,7 @@
 namespace segmatch {
 
 void RegistrationConfig::validate() const {
-  auto positive = [](float v, const char* name) {
-    if (!(v > 0.0f) || !std::isfinite(v)) throw std::invalid_argument(std::string("RegistrationConfig.") + name + " must be finite and > 0");
-  };
+  auto positive = [](float v, const char* name) { detail::require_positive(v, "RegistrationConfig", name); };
   positive(window_m, "window_m");
   positive(coarse_correspondence_m, "coarse_correspondence_m");
   positive(max_prior_radius_m, "max_prior_radius_m");
@@ -33,9 +33,7 @@ void RegistrationConfig::validate() const {
 }
 
 void NewestScansConfig::validate() const {
-  auto positive = [](float v, const char* name) {
-    if (!(v > 0.0f) || !std::isfinite(v)) throw std::invalid_argument(std::string("NewestScansConfig.") + name + " must be finite and > 0");
-  };
+  auto positive = [](float v, const char* name) { detail::require_positive(v, "NewestScansConfig", name); };
   positive(window_m, "window_m");
   positive(leaf_m, "leaf_m");
   positive(max_shift_m, "max_shift_m");

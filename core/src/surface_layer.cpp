@@ -2,6 +2,8 @@
 
 #include "segmatch/core/preprocess.h"
 
+#include "config_checks.h"
+
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -20,9 +22,7 @@ VoxelGridConfig grid_of(const SurfaceLayerConfig& c) {
 }  // namespace
 
 void SurfaceLayerConfig::validate() const {
-  auto positive = [](float v, const char* name) {
-    if (!(v > 0.0f) || !std::isfinite(v)) throw std::invalid_argument(std::string("SurfaceLayerConfig.") + name + " must be finite and > 0");
-  };
+  auto positive = [](float v, const char* name) { detail::require_positive(v, "SurfaceLayerConfig", name); };
   positive(leaf_m, "leaf_m");
   positive(max_range_m, "max_range_m");
   positive(tile_m, "tile_m");
