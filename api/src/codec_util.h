@@ -25,6 +25,8 @@ DecodeStatus get_pose(wire::Reader& r, Pose3d& T);
 // `count` points of `stride` floats (3: x y z, intensity 0; 4: x y z intensity); kNonFinite if
 // any value is not finite.
 DecodeStatus get_points(wire::Reader& r, uint32_t count, uint32_t stride, PointCloud& points);
+// The vehicle's newest scans (LOCALIZE bit 5, LOCALIZE_SEGMENTS bit 4): count, then x y z f32.
+void put_newest_points(wire::Writer& w, const PointCloud& points);
 // The first failure wins.
 DecodeStatus first_error(std::initializer_list<DecodeStatus> statuses);
 

@@ -70,6 +70,11 @@ static_assert(sizeof(Point) == 4 * sizeof(float), "Point must stay x y z intensi
 
 }  // namespace
 
+void detail::put_newest_points(wire::Writer& w, const PointCloud& points) {
+  w.u32(static_cast<uint32_t>(points.size()));
+  for (const Point& p : points) w.f32s(&p.x, 3);
+}
+
 DecodeStatus detail::get_points(wire::Reader& r, uint32_t count, uint32_t stride, PointCloud& points) {
   points.resize(count);
   if (stride == 4) {
@@ -106,10 +111,7 @@ std::vector<uint8_t> encode(const LocalizeRequest& m) {
     for (const Point& p : m.points) w.f32s(&p.x, 3);
   }
   if (m.flags & kFlagPriorHeading) w.f64(m.prior_heading_tolerance_deg);
-  if (m.flags & kFlagNewestScans) {  // revision 8
-    w.u32(static_cast<uint32_t>(m.newest_points.size()));
-    for (const Point& p : m.newest_points) w.f32s(&p.x, 3);
-  }
+  if (m.flags & kFlagNewestScans) put_newest_points(w, m.newest_points);  // revision 8
   return detail::frame(type_of(m), w);
 }
 

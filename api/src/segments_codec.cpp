@@ -100,17 +100,16 @@ DecodeStatus get_segment(wire::Reader& r, bool esf, uint64_t index, Segment& s) 
 // tile the payload up to `end` exactly (else a miscount would surface as whatever garbage it
 // misaligns).
 bool counts_add_up(const uint8_t* payload, size_t end, uint32_t count, uint32_t points, bool esf) {
-  const size_t size = end;
   const uint64_t fixed = kSegmentBytes + (esf ? kEsfBytes : 0);
   uint64_t at = kSegmentsFixedBytes, seen = 0;
   for (uint32_t i = 0; i < count; ++i) {
-    if (at + fixed > size) return false;
+    if (at + fixed > end) return false;
     wire::Reader n(payload + at + 40, 4);
     const uint32_t points_here = n.u32();
     seen += points_here;
     at += fixed + uint64_t{points_here} * kBytesPerSegmentPoint;
   }
-  return at == size && seen == points;
+  return at == end && seen == points;
 }
 
 }  // namespace
@@ -148,10 +147,7 @@ std::vector<uint8_t> encode(const LocalizeSegmentsRequest& m) {
     if (esf) put_esf(w, s);
     put_points(w, s, e);
   }
-  if (m.flags & kSegmentsFlagNewestScans) {  // revision 10
-    w.u32(static_cast<uint32_t>(m.newest_points.size()));
-    for (const Point& p : m.newest_points) w.f32s(&p.x, 3);
-  }
+  if (m.flags & kSegmentsFlagNewestScans) detail::put_newest_points(w, m.newest_points);  // revision 10
   return detail::frame(type_of(m), w);
 }
 

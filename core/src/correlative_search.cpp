@@ -40,6 +40,9 @@ class LikelihoodGrid {
       if (x >= 0 && y >= 0 && x < size_ && y < size_) occupied[static_cast<size_t>(x) * size_ + y] = 1;
     }
     constexpr int kSpread = 2;
+    float kernel[2 * kSpread + 1][2 * kSpread + 1];
+    for (int dx = -kSpread; dx <= kSpread; ++dx)
+      for (int dy = -kSpread; dy <= kSpread; ++dy) kernel[dx + kSpread][dy + kSpread] = static_cast<float>(std::exp(-0.5 * (dx * dx + dy * dy)));
     for (int x = 0; x < size_; ++x)
       for (int y = 0; y < size_; ++y) {
         if (!occupied[static_cast<size_t>(x) * size_ + y]) continue;
@@ -48,7 +51,7 @@ class LikelihoodGrid {
             const int u = x + dx, v = y + dy;
             if (u < 0 || v < 0 || u >= size_ || v >= size_) continue;
             float& value = values_[static_cast<size_t>(u) * size_ + v];
-            value = std::max(value, static_cast<float>(std::exp(-0.5 * (dx * dx + dy * dy))));
+            value = std::max(value, kernel[dx + kSpread][dy + kSpread]);
           }
       }
   }
@@ -96,15 +99,14 @@ struct Peak {
 
 std::vector<SearchCandidate> correlative_search(const PointCloud& query_points, const PointCloud& map_points,
                                                 const Pose3d& T_map_query_prior, const Eigen::Vector3d& sensor_query,
-                                                double radius_m, double heading_tolerance_deg,
+                                                double radius_m, double heading_tolerance_deg, double window_m,
                                                 const CorrelativeSearchConfig& c) {
   c.validate();
-  constexpr double kReachM = 40.0;  // query points farther from the sensor drift with the odometry
-  const std::vector<Eigen::Vector3d> offsets = query_offsets(query_points, sensor_query, kReachM, c);
+  const std::vector<Eigen::Vector3d> offsets = query_offsets(query_points, sensor_query, window_m, c);
   if (offsets.empty() || map_points.empty()) return {};
   const Eigen::Vector3d sensor_map = T_map_query_prior * sensor_query;
   const double cell = c.resolution_m;
-  const LikelihoodGrid grid(map_points, sensor_map.head<2>(), radius_m + kReachM + 2.0 * cell, cell);
+  const LikelihoodGrid grid(map_points, sensor_map.head<2>(), radius_m + window_m + 2.0 * cell, cell);
   const int steps = static_cast<int>(std::floor(radius_m / cell));
   const int turns = static_cast<int>(std::floor(heading_tolerance_deg / c.angle_step_deg));
   const Eigen::Vector2i centre = grid.cell_of(sensor_map.head<2>());

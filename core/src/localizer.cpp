@@ -28,13 +28,7 @@ class Stopwatch {
   std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
 };
 
-LocalizationResult refuse(LocalizationResult r, Refusal refusal, std::string why) {
-  r.status = LocalizationStatus::kNotLocalized;
-  r.refusal = refusal;
-  r.reason = std::move(why);
-  r.covariance.setZero();  // a refused pose has none
-  return r;
-}
+using detail::refuse;
 
 // The hypothesis with the most support, and the runner-up's support.
 struct Ranked {

@@ -14,6 +14,14 @@
 namespace segmatch {
 namespace detail {
 
+LocalizationResult refuse(LocalizationResult r, Refusal refusal, std::string why) {
+  r.status = LocalizationStatus::kNotLocalized;
+  r.refusal = refusal;
+  r.reason = std::move(why);
+  r.covariance.setZero();  // a refused pose has none
+  return r;
+}
+
 // The map segments whose centroids lie within radius_m of center, horizontally.
 std::vector<int> targets_within_disc(const Segments& targets, const Eigen::Vector3d& center, double radius_m) {
   std::vector<int> out;
@@ -94,8 +102,6 @@ void refine_recent_window(const WindowPoints& points, const Eigen::Vector3f& sen
   r.T_map_query = window.T_target_query;
 }
 
-// Tracking by registration (registration.h): every query segment's points near the sensor onto
-// the map segments' near where the prior puts it. Localized, or the reason it did not answer.
 namespace {
 
 // The segment check of a registered pose: enough query segments land on map segments, and
@@ -152,7 +158,8 @@ void register_over_wide_prior(const Segments& targets, const TargetPoints* sourc
   const Eigen::Vector3d centre = prior.T_map_query * s;
   const PointCloud map = map_points_near(targets, source, centre, config.registration.window_m + prior.radius_m + kWindowMarginM);
   const std::vector<SearchCandidate> peaks =
-      correlative_search(query, map, prior.T_map_query, s, prior.radius_m, prior.max_rotation_deg, search);
+      correlative_search(query, map, prior.T_map_query, s, prior.radius_m, prior.max_rotation_deg,
+                         config.registration.window_m, search);
   const float max_rmse_m = config.max_refine_rmse_voxels * config.segmentation.voxel.leaf_m;
   // A peak is within a cell and a heading step of a minimum: the registration from it may move
   // that far and a little more, no farther.
@@ -205,6 +212,8 @@ void register_over_wide_prior(const Segments& targets, const TargetPoints* sourc
 
 }  // namespace
 
+// Tracking by registration (registration.h): every query segment's points near the sensor onto
+// the map segments' near where the prior puts it. Localized, or the reason it did not answer.
 void register_near_prior(const Segments& targets, const TargetPoints* source, const CentroidIndex& centroids,
                          const RandomForestMatcher* classifier, const LocalizerConfig& config, const PosePrior& prior,
                          const Eigen::Vector3f& sensor, LocalizationResult& r) {
@@ -269,21 +278,17 @@ void refine_to_newest(const PointCloud& newest, const Segments& targets, const T
   if (surfaces && c.refuse_off_map && off_map) {
     char fit[96];
     std::snprintf(fit, sizeof(fit), "fitness %.2f, at least %.2f", now.fitness, c.min_fitness);
-    r.status = LocalizationStatus::kNotLocalized;
-    r.refusal = Refusal::kOffMap;
-    r.reason = std::string("the vehicle's newest scans do not lie on the map's surfaces at the answer (") +
-               (now.refusal == RegistrationRefusal::kFewPoints ? now.reason : fit) + "): the sensor sees what the map never saw";
-    r.covariance.setZero();
+    r = refuse(std::move(r), Refusal::kOffMap,
+               std::string("the vehicle's newest scans do not lie on the map's surfaces at the answer (") +
+                   (now.refusal == RegistrationRefusal::kFewPoints ? now.reason : fit) + "): the sensor sees what the map never saw");
     return;
   }
   // They lie on the layer, but settle farther from the answer than max_shift_m or turned past
   // max_turn_deg: the sensor's own view puts it elsewhere, and the answer is wrong or warped
   // beyond what the window explains.
   if (surfaces && c.refuse_off_map && now.refusal == RegistrationRefusal::kOutsidePrior) {
-    r.status = LocalizationStatus::kNotLocalized;
-    r.refusal = Refusal::kNewestScansDisagree;
-    r.reason = "the vehicle's newest scans fit the map away from the answer (" + now.reason + ")";
-    r.covariance.setZero();
+    r = refuse(std::move(r), Refusal::kNewestScansDisagree,
+               "the vehicle's newest scans fit the map away from the answer (" + now.reason + ")");
     return;
   }
   if (!now.accepted()) return;

@@ -11,6 +11,10 @@ namespace segmatch {
 namespace detail {
 
 // The map segments whose centroids lie within radius_m of center, horizontally.
+// r, not localized, with its typed refusal and the reason in words (a refused pose has no
+// covariance).
+LocalizationResult refuse(LocalizationResult r, Refusal refusal, std::string why);
+
 std::vector<int> targets_within_disc(const Segments& targets, const Eigen::Vector3d& center, double radius_m);
 
 // Points of the segments on one side of the matches, for the refinement: every stride-th point

@@ -114,15 +114,15 @@ RegistrationResult register_to_map(const PointCloud& query_points, const PointCl
   fine_config.max_iterations = std::max(refine.max_iterations, kMinFineIterations);
   // The coarse stage looks 1.5 m around each query point: the map at full density only makes
   // each look slower (RegistrationConfig::coarse_leaf_m).
-  PointCloud coarse_map;
+  PointCloud thinned;
   if (config.coarse_leaf_m > 0.0f) {
     VoxelGridConfig thin;
     thin.leaf_m = config.coarse_leaf_m;
     thin.min_points_per_voxel = 1;
-    coarse_map = voxel_filter(map_points, thin);
+    thinned = voxel_filter(map_points, thin);
   }
-  const RefineResult first =
-      refine_alignment(window, config.coarse_leaf_m > 0.0f ? coarse_map : map_points, T_map_query_prior, coarse, pivot_prior);
+  const PointCloud& coarse_map = config.coarse_leaf_m > 0.0f ? thinned : map_points;
+  const RefineResult first = refine_alignment(window, coarse_map, T_map_query_prior, coarse, pivot_prior);
   const RefineResult fine = refine_alignment(window, map_points, first.T_target_query, fine_config,
                                              first.T_target_query * sensor_query);
   r.T_map_query = fine.T_target_query;

@@ -22,6 +22,7 @@ using test::pole_street;
 using test::transformed;
 
 constexpr double kDeg = M_PI / 180.0;
+constexpr double kWindowM = 40.0;  // RegistrationConfig::window_m
 
 Pose3d yaw_about(const Eigen::Vector3d& at, double yaw_deg, const Eigen::Vector3d& shift) {
   Pose3d T = Pose3d::Identity();
@@ -56,7 +57,7 @@ TEST(CorrelativeSearch, AWidePriorComesBackWithinACellAndAStep) {
   for (const auto& [shift, turn] : {std::pair{Eigen::Vector3d(14.0, -3.0, 0.0), 6.0}, {Eigen::Vector3d(-8.5, 9.0, 0.0), -4.0}}) {
     const Pose3d prior = w.prior(shift, turn);
     ASSERT_GT(sensor_error_m(prior, w), 8.0);
-    const std::vector<SearchCandidate> peaks = correlative_search(w.query(), w.map, prior, w.sensor_query(), 20.0, 10.0, c);
+    const std::vector<SearchCandidate> peaks = correlative_search(w.query(), w.map, prior, w.sensor_query(), 20.0, 10.0, kWindowM, c);
     ASSERT_FALSE(peaks.empty());
     EXPECT_LE(sensor_error_m(peaks.front().T_map_query, w), c.resolution_m) << shift.transpose();
     EXPECT_LE(heading_error_deg(peaks.front().T_map_query, w), c.angle_step_deg) << shift.transpose();
@@ -76,7 +77,7 @@ double oracle_best(const PointCloud& query, const PointCloud& map, const Pose3d&
                    double radius_m, double tolerance_deg, const CorrelativeSearchConfig& c) {
   const double cell = c.resolution_m;
   const Eigen::Vector3d centre = prior * sensor;
-  const Eigen::Vector2d origin = centre.head<2>() - Eigen::Vector2d::Constant(radius_m + 40.0 + 2.0 * cell);
+  const Eigen::Vector2d origin = centre.head<2>() - Eigen::Vector2d::Constant(radius_m + kWindowM + 2.0 * cell);
   auto cell_of = [&](const Eigen::Vector2d& p) {
     return std::pair<long, long>{static_cast<long>(std::floor((p.x() - origin.x()) / cell)),
                                  static_cast<long>(std::floor((p.y() - origin.y()) / cell))};
@@ -87,7 +88,7 @@ double oracle_best(const PointCloud& query, const PointCloud& map, const Pose3d&
   std::vector<Eigen::Vector3d> offsets;
   for (const Point& p : query) {
     const Eigen::Vector3d d = p.xyz().cast<double>() - sensor;
-    if (d.head<2>().norm() > 40.0) continue;
+    if (d.head<2>().norm() > kWindowM) continue;
     const std::pair<long, long> k{static_cast<long>(std::floor(d.x() / cell)), static_cast<long>(std::floor(d.y() / cell))};
     if (first.emplace(k, d).second) offsets.push_back(d);
   }
@@ -123,7 +124,7 @@ TEST(CorrelativeSearch, ItsBestPeakScoresWhatABruteForceOracleFinds) {
   c.max_query_points = 100000;  // no thinning: the oracle keeps every cell's point
   for (const auto& [shift, turn] : {std::pair{Eigen::Vector3d(3.0, 2.0, 0.0), 2.0}, {Eigen::Vector3d(-1.5, -2.5, 0.0), -1.0}}) {
     const Pose3d prior = w.prior(shift, turn);
-    const std::vector<SearchCandidate> peaks = correlative_search(w.query(), w.map, prior, w.sensor_query(), 4.0, 3.0, c);
+    const std::vector<SearchCandidate> peaks = correlative_search(w.query(), w.map, prior, w.sensor_query(), 4.0, 3.0, kWindowM, c);
     ASSERT_FALSE(peaks.empty());
     EXPECT_NEAR(peaks.front().score, oracle_best(w.query(), w.map, prior, w.sensor_query(), 4.0, 3.0, c), 1e-6);
     EXPECT_GT(peaks.front().score, 0.75) << "near the truth the query lies on the map (less a sub-cell offset)";
@@ -133,7 +134,7 @@ TEST(CorrelativeSearch, ItsBestPeakScoresWhatABruteForceOracleFinds) {
 TEST(CorrelativeSearch, AStreetOfIdenticalPolesHasPeaksAPoleSpacingApart) {
   const World w(false);  // poles every 6 m and nothing else
   const Pose3d prior = w.prior(Eigen::Vector3d(2.0, 1.0, 0.0), 0.0);
-  const std::vector<SearchCandidate> peaks = correlative_search(w.query(), w.map, prior, w.sensor_query(), 15.0, 5.0, {});
+  const std::vector<SearchCandidate> peaks = correlative_search(w.query(), w.map, prior, w.sensor_query(), 15.0, 5.0, kWindowM, {});
   ASSERT_GE(peaks.size(), 2u);
   EXPECT_NEAR(peaks[1].score, peaks[0].score, 0.2 * peaks[0].score) << "look-alikes score alike";
   const Eigen::Vector3d a = peaks[0].T_map_query * w.sensor_query(), b = peaks[1].T_map_query * w.sensor_query();
@@ -145,12 +146,12 @@ TEST(CorrelativeSearch, StaysWithinThePriorAndNeedsPoints) {
   const Pose3d prior = w.prior(Eigen::Vector3d(14.0, -3.0, 0.0), 6.0);
   // The truth is 14.3 m and 6 degrees away, outside a 5 m, 2 degree prior: whatever the peaks
   // are, they stay inside it.
-  for (const SearchCandidate& p : correlative_search(w.query(), w.map, prior, w.sensor_query(), 5.0, 2.0, {})) {
+  for (const SearchCandidate& p : correlative_search(w.query(), w.map, prior, w.sensor_query(), 5.0, 2.0, kWindowM, {})) {
     EXPECT_LE((p.T_map_query * w.sensor_query() - prior * w.sensor_query()).head<2>().norm(), 5.0 + 1e-9);
     EXPECT_LE(Eigen::AngleAxisd(p.T_map_query.linear() * prior.linear().transpose()).angle() / kDeg, 2.0 + 1e-9);
   }
-  EXPECT_TRUE(correlative_search({}, w.map, prior, w.sensor_query(), 5.0, 2.0, {}).empty());
-  EXPECT_TRUE(correlative_search(w.query(), {}, prior, w.sensor_query(), 5.0, 2.0, {}).empty());
+  EXPECT_TRUE(correlative_search({}, w.map, prior, w.sensor_query(), 5.0, 2.0, kWindowM, {}).empty());
+  EXPECT_TRUE(correlative_search(w.query(), {}, prior, w.sensor_query(), 5.0, 2.0, kWindowM, {}).empty());
 }
 
 // In the localizer: a prior 13 m and 4 degrees off, radius 20 m (a GNSS fix), is answered by

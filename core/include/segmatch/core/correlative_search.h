@@ -41,12 +41,14 @@ struct SearchCandidate {
 };
 
 // query_points: query frame; map_points: map frame; the sensor is at sensor_query in the query
-// frame. Candidates move the prior's sensor position by at most radius_m horizontally and turn
-// it about the vertical through the sensor by at most heading_tolerance_deg; height, roll and
-// pitch are the prior's. At most config.candidates, best first; none without points.
+// frame. Only query points within window_m of the sensor (horizontally) are scored: farther ones
+// drift with the odometry (RegistrationConfig::window_m). Candidates move the prior's sensor
+// position by at most radius_m horizontally and turn it about the vertical through the sensor by
+// at most heading_tolerance_deg; height, roll and pitch are the prior's. At most
+// config.candidates, best first; none without points.
 std::vector<SearchCandidate> correlative_search(const PointCloud& query_points, const PointCloud& map_points,
                                                 const Pose3d& T_map_query_prior, const Eigen::Vector3d& sensor_query,
-                                                double radius_m, double heading_tolerance_deg,
+                                                double radius_m, double heading_tolerance_deg, double window_m,
                                                 const CorrelativeSearchConfig& config);
 
 }  // namespace segmatch
