@@ -67,6 +67,7 @@ const char* to_string(ReplyMethod method) {
   switch (method) {
     case ReplyMethod::kSegments: return "segments";
     case ReplyMethod::kRegistration: return "registration";
+    case ReplyMethod::kSurfaces: return "surfaces";
   }
   return "unknown";
 }
@@ -100,6 +101,7 @@ const char* to_string(RefusalCode code) {
     case RefusalCode::kLowConfidence: return "LOW_CONFIDENCE";
     case RefusalCode::kOffMap: return "OFF_MAP";
     case RefusalCode::kNewestScansDisagree: return "NEWEST_SCANS_DISAGREE";
+    case RefusalCode::kTrackingLost: return "TRACKING_LOST";
   }
   return "UNKNOWN";
 }

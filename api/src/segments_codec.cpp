@@ -161,6 +161,9 @@ DecodeStatus decode(const uint8_t* payload, size_t size, const Limits&, Localize
   const uint32_t count = r.u32();
   const uint32_t points = r.u32();
   if (m.flags & ~kKnownSegmentsFlags) return DecodeStatus::kBadField;
+  // Tracking (revision 11) registers the newest scans around the prior: both must be there.
+  const uint32_t track_needs = kSegmentsFlagHasPrior | kSegmentsFlagNewestScans;
+  if ((m.flags & kSegmentsFlagTrack) && (m.flags & track_needs) != track_needs) return DecodeStatus::kBadField;
   const bool esf = (m.flags & kSegmentsFlagEsf) != 0;
   // 64-bit arithmetic: no overflow for any u32 counts.
   const uint64_t segments_end = kSegmentsFixedBytes + uint64_t{count} * (kSegmentBytes + (esf ? kEsfBytes : 0)) +

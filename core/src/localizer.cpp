@@ -152,7 +152,12 @@ const char* to_string(LocalizationStatus status) {
 }
 
 const char* to_string(LocalizationMethod method) {
-  return method == LocalizationMethod::kRegistration ? "registration" : "segments";
+  switch (method) {
+    case LocalizationMethod::kRegistration: return "registration";
+    case LocalizationMethod::kSurfaces: return "surfaces";
+    case LocalizationMethod::kSegments: break;
+  }
+  return "segments";
 }
 
 const char* to_string(Refusal refusal) {
@@ -169,6 +174,7 @@ const char* to_string(Refusal refusal) {
     case Refusal::kDeadlinePassed: return "deadline_passed";
     case Refusal::kOffMap: return "off_map";
     case Refusal::kNewestScansDisagree: return "newest_scans_disagree";
+    case Refusal::kTrackingLost: return "tracking_lost";
   }
   return "unknown";
 }
@@ -190,6 +196,7 @@ void LocalizerConfig::validate() const {
   covariance.validate();
   newest.validate();
   search.validate();
+  track.validate();
   if (!(min_refine_fitness >= 0.0f && min_refine_fitness <= 1.0f))
     throw std::invalid_argument("min_refine_fitness must be in 0..1");
   if (!(max_refine_rmse_voxels >= 0.0f) || !std::isfinite(max_refine_rmse_voxels))
@@ -391,6 +398,18 @@ LocalizationResult Localizer::localize_segments(Segments query, const Eigen::Vec
   }
   r.status = LocalizationStatus::kLocalized;
   return finish(std::move(r));
+}
+
+LocalizationResult Localizer::track(Segments query, const PointCloud& newest, const Eigen::Vector3f& sensor_position,
+                                    const PosePrior& prior) const {
+  check_prior(&prior);
+  Stopwatch clock;
+  LocalizationResult r;
+  r.query = std::move(query);
+  r.query_segments = r.query.size();
+  detail::track_on_surfaces(newest, targets_, points_.get(), centroids_, classifier_.get(), surfaces_.get(), config_, prior, sensor_position, r);
+  r.timings.refine_ms = r.timings.total_ms = clock.lap();
+  return r;
 }
 
 void Localizer::refine_to_newest_scans(const PointCloud& newest, const Eigen::Vector3f& sensor_position,

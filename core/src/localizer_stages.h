@@ -44,6 +44,12 @@ void register_near_prior(const Segments& targets, const TargetPoints* source, co
 // covariance and window fields when they agree with it.
 // With the map's surface layer the scans keep their ground and register onto it; without, onto
 // the segments' points, ground removed.
+// Tracking on the surface layer (Localizer::track, SurfaceTrackingConfig): localized by the
+// newest scans' registration around the prior, or refused with Refusal::kTrackingLost.
+void track_on_surfaces(const PointCloud& newest, const Segments& targets, const TargetPoints* source, const CentroidIndex& centroids,
+                       const RandomForestMatcher* classifier, const MapSurfaces* surfaces, const LocalizerConfig& config,
+                       const PosePrior& prior, const Eigen::Vector3f& sensor, LocalizationResult& r);
+
 void refine_to_newest(const PointCloud& newest, const Segments& targets, const TargetPoints* source,
                       const MapSurfaces* surfaces, const LocalizerConfig& config, const Eigen::Vector3f& sensor,
                       LocalizationResult& r);

@@ -42,6 +42,19 @@ void NewestScansConfig::validate() const {
   if (!(min_fitness >= 0.0f && min_fitness <= 1.0f)) throw std::invalid_argument("NewestScansConfig.min_fitness must be in 0..1");
 }
 
+void SurfaceTrackingConfig::validate() const {
+  auto positive = [](float v, const char* name) { detail::require_positive(v, "SurfaceTrackingConfig", name); };
+  positive(leaf_m, "leaf_m");
+  positive(window_m, "window_m");
+  if (min_points < 6) throw std::invalid_argument("SurfaceTrackingConfig.min_points must be >= 6");
+  if (max_points < min_points) throw std::invalid_argument("SurfaceTrackingConfig.max_points must be >= min_points");
+  positive(ambiguity_range_m, "ambiguity_range_m");
+  if (!(fine_first_m >= 0.0f) || !std::isfinite(fine_first_m))
+    throw std::invalid_argument("SurfaceTrackingConfig.fine_first_m must be finite and >= 0 (0: off)");
+  positive(max_shifted_support, "max_shifted_support");
+  if (!(min_fitness >= 0.0f && min_fitness <= 1.0f)) throw std::invalid_argument("SurfaceTrackingConfig.min_fitness must be in 0..1");
+}
+
 void CovarianceConfig::validate() const {
   if (!(scale > 0.0f) || !std::isfinite(scale)) throw std::invalid_argument("CovarianceConfig.scale must be finite and > 0");
   if (!(floor_m >= 0.0f) || !std::isfinite(floor_m)) throw std::invalid_argument("CovarianceConfig.floor_m must be finite and >= 0");
@@ -115,16 +128,17 @@ RegistrationResult register_to_map(const PointCloud& query_points, const PointCl
   // The coarse stage looks 1.5 m around each query point: the map at full density only makes
   // each look slower (RegistrationConfig::coarse_leaf_m).
   PointCloud thinned;
-  if (config.coarse_leaf_m > 0.0f) {
+  if (config.coarse_stage && config.coarse_leaf_m > 0.0f) {
     VoxelGridConfig thin;
     thin.leaf_m = config.coarse_leaf_m;
     thin.min_points_per_voxel = 1;
     thinned = voxel_filter(map_points, thin);
   }
   const PointCloud& coarse_map = config.coarse_leaf_m > 0.0f ? thinned : map_points;
-  const RefineResult first = refine_alignment(window, coarse_map, T_map_query_prior, coarse, pivot_prior);
-  const RefineResult fine = refine_alignment(window, map_points, first.T_target_query, fine_config,
-                                             first.T_target_query * sensor_query);
+  const Pose3d start = config.coarse_stage
+                          ? refine_alignment(window, coarse_map, T_map_query_prior, coarse, pivot_prior).T_target_query
+                          : T_map_query_prior;
+  const RefineResult fine = refine_alignment(window, map_points, start, fine_config, start * sensor_query);
   r.T_map_query = fine.T_target_query;
   r.fitness = fine.fitness;
   r.rmse_m = fine.rmse_m;

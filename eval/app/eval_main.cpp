@@ -30,39 +30,79 @@ namespace fs = std::filesystem;
 namespace {
 
 // --segments: the vehicle segments and describes each query itself (segmatch_vehicle) and
-// sends LOCALIZE_SEGMENTS; its own time and the request sizes are reported apart.
+// sends LOCALIZE_SEGMENTS; its own time and the request sizes are reported apart. With a
+// tracker's prior (narrow enough for registration) it first sends the tracking request
+// (revision 11: no segment points, the newest scans thinned) and the full one only when that
+// comes back TRACKING_LOST; both requests' bytes and server times count.
 struct SegmentsSide {
   std::unique_ptr<vehicle::SegmentQuery> query;
-  std::vector<double> vehicle_ms, request_bytes;
+  bool track = true;
+  std::vector<double> vehicle_ms, request_bytes, tracking_bytes;
+  size_t tracked = 0, lost = 0;
   api::LocalizeSegmentsRequest make(const api::LocalizeRequest& r) {
     ModuleTimings t;
     api::LocalizeSegmentsRequest s = query->make_request(r, &t);
     vehicle_ms.push_back(t.total_ms);
-    request_bytes.push_back(static_cast<double>(api::encode(s).size()));
     return s;
+  }
+  bool tracks(const api::LocalizeSegmentsRequest& s) const {
+    const uint32_t needs = api::kSegmentsFlagHasPrior | api::kSegmentsFlagNewestScans;
+    return track && (s.flags & needs) == needs && s.prior_radius_m > 0.0 &&
+           s.prior_radius_m <= query->parameters().localizer.registration.max_prior_radius_m;
+  }
+  template <typename Send>
+  api::LocalizeReply exchange(const api::LocalizeRequest& r, Send&& send) {
+    const api::LocalizeSegmentsRequest full = make(r);
+    if (!tracks(full)) {
+      request_bytes.push_back(static_cast<double>(api::encode(full).size()));
+      return send(full);
+    }
+    api::LocalizeSegmentsRequest light = query->tracking_request(full);
+    light.flags |= api::kSegmentsFlagRefusalCode;
+    const double light_bytes = static_cast<double>(api::encode(light).size());
+    tracking_bytes.push_back(light_bytes);
+    ++tracked;
+    api::LocalizeReply reply = send(light);
+    if (reply.refusal != api::RefusalCode::kTrackingLost) {
+      request_bytes.push_back(light_bytes);
+      return reply;
+    }
+    ++lost;
+    request_bytes.push_back(light_bytes + static_cast<double>(api::encode(full).size()));
+    const float first_ms = reply.timings.server_total;
+    api::LocalizeReply again = send(full);
+    again.timings.server_total += first_ms;
+    if (again.status != api::LocalizeStatus::kLocalized) again.reason += " [" + reply.reason + "]";
+    return again;
   }
   void print() const {
     if (!query || vehicle_ms.empty()) return;
     std::printf("vehicle side (--segments): median %.1f ms segmenting and describing per query, median request %.0f bytes\n",
                 eval::distribution_of(vehicle_ms).median, eval::distribution_of(request_bytes).median);
+    if (tracked)
+      std::printf("tracking requests (no segment points, newest scans thinned): %zu sent, median %.0f bytes; %zu came back "
+                  "TRACKING_LOST and were resent in full\n",
+                  tracked, eval::distribution_of(tracking_bytes).median, lost);
   }
 };
 
 int run_localize(const eval::LocalizationRunConfig& config, const std::string& server, const std::string& token_file,
-                 const std::string& out_dir, bool segments, const server::MapLoadOptions& load) {
+                 const std::string& out_dir, bool segments, bool track_surfaces, const server::MapLoadOptions& load) {
   eval::LocalizeFn localize;
   std::shared_ptr<const server::LoadedMap> loaded;
   std::unique_ptr<api::Client> client;
   SegmentsSide side;
+  side.track = track_surfaces;
   if (server.empty()) {
     loaded = server::load_map(config.map_path, load);
     for (const std::string& w : loaded->warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
     if (segments) {
       side.query = std::make_unique<vehicle::SegmentQuery>(server::info_of(*loaded).parameters_json);
       localize = [&](const api::LocalizeRequest& r) {
-        const api::LocalizeSegmentsRequest s = side.make(r);
-        if (const auto refused = server::refuse_segments(*loaded, s)) throw std::runtime_error(refused->message);
-        return server::localize_segments_request(*loaded, s);
+        return side.exchange(r, [&](const api::LocalizeSegmentsRequest& s) {
+          if (const auto refused = server::refuse_segments(*loaded, s)) throw std::runtime_error(refused->message);
+          return server::localize_segments_request(*loaded, s);
+        });
       };
     } else {
       localize = [&](const api::LocalizeRequest& r) { return server::localize_request(*loaded, r); };
@@ -74,7 +114,9 @@ int run_localize(const eval::LocalizationRunConfig& config, const std::string& s
     client = std::make_unique<api::Client>(where.host, where.port, options);
     if (segments) {
       side.query = std::make_unique<vehicle::SegmentQuery>(vehicle::SegmentQuery::from_info(client->info()));
-      localize = [&](const api::LocalizeRequest& r) { return client->localize_segments(side.make(r)); };
+      localize = [&](const api::LocalizeRequest& r) {
+        return side.exchange(r, [&](const api::LocalizeSegmentsRequest& s) { return client->localize_segments(s); });
+      };
     } else {
       localize = [&](const api::LocalizeRequest& r) { return client->localize(r); };
     }
@@ -225,6 +267,11 @@ int main(int argc, char** argv) {
   loc->add_flag("--segments", segments,
                 "query by segments (LOCALIZE_SEGMENTS): segment and describe each local cloud here, as a vehicle would, "
                 "and send the segments instead of the cloud");
+  std::string track_surfaces = "on";
+  loc->add_option("--track-surfaces", track_surfaces,
+                  "with --segments and a narrow prior: first send the tracking request (no segment points, the newest "
+                  "scans thinned; protocol revision 11) and the full one only after TRACKING_LOST (default on)")
+      ->check(CLI::IsMember({"on", "off"}));
   eval::LocalizationRunConfig fc;
   auto* fun = app.add_subcommand("funnel", "where true matches are lost: segments, counterparts, retrieved, classified");
   fun->add_option("--map", fc.map_path, "map database")->required();
@@ -264,7 +311,7 @@ int main(int argc, char** argv) {
         if (!server.empty()) throw std::runtime_error("--search is for in-process runs (the server serves its map's)");
         load.search_enabled = search == "on";
       }
-      return run_localize(lc, server, token_file, out_dir, segments, load);
+      return run_localize(lc, server, token_file, out_dir, segments, track_surfaces == "on", load);
     }
     if (*fun) {
       const auto loaded = server::load_map(fc.map_path);

@@ -111,6 +111,7 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("window_m", l.registration.window_m);
   v("coarse_correspondence_m", l.registration.coarse_correspondence_m);
   v("coarse_leaf_m", l.registration.coarse_leaf_m);
+  v("coarse_stage", l.registration.coarse_stage);
   v("max_prior_radius_m", l.registration.max_prior_radius_m);
   v("min_query_points", l.registration.min_query_points);
   v("max_last_step_m", l.registration.max_last_step_m);
@@ -140,6 +141,16 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("candidates", l.search.candidates);
   v("min_separation_m", l.search.min_separation_m);
   v("min_fitness", l.search.min_fitness);
+  v.section("track");
+  v("enabled", l.track.enabled);
+  v("leaf_m", l.track.leaf_m);
+  v("window_m", l.track.window_m);
+  v("min_points", l.track.min_points);
+  v("max_points", l.track.max_points);
+  v("min_fitness", l.track.min_fitness);
+  v("ambiguity_range_m", l.track.ambiguity_range_m);
+  v("max_shifted_support", l.track.max_shifted_support);
+  v("fine_first_m", l.track.fine_first_m);
   v.section("localizer");
   v("support_radius_m", l.support_radius_m);
   v("min_support", l.min_support);

@@ -51,6 +51,7 @@ class RefusalCode(enum.IntEnum):
     LOW_CONFIDENCE = 8
     OFF_MAP = 9  # revision 9
     NEWEST_SCANS_DISAGREE = 10  # revision 9
+    TRACKING_LOST = 11  # revision 11: a tracking request without segment points did not register
 
 
 class LocalizeStatus(enum.IntEnum):

@@ -27,8 +27,11 @@ SEGMENTS_FLAG_ESF = 1 << 1  # every segment carries its ESF histogram
 SEGMENTS_FLAG_REFUSAL_CODE = 1 << 2  # revision 5, as LOCALIZE's FLAG_REFUSAL_CODE
 SEGMENTS_FLAG_DETAIL = 1 << 3  # revision 6, as LOCALIZE's FLAG_DETAIL
 SEGMENTS_FLAG_NEWEST_SCANS = 1 << 4  # revision 10, as LOCALIZE's FLAG_NEWEST_SCANS
+# Revision 11: track on the surface layer (docs/protocol.md 5.5); needs bits 0 and 4, and the
+# segments may then carry no points.
+SEGMENTS_FLAG_TRACK = 1 << 5
 KNOWN_SEGMENTS_FLAGS = (SEGMENTS_FLAG_HAS_PRIOR | SEGMENTS_FLAG_ESF | SEGMENTS_FLAG_REFUSAL_CODE | SEGMENTS_FLAG_DETAIL
-                        | SEGMENTS_FLAG_NEWEST_SCANS)
+                        | SEGMENTS_FLAG_NEWEST_SCANS | SEGMENTS_FLAG_TRACK)
 SEGMENTS_FIXED_BYTES = 156
 SEGMENT_BYTES = 45  # centroid, 7 eigen features, point count, step exponent
 EIGEN_FEATURES = 7
@@ -116,6 +119,9 @@ class LocalizeSegments(RequestHead):
         count, total_points = r.u32(), r.u32()
         if m.flags & ~KNOWN_SEGMENTS_FLAGS:
             raise DecodeError(DecodeStatus.BAD_FIELD, f"unknown flag bits 0x{m.flags & ~KNOWN_SEGMENTS_FLAGS:x}")
+        track_needs = SEGMENTS_FLAG_HAS_PRIOR | SEGMENTS_FLAG_NEWEST_SCANS
+        if m.flags & SEGMENTS_FLAG_TRACK and m.flags & track_needs != track_needs:
+            raise DecodeError(DecodeStatus.BAD_FIELD, "the track bit needs a prior and the newest scans")
         esf = bool(m.flags & SEGMENTS_FLAG_ESF)
         fixed = SEGMENT_BYTES + (ESF_BYTES if esf else 0)
         end = SEGMENTS_FIXED_BYTES + count * fixed + total_points * 6

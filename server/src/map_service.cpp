@@ -172,6 +172,7 @@ api::RefusalCode refusal_code_of(Refusal r) {
     case Refusal::kLowConfidence: return api::RefusalCode::kLowConfidence;
     case Refusal::kOffMap: return api::RefusalCode::kOffMap;
     case Refusal::kNewestScansDisagree: return api::RefusalCode::kNewestScansDisagree;
+    case Refusal::kTrackingLost: return api::RefusalCode::kTrackingLost;
     case Refusal::kDeadlinePassed: break;
   }
   return api::RefusalCode::kNone;
@@ -200,7 +201,8 @@ api::LocalizeReply reply_of(const LoadedMap& map, const LocalizationResult& r, u
     reply.detail = api::ReplyDetail{r.window_warp_m, r.window_warp_deg, static_cast<uint32_t>(r.window_points), {}};
     api::ReplyDetail::Estimate e;  // revision 7
     e.method = static_cast<uint8_t>(r.method == LocalizationMethod::kRegistration ? api::ReplyMethod::kRegistration
-                                                                                : api::ReplyMethod::kSegments);
+                                    : r.method == LocalizationMethod::kSurfaces   ? api::ReplyMethod::kSurfaces
+                                                                                  : api::ReplyMethod::kSegments);
     if (reply.status == api::LocalizeStatus::kLocalized) e.covariance_upper = api::covariance_upper(r.covariance);
     reply.detail->estimate = e;
   }
@@ -265,6 +267,17 @@ Outcome serve_localize_segments(const LoadedMap& map, api::LocalizeSegmentsReque
   const auto start = std::chrono::steady_clock::now();
   const RequestFields fields = request_fields(request);
   const std::optional<PosePrior> prior = pose_prior_of(fields);
+  const Eigen::Vector3f sensor = request.sensor_position_local.cast<float>();
+  // Tracking on the surface layer first (revision 11, docs/protocol.md 5.5); the full request's
+  // path when it does not answer and the segments carry points, TRACKING_LOST when they do not.
+  if (request.flags & api::kSegmentsFlagTrack) {
+    LocalizationResult tracked = prior ? map.localizer->track(request.segments, request.newest_points, sensor, *prior)
+                                       : LocalizationResult{};
+    if (!prior) tracked.refusal = Refusal::kTrackingLost, tracked.reason = "tracking on the surface layer needs a prior radius > 0";
+    bool has_points = false;
+    for (const Segment& s : request.segments) has_points = has_points || !s.points.empty();
+    if (tracked.localized() || !has_points) return outcome_of(map, tracked, request.request_id, fields, start);
+  }
   LocalizationResult r = map.localizer->localize_segments(
       std::move(request.segments), request.sensor_position_local.cast<float>(), prior ? &*prior : nullptr, {}, deadline);
   if ((request.flags & api::kSegmentsFlagNewestScans) && !deadline.passed())  // revision 10, as LOCALIZE bit 5

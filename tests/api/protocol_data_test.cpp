@@ -96,7 +96,8 @@ const std::set<std::string> kFiles = {
     "localize_global.bin", "localize_prior_voxelized.bin", "localize_segments.bin",
     "localize_reply_localized.bin", "localize_reply_not_localized.bin", "localize_reply_outside_prior.bin",
     "localize_refusal_code.bin", "localize_reply_refused.bin", "localize_detail.bin", "localize_reply_detail.bin",
-    "localize_reply_estimate.bin", "localize_newest.bin", "localize_segments_newest.bin", "localize_reply_off_map.bin", "error.bin"};
+    "localize_reply_estimate.bin", "localize_newest.bin", "localize_segments_newest.bin", "localize_reply_off_map.bin", "error.bin",
+    "localize_segments_track.bin", "localize_reply_tracking_lost.bin", "localize_reply_surfaces.bin"};
 
 }  // namespace
 
@@ -328,8 +329,66 @@ TEST(ProtocolData, LocalizeReplyOffMap) {
     EXPECT_EQ(static_cast<int>(m.refusal), 9);
     EXPECT_STREQ(to_string(m.refusal), "OFF_MAP");
     EXPECT_STREQ(to_string(RefusalCode::kNewestScansDisagree), "NEWEST_SCANS_DISAGREE");
-    EXPECT_STREQ(to_string(static_cast<RefusalCode>(11)), "UNKNOWN") << "a later revision's code";
+    EXPECT_STREQ(to_string(static_cast<RefusalCode>(12)), "UNKNOWN") << "a later revision's code";
     EXPECT_EQ(m.status, LocalizeStatus::kNotLocalized);
+  });
+}
+
+// Revision 11: LOCALIZE_SEGMENTS bit 5, tracking on the surface layer: segments without points,
+// the newest scans; answered TRACKING_LOST (code 11), or localized by method 2.
+TEST(ProtocolData, LocalizeSegmentsTrack) {
+  LocalizeSegmentsRequest r;
+  r.request_id = 16;
+  r.flags = kSegmentsFlagHasPrior | kSegmentsFlagRefusalCode | kSegmentsFlagDetail | kSegmentsFlagNewestScans | kSegmentsFlagTrack;
+  r.sensor_position_local = Eigen::Vector3d(1.0, 2.0, 0.5);
+  r.T_map_local_prior = pose(0.5, Eigen::Vector3d(100.0, 200.0, 0.0));
+  r.prior_radius_m = 3.0;
+  r.prior_heading_tolerance_deg = 5.0;
+  r.parameters_digest = segments_digest(kParametersJson);
+  for (int k = 0; k < 2; ++k) {
+    Segment s;
+    s.centroid = Eigen::Vector3f(4.f * static_cast<float>(k + 1), 1.f, 0.5f);
+    for (int i = 0; i < kEigenFeatureCount; ++i) s.eigen[i] = 0.25f * static_cast<float>(i + k + 1);
+    r.segments.push_back(s);
+  }
+  r.newest_points = {{1.5f, -2.f, 0.25f, 0.f}, {3.f, 4.f, -0.5f, 0.f}};
+  check_file<LocalizeSegmentsRequest>("localize_segments_track.bin", r, [](const LocalizeSegmentsRequest& m) {
+    EXPECT_EQ(m.flags, 61u);
+    ASSERT_EQ(m.segments.size(), 2u);
+    EXPECT_TRUE(m.segments[1].points.empty());
+    EXPECT_EQ(m.segments[1].centroid.x(), 8.f);
+    ASSERT_EQ(m.newest_points.size(), 2u);
+  });
+  // Bit 5 without the prior or without the newest scans is malformed.
+  for (uint32_t drop : {kSegmentsFlagHasPrior, kSegmentsFlagNewestScans}) {
+    LocalizeSegmentsRequest bad = r;
+    bad.flags &= ~drop;
+    if (drop == kSegmentsFlagNewestScans) bad.newest_points.clear();
+    LocalizeSegmentsRequest out;
+    EXPECT_EQ(decode_frame(encode(bad), Limits{}, out), DecodeStatus::kBadField) << drop;
+  }
+
+  LocalizeReply lost;
+  lost.request_id = 16;
+  lost.status = LocalizeStatus::kNotLocalized;
+  lost.refusal = RefusalCode::kTrackingLost;
+  lost.reason = "tracking on the surface layer: registration fitness 0.61 below 0.75";
+  lost.timings = timings();
+  check_file<LocalizeReply>("localize_reply_tracking_lost.bin", lost, [](const LocalizeReply& m) {
+    EXPECT_EQ(static_cast<int>(m.refusal), 11);
+    EXPECT_STREQ(to_string(m.refusal), "TRACKING_LOST");
+  });
+  LocalizeReply tracked = localized_reply(16);
+  ReplyDetail d{0.f, 0.f, 3100, {}};
+  ReplyDetail::Estimate e;
+  e.method = static_cast<uint8_t>(ReplyMethod::kSurfaces);
+  for (size_t k = 0; k < e.covariance_upper.size(); ++k) e.covariance_upper[k] = static_cast<float>(k + 2) / 8192.0f;
+  d.estimate = e;
+  tracked.detail = d;
+  check_file<LocalizeReply>("localize_reply_surfaces.bin", tracked, [](const LocalizeReply& m) {
+    ASSERT_TRUE(m.detail && m.detail->estimate);
+    EXPECT_EQ(m.detail->estimate->method, 2u);
+    EXPECT_STREQ(to_string(static_cast<ReplyMethod>(m.detail->estimate->method)), "surfaces");
   });
 }
 

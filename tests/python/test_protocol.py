@@ -76,6 +76,11 @@ EXPECTED = {
         11, p.LocalizeStatus.NOT_LOCALIZED,
         "the vehicle's newest scans do not lie on the map's surfaces at the answer (fitness 0.53, at least 0.55)",
         Pose(), 0, 0.0, 0, [], TIMINGS, refusal=p.RefusalCode.OFF_MAP),
+    "localize_reply_tracking_lost.bin": p.LocalizeReply(
+        16, p.LocalizeStatus.NOT_LOCALIZED, "tracking on the surface layer: registration fitness 0.61 below 0.75",
+        Pose(), 0, 0.0, 0, [], TIMINGS, refusal=p.RefusalCode.TRACKING_LOST),
+    "localize_reply_surfaces.bin": localized_reply(request_id=16, detail=p.ReplyDetail(
+        0.0, 0.0, 3100, method=2, covariance_upper=[(k + 2) / 8192.0 for k in range(21)])),
     "error.bin": p.Error(ErrorCode.NON_FINITE, "NaN or Inf value"),
 }
 
@@ -97,7 +102,8 @@ def expected_stored() -> dict:
 class StoredFrames(unittest.TestCase):
     def test_every_stored_frame_is_checked(self):
         names = {f.name for f in PROTOCOL_DATA.glob("*.bin")}
-        self.assertEqual(names, set(expected_stored()) | {"localize_segments.bin", "localize_segments_newest.bin"})
+        self.assertEqual(names, set(expected_stored()) | {"localize_segments.bin", "localize_segments_newest.bin",
+                                                          "localize_segments_track.bin"})
 
     def test_every_frame_decodes_and_reencodes_byte_for_byte(self):
         files = sorted(PROTOCOL_DATA.glob("*.bin")) + sorted(GOLDEN_V1_V4.glob("*.bin"))

@@ -4,11 +4,16 @@
 #include "server_test_util.h"
 
 #include "segmatch/server/map_service.h"
+#include "segmatch/storage/map_reader.h"
+#include "segmatch/storage/map_writer.h"
 #include "segmatch/vehicle/segment_query.h"
+
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 
 using namespace segmatch;
 using namespace segmatch::testing;
@@ -229,4 +234,86 @@ TEST(ServerSegments, ThinningKeepsEverySegmentAndAtMostTheBudget) {
   EXPECT_EQ(total, 250u + 500u + 750u);
   thin_segment_points(segments, 0);
   EXPECT_EQ(segments[0].points.size(), 250u) << "0: no thinning";
+}
+
+// Revision 11 (LOCALIZE_SEGMENTS bit 5): a vehicle with a fix sends its segments without points
+// and its newest scans thinned; the server registers the scans onto the map's surface layer
+// around the prior (method 2), or answers TRACKING_LOST, and a request whose segments carry
+// points goes on as a full one. The suite's map has no surface layer: this test writes the
+// same segments with one made of the revisit clouds placed by their true poses (the path under
+// test is the server's; core/surface_tracking_test.cpp checks the registration itself).
+TEST(ServerSegments, TrackingRequestsAnswerFromTheSurfaceLayerOrSayTrackingLost) {
+  const TestWorld& w = test_world();
+  const std::string path = (std::filesystem::temp_directory_path() / ("segmatch-track-" + std::to_string(::getpid()) + ".sqlite")).string();
+  {
+    const storage::MapReader reader = storage::MapReader::open(w.map_path);
+    PointCloud layer;
+    for (const Query& q : w.queries()) {
+      const Pose3d T_map_local = q.T_world_sensor * q.T_local_sensor.inverse();
+      for (const Point& p : q.request.points) {
+        const Eigen::Vector3d m = T_map_local * p.xyz().cast<double>();
+        layer.push_back(Point{float(m.x()), float(m.y()), float(m.z()), 0.f});
+      }
+    }
+    VoxelGridConfig thin;
+    thin.leaf_m = 0.25f;
+    thin.min_points_per_voxel = 1;
+    storage::MapMetadata meta = reader.metadata();
+    storage::MapWriter writer = storage::MapWriter::create(path, meta, true);
+    writer.add_segments(reader.load_segments(), {});
+    writer.set_surfaces(voxel_filter(layer, thin), 0.25f, 64.f);
+    writer.commit();
+  }
+  const std::shared_ptr<const server::LoadedMap> map = server::load_map(path);
+  const vehicle::SegmentQuery v(server::info_of(*map).parameters_json);
+  size_t tracked = 0, lost = 0, wrong = 0;
+  std::vector<double> bytes;
+  for (const Query& q : w.queries()) {
+    api::LocalizeRequest cloud = q.request;
+    cloud.flags |= api::kFlagDetail | api::kFlagNewestScans | api::kFlagRefusalCode | api::kFlagHasPrior;
+    cloud.T_map_local_prior = q.T_world_sensor * q.T_local_sensor.inverse();  // a tracker's prior: the truth
+    cloud.prior_radius_m = 3.0;
+    const PointCloud near = crop_cylinder(q.request.points, q.request.sensor_position_local, 60.0);
+    for (size_t i = 0; i < near.size(); i += 4) cloud.newest_points.push_back(near[i]);
+    const api::LocalizeSegmentsRequest full = v.make_request(cloud);
+    const api::LocalizeSegmentsRequest light = v.tracking_request(full);
+    ASSERT_TRUE(light.flags & api::kSegmentsFlagTrack);
+    for (const Segment& g : light.segments) ASSERT_TRUE(g.points.empty());
+    EXPECT_LE(light.newest_points.size(), static_cast<size_t>(v.parameters().localizer.track.max_points));
+    bytes.push_back(static_cast<double>(api::encode(light).size()));
+    const api::LocalizeReply r = server::localize_segments_request(*map, light);
+    if (r.status == api::LocalizeStatus::kLocalized) {
+      ++tracked;
+      ASSERT_TRUE(r.detail && r.detail->estimate);
+      EXPECT_EQ(r.detail->estimate->method, static_cast<uint8_t>(api::ReplyMethod::kSurfaces));
+      const Pose3d T_map_sensor = r.T_map_local * q.T_local_sensor;
+      wrong += position_error_m(T_map_sensor, q.T_world_sensor) > 0.3 || angle_error_deg(T_map_sensor, q.T_world_sensor) > 1.0;
+    } else {
+      ++lost;
+      EXPECT_EQ(r.refusal, api::RefusalCode::kTrackingLost) << r.reason;
+      std::printf("[segments] frame %zu: %s\n", q.frame, r.reason.c_str());
+    }
+    // The truth 6 m outside a 3 m disc: never a fix.
+    api::LocalizeSegmentsRequest off = light;
+    off.T_map_local_prior.translation() += Eigen::Vector3d(6.0, 0.0, 0.0);
+    EXPECT_NE(server::localize_segments_request(*map, off).status, api::LocalizeStatus::kLocalized) << q.frame;
+    // With its segments' points the request does not stop at TRACKING_LOST: a prior too wide for
+    // tracking goes on to the full path and gets its answer.
+    api::LocalizeSegmentsRequest wide = full, plain = full;
+    wide.flags |= api::kSegmentsFlagTrack;
+    wide.prior_radius_m = plain.prior_radius_m = 25.0;
+    const api::LocalizeReply a = server::localize_segments_request(*map, wide), b = server::localize_segments_request(*map, plain);
+    EXPECT_EQ(a.status, b.status) << q.frame;
+    EXPECT_NE(a.refusal, api::RefusalCode::kTrackingLost) << q.frame;
+    // The suite's map has no layer: TRACKING_LOST, by name.
+    const api::LocalizeReply none = server::localize_segments_request(loaded_map(), light);
+    EXPECT_EQ(none.refusal, api::RefusalCode::kTrackingLost);
+    EXPECT_NE(none.reason.find("no surface layer"), std::string::npos) << none.reason;
+  }
+  std::filesystem::remove(path);
+  std::sort(bytes.begin(), bytes.end());
+  std::printf("[segments] tracking requests: %zu localized on the surface layer, %zu TRACKING_LOST, median %.0f KB\n", tracked, lost,
+              bytes[bytes.size() / 2] / 1024);
+  EXPECT_GE(tracked * 2, w.queries().size());  // 6 of 9 (the others: too few matched segments for L2 on this short map)
+  EXPECT_EQ(wrong, 0u);
 }

@@ -1,5 +1,6 @@
 #include "segmatch/vehicle/segment_query.h"
 
+#include <algorithm>
 #include <chrono>
 #include <stdexcept>
 
@@ -60,6 +61,29 @@ api::LocalizeSegmentsRequest SegmentQuery::make_request(const api::LocalizeReque
   thin_segment_points(r.segments, static_cast<size_t>(parameters_.localizer.refine.max_segment_points));
   if (timings)
     timings->total_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  return r;
+}
+
+api::LocalizeSegmentsRequest SegmentQuery::tracking_request(const api::LocalizeSegmentsRequest& full) const {
+  const uint32_t needs = api::kSegmentsFlagHasPrior | api::kSegmentsFlagNewestScans;
+  if ((full.flags & needs) != needs)
+    throw std::invalid_argument("a tracking request needs a prior and the newest scans (LOCALIZE_SEGMENTS bits 0 and 4)");
+  const SurfaceTrackingConfig& track = parameters_.localizer.track;
+  api::LocalizeSegmentsRequest r = full;
+  r.flags |= api::kSegmentsFlagTrack;
+  r.segments.clear();
+  for (const Segment& s : full.segments) {  // the support check reads centroids and features only
+    if ((s.centroid.cast<double>() - full.sensor_position_local).head<2>().norm() > track.window_m) continue;
+    r.segments.push_back(s);
+    r.segments.back().points.clear();
+  }
+  VoxelGridConfig thin;
+  thin.leaf_m = track.leaf_m;
+  thin.min_points_per_voxel = 1;
+  const PointCloud newest = voxel_filter(crop_cylinder(full.newest_points, full.sensor_position_local, track.window_m), thin);
+  const size_t step = (newest.size() + track.max_points - 1) / static_cast<size_t>(track.max_points);
+  r.newest_points.clear();
+  for (size_t i = 0; i < newest.size(); i += std::max<size_t>(step, 1)) r.newest_points.push_back(newest[i]);
   return r;
 }
 

@@ -24,7 +24,7 @@ constexpr std::array<uint8_t, 4> kMagic = {'S', 'G', 'M', 'Q'};
 constexpr uint16_t kProtocolVersion = 1;
 // The protocol document's revision (docs/protocol.md, History): messages, flag bits and error
 // codes added compatibly since version 1. The frame header still says kProtocolVersion.
-constexpr int kProtocolRevision = 8;
+constexpr int kProtocolRevision = 11;
 constexpr size_t kHeaderBytes = 12;
 
 enum class MessageType : uint16_t {
@@ -168,8 +168,11 @@ constexpr uint32_t kSegmentsFlagEsf = 1u << 1;       // every segment carries it
 constexpr uint32_t kSegmentsFlagRefusalCode = 1u << 2;  // revision 5, as LOCALIZE bit 3
 constexpr uint32_t kSegmentsFlagDetail = 1u << 3;       // revision 6, as LOCALIZE bit 4
 constexpr uint32_t kSegmentsFlagNewestScans = 1u << 4;  // revision 10, as LOCALIZE bit 5
+// Revision 11: track on the surface layer (docs/protocol.md 5.5); needs bits 0 and 4; the
+// segments may then carry no points.
+constexpr uint32_t kSegmentsFlagTrack = 1u << 5;
 constexpr uint32_t kKnownSegmentsFlags = kSegmentsFlagHasPrior | kSegmentsFlagEsf | kSegmentsFlagRefusalCode |
-                                         kSegmentsFlagDetail | kSegmentsFlagNewestScans;
+                                         kSegmentsFlagDetail | kSegmentsFlagNewestScans | kSegmentsFlagTrack;
 constexpr int kPointStepExponentMin = -16;  // finest point step 2^-16 m (15 um)
 constexpr int kPointStepExponentMax = 10;
 constexpr int kEsfExponentMin = -64;
@@ -218,6 +221,7 @@ enum class RefusalCode : uint16_t {
   kLowConfidence = 8,
   kOffMap = 9,  // revision 9: the vehicle's newest scans do not lie on the map at the answer
   kNewestScansDisagree = 10,  // revision 9: they do, but settle away from the answer
+  kTrackingLost = 11,  // revision 11: a tracking request (segments bit 5) without points did not register
 };
 const char* to_string(RefusalCode code);
 
@@ -246,7 +250,7 @@ struct ReplyDetail {
 };
 constexpr size_t kReplyDetailBytes = 12;           // revision 6's fields
 constexpr size_t kReplyDetailEstimateBytes = 100;  // with revision 7's
-enum class ReplyMethod : uint8_t { kSegments = 0, kRegistration = 1 };
+enum class ReplyMethod : uint8_t { kSegments = 0, kRegistration = 1, kSurfaces = 2 };  // 2: revision 11
 const char* to_string(ReplyMethod method);
 // The covariance as a matrix, and back (the upper triangle; the matrix is symmetric).
 Eigen::Matrix<double, 6, 6> covariance_matrix(const std::array<float, 21>& upper);

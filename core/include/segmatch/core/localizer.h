@@ -41,6 +41,7 @@ struct LocalizerConfig {
   CovarianceConfig covariance;  // of every localized answer
   NewestScansConfig newest;     // the sensor's pose now, when the query has its newest scans
   CorrelativeSearchConfig search;  // registration over priors too wide for ICP alone
+  SurfaceTrackingConfig track;     // the newest scans onto the surface layer (Localizer::track)
   // Beyond the paper: each verified hypothesis is ranked by its support (support.h), the
   // number of query segments that land within support_radius_m of a map segment under it.
   // The best must have at least min_support, and no other distinct hypothesis may reach
@@ -76,9 +77,10 @@ struct LocalizerConfig {
 enum class LocalizationStatus { kLocalized, kNotLocalized };
 const char* to_string(LocalizationStatus status);
 
-// What answered: segment matching (the paper's pipeline, and the global path), or the
-// registration to the map around a prior (registration.h).
-enum class LocalizationMethod { kSegments, kRegistration };
+// What answered: segment matching (the paper's pipeline, and the global path), the
+// registration to the map around a prior (registration.h), or the newest scans registered onto
+// the surface layer around a prior (Localizer::track).
+enum class LocalizationMethod { kSegments, kRegistration, kSurfaces };
 const char* to_string(LocalizationMethod method);
 
 // Why a query was not localized, stage by stage (LocalizationResult::reason says it in words).
@@ -95,6 +97,7 @@ enum class Refusal {
   kDeadlinePassed,       // the query's deadline passed before it was answered (Deadline)
   kOffMap,               // the vehicle's newest scans do not lie on the map's surfaces at the answer
   kNewestScansDisagree,  // ... they do, but settle farther from it than NewestScansConfig allows
+  kTrackingLost,         // Localizer::track: the newest scans did not register around the prior
 };
 const char* to_string(Refusal refusal);
 
@@ -251,6 +254,14 @@ class Localizer {
   // Leaves r as it is otherwise, when disabled, or when r is not localized. Thread-safe.
   void refine_to_newest_scans(const PointCloud& newest, const Eigen::Vector3f& sensor_position,
                               LocalizationResult& r) const;
+
+  // Tracking on the surface layer (SurfaceTrackingConfig): the newest scans (query frame)
+  // registered onto the map's surface layer around `prior`, the pose checked against the
+  // query's segments (centroids and features; their points are not read). Localized with
+  // LocalizationMethod::kSurfaces, or refused with Refusal::kTrackingLost and the reason (no
+  // layer, a prior too wide, a gate). Thread-safe.
+  LocalizationResult track(Segments query, const PointCloud& newest, const Eigen::Vector3f& sensor_position,
+                           const PosePrior& prior) const;
 
   const Segments& targets() const { return targets_; }
   const LocalizerConfig& config() const { return config_; }

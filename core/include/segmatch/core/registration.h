@@ -33,6 +33,8 @@ struct RegistrationConfig {
   // ... onto the map's points thinned to this voxel grid (0: at full density). Only the fine
   // stage decides the answer and its gates.
   float coarse_leaf_m = 0.5f;
+  // Off: the fine stage starts at the prior itself (SurfaceTrackingConfig::fine_first_m).
+  bool coarse_stage = true;
   // Priors wider than this are not a starting point for ICP (its basin is a metre or two): such
   // queries go to segment matching directly. On riverside02 with GNSS-like priors (sigma 10 m,
   // radius 30 m) registration found wrong minima along the street, 1-15 m off with fitness up
@@ -90,6 +92,38 @@ struct NewestScansConfig {
   // for their fitness to say this, and the answer stands.
   bool refuse_off_map = true;
   void validate() const;       // throws std::invalid_argument naming the field
+};
+
+// Tracking on the surface layer (beyond the paper; docs/protocol.md 5.5, bit 5): a vehicle with
+// a fix sends its newest scans and its segments' centroids and features, no segment points.
+// The scans, thinned to leaf_m, are registered onto the layer around the prior (a tracker's:
+// RegistrationConfig::max_prior_radius_m at most) with the registration's gates and
+// min_fitness here, and the pose must be supported by the segments as every registration is
+// (RegistrationConfig::min_support, min_matched_segments): walls and ground agree along a
+// street anywhere, its objects only at the right place. Its ICP reads a few thousand points,
+// not the segments' tens of thousands, and no segment points travel (README, 2026-12-06).
+struct SurfaceTrackingConfig {
+  bool enabled = true;
+  float leaf_m = 0.5f;        // the newest scans are thinned to this voxel grid
+  float window_m = 40.0f;     // ... within this horizontal distance of the sensor
+  int min_points = 200;       // after thinning
+  // A tracking request carries at most this many newest points (every k-th after thinning) and
+  // only the segments within window_m of the sensor: the ICP reads RefineConfig::max_query_points
+  // (2000) of them anyway, and nearby segments are those the odometry placed best.
+  int max_points = 2000;
+  float min_fitness = 0.75f;  // of the fine stage; chosen on data (README)
+  // A tracker's prior is centimetres off after a fix: the fine stage alone, from the prior, is
+  // tried first, and its answer stands when it passes every gate having moved the sensor at most
+  // this far (0: off); otherwise both stages run, as from any prior (README: server time).
+  float fine_first_m = 0.3f;
+  // The registered pose shifted along its weakest horizontal axis and across it, up to
+  // ambiguity_range_m: where the query's segments find at least max_shifted_support times the
+  // support they find at the pose, the objects say the vehicle is elsewhere (refused). True
+  // answers reached at most 0.79 (riverside02), 0.69 (demo city), 0.24 (hku-mb); the one false
+  // answer of the wrong-prior stress without this check, 2.8 (README, 2026-12-06).
+  float ambiguity_range_m = 12.0f;
+  float max_shifted_support = 0.8f;
+  void validate() const;      // throws std::invalid_argument naming the field
 };
 
 // How a refined pose's covariance is made (pose_covariance): scale * s^2 * inverse(information),

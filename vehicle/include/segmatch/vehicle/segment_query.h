@@ -34,6 +34,12 @@ class SegmentQuery {
   api::LocalizeSegmentsRequest make_request(const api::LocalizeRequest& cloud_request,
                                             ModuleTimings* timings = nullptr) const;
 
+  // The tracking request of a full one (revision 11, docs/protocol.md 5.5): the same segments
+  // without their points, the newest scans thinned to the map's track.leaf_m within its
+  // track.window_m, bit 5 set. For a vehicle with a fix (a prior and newest scans in `full`);
+  // throws std::invalid_argument otherwise. A TRACKING_LOST reply means: send `full`.
+  api::LocalizeSegmentsRequest tracking_request(const api::LocalizeSegmentsRequest& full) const;
+
   // The described segments of a local cloud (query frame), every point kept.
   Segments segment(const PointCloud& cloud, const Eigen::Vector3d& sensor_position, CloudKind kind,
                    ModuleTimings* timings = nullptr) const;
