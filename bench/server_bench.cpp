@@ -14,7 +14,9 @@
 #include <segmatch/io/pipeline_config.h>
 #include <segmatch/server/server.h>
 #include <segmatch/sim/city.h>
+#include <segmatch/core/surface_layer.h>
 #include <segmatch/sim/keyframes.h>
+#include <segmatch/sim/local_clouds.h>
 #include <segmatch/storage/map_writer.h>
 #include <segmatch/vehicle/segment_query.h>
 
@@ -82,6 +84,12 @@ std::string build_map(const sim::City& city, const io::PipelineConfig& config, c
   meta.parameters_json = io::to_json(config);
   storage::MapWriter writer = storage::MapWriter::create(path, meta, true);
   writer.add_segments(sim::segments_along(city.world, city.first, sim::hdl64e(), along), {});
+  // The surface layer, as segmatch-mapbuilder accumulates it from the first traversal's scans.
+  SurfaceAccumulator surfaces(config.surfaces);
+  const sim::RayCaster caster(city.world.scene());
+  sim::for_each_kept_scan(caster, sim::hdl64e(), city.first, config.local_cloud, sim::LocalCloudSchedule{},
+                          [&](size_t frame, const sim::SimulatedScan& scan) { surfaces.add_scan(scan.points, city.first.T_world_lidar[frame]); });
+  writer.set_surfaces(surfaces.points(), config.surfaces.leaf_m, config.surfaces.tile_m);
   if (!model.empty()) writer.set_classifier({"opencv-rtrees-yaml", model});
   writer.commit();
   return path;
@@ -375,6 +383,21 @@ int main(int argc, char** argv) {
                           [&](api::Client& c, size_t i) { return c.localize_segments(tracked_segments[i]); }, tracked_segments.size()};
   out["tracked_cloud"] = run_kind(server.port(), tracked_cloud, median_bytes(tracked), o.bench, {1, 4}, false);
   out["tracked_segments"] = run_kind(server.port(), tracked_segs, median_bytes(tracked_segments), o.bench, {1, 4}, false);
+  // Tracking on the surface layer (protocol revision 11): the same queries as tracking requests,
+  // segments without points and at most track.max_points newest points. The simulated local
+  // clouds come whole: their points within the map's track.window_m of the sensor stand in for
+  // the newest scans (the request keeps at most track.max_points of them either way).
+  const vehicle::SegmentQuery vehicle_side = vehicle::SegmentQuery::from_info(connect(server.port()).info());
+  std::vector<api::LocalizeSegmentsRequest> tracking;
+  for (size_t i = 0; i < tracked_segments.size(); ++i) {
+    api::LocalizeSegmentsRequest full = tracked_segments[i];
+    full.flags |= api::kSegmentsFlagNewestScans | api::kSegmentsFlagRefusalCode | api::kSegmentsFlagDetail;
+    full.newest_points = crop_cylinder(tracked[i].points, tracked[i].sensor_position_local, config.localizer.track.window_m);
+    tracking.push_back(vehicle_side.tracking_request(full));
+  }
+  const Kind tracking_kind{"tracking requests (LOCALIZE_SEGMENTS bit 5, 3 m prior)",
+                           [&](api::Client& c, size_t i) { return c.localize_segments(tracking[i]); }, tracking.size()};
+  out["tracking_requests"] = run_kind(server.port(), tracking_kind, median_bytes(tracking), o.bench, {1, 4}, false);
   out["setup"] = {{"queries", requests.size()}, {"points_mean", double(points) / requests.size()},
                   {"cores", std::thread::hardware_concurrency()}, {"matcher", o.l2 ? "L2" : "RF_eigen+shapes"}};
   server.stop();

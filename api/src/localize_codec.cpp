@@ -123,6 +123,9 @@ DecodeStatus decode(const uint8_t* payload, size_t size, const Limits&, Localize
   const uint32_t count = r.u32();
   m.point_stride = r.u32();
   if (m.flags & ~kKnownFlags) return DecodeStatus::kBadField;
+  // Tracking first (revision 11) registers the newest scans around the prior: both must be there.
+  if ((m.flags & kFlagTrack) && (m.flags & (kFlagHasPrior | kFlagNewestScans)) != (kFlagHasPrior | kFlagNewestScans))
+    return DecodeStatus::kBadField;
   if (m.point_stride != 3 && m.point_stride != 4) return DecodeStatus::kBadStride;
   // 64-bit arithmetic: count * stride * 4 cannot overflow.
   const uint64_t trailer = (m.flags & kFlagPriorHeading) ? 8 : 0;

@@ -49,6 +49,7 @@ void SurfaceTrackingConfig::validate() const {
   if (min_points < 6) throw std::invalid_argument("SurfaceTrackingConfig.min_points must be >= 6");
   if (max_points < min_points) throw std::invalid_argument("SurfaceTrackingConfig.max_points must be >= min_points");
   positive(ambiguity_range_m, "ambiguity_range_m");
+  if (min_matched_segments < 0) throw std::invalid_argument("SurfaceTrackingConfig.min_matched_segments must be >= 0");
   if (!(fine_first_m >= 0.0f) || !std::isfinite(fine_first_m))
     throw std::invalid_argument("SurfaceTrackingConfig.fine_first_m must be finite and >= 0 (0: off)");
   positive(max_shifted_support, "max_shifted_support");

@@ -269,8 +269,9 @@ int main(int argc, char** argv) {
                 "and send the segments instead of the cloud");
   std::string track_surfaces = "on";
   loc->add_option("--track-surfaces", track_surfaces,
-                  "with --segments and a narrow prior: first send the tracking request (no segment points, the newest "
-                  "scans thinned; protocol revision 11) and the full one only after TRACKING_LOST (default on)")
+                  "with a narrow prior and newest scans, track on the surface layer first (protocol revision 11): the cloud "
+                  "path sets LOCALIZE bit 6; --segments sends the tracking request (nearby segments without points, the newest "
+                  "scans thinned) and the full one only after TRACKING_LOST (default on)")
       ->check(CLI::IsMember({"on", "off"}));
   eval::LocalizationRunConfig fc;
   auto* fun = app.add_subcommand("funnel", "where true matches are lost: segments, counterparts, retrieved, classified");
@@ -311,7 +312,8 @@ int main(int argc, char** argv) {
         if (!server.empty()) throw std::runtime_error("--search is for in-process runs (the server serves its map's)");
         load.search_enabled = search == "on";
       }
-      return run_localize(lc, server, token_file, out_dir, segments, track_surfaces == "on", load);
+      lc.track_surfaces = track_surfaces == "on";
+      return run_localize(lc, server, token_file, out_dir, segments, lc.track_surfaces, load);
     }
     if (*fun) {
       const auto loaded = server::load_map(fc.map_path);

@@ -109,6 +109,7 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
                                                     : c.reference_path;
   }
   QueryPriors priors(c, truth.T_map_sensor);
+  const double max_track_radius_m = parameters.localizer.registration.max_prior_radius_m;
   PriorComparison comparison;
   run.title = map.metadata().name + ": " + (c.sim_dataset.empty() ? c.query_folder : c.sim_dataset + " (01)");
   std::map<std::string, std::vector<double>> timings;
@@ -118,6 +119,11 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
       [&](const io::ReplayQuery& q) {
         api::LocalizeRequest request = request_of(q);
         const std::string mode = priors.prepare(request, q);
+        // A narrow prior with the newest scans: track on the surface layer first (revision 11;
+        // the segments path sends its own tracking request instead, eval_main.cpp).
+        if (c.track_surfaces && (request.flags & api::kFlagHasPrior) && (request.flags & api::kFlagNewestScans) &&
+            request.prior_radius_m > 0.0 && request.prior_radius_m <= max_track_radius_m)
+          request.flags |= api::kFlagTrack;
         const auto start = std::chrono::steady_clock::now();
         const api::LocalizeReply reply = localize(request);
         const double latency_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();

@@ -150,6 +150,7 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("min_fitness", l.track.min_fitness);
   v("ambiguity_range_m", l.track.ambiguity_range_m);
   v("max_shifted_support", l.track.max_shifted_support);
+  v("min_matched_segments", l.track.min_matched_segments);
   v("fine_first_m", l.track.fine_first_m);
   v.section("localizer");
   v("support_radius_m", l.support_radius_m);

@@ -7,7 +7,7 @@ import enum
 
 MAGIC = b"SGMQ"
 VERSION = 1  # the frame header's version
-REVISION = 8  # the document's revision: additions since version 1 (docs/protocol.md 8)
+REVISION = 11  # the document's revision: additions since version 1 (docs/protocol.md 8)
 HEADER_BYTES = 12
 MAX_PAYLOAD_BYTES = 64 << 20  # the server's default --max-frame-mb
 
@@ -19,7 +19,9 @@ FLAG_REFUSAL_CODE = 1 << 3  # revision 5: the reply carries a RefusalCode (serve
 FLAG_DETAIL = 1 << 4  # revision 6: the reply carries a detail block (servers of revision <= 5: MALFORMED)
 # Revision 8: the vehicle's newest scans follow the points (servers of revision <= 7: MALFORMED).
 FLAG_NEWEST_SCANS = 1 << 5
-KNOWN_FLAGS = FLAG_HAS_PRIOR | FLAG_VOXELIZED | FLAG_PRIOR_HEADING | FLAG_REFUSAL_CODE | FLAG_DETAIL | FLAG_NEWEST_SCANS
+FLAG_TRACK = 1 << 6  # revision 11: track on the surface layer first; needs FLAG_HAS_PRIOR and FLAG_NEWEST_SCANS
+KNOWN_FLAGS = (FLAG_HAS_PRIOR | FLAG_VOXELIZED | FLAG_PRIOR_HEADING | FLAG_REFUSAL_CODE | FLAG_DETAIL | FLAG_NEWEST_SCANS
+               | FLAG_TRACK)
 LOCALIZE_FIXED_BYTES = 140  # payload bytes before the points
 
 

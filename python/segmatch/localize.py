@@ -12,7 +12,7 @@ from typing import ClassVar, List, Optional, Tuple
 
 import numpy as np
 
-from ._constants import (FLAG_NEWEST_SCANS, FLAG_PRIOR_HEADING, KNOWN_FLAGS, LOCALIZE_FIXED_BYTES, LocalizeStatus,
+from ._constants import (FLAG_HAS_PRIOR, FLAG_NEWEST_SCANS, FLAG_PRIOR_HEADING, FLAG_TRACK, KNOWN_FLAGS, LOCALIZE_FIXED_BYTES, LocalizeStatus,
                          MessageType, RefusalCode)
 from ._wire import Reader, Writer, all_finite
 from .errors import DecodeError, DecodeStatus
@@ -130,6 +130,8 @@ class Localize(RequestHead):
         m = cls(**head)
         if m.flags & ~KNOWN_FLAGS:
             raise DecodeError(DecodeStatus.BAD_FIELD, f"unknown flag bits 0x{m.flags & ~KNOWN_FLAGS:x}")
+        if m.flags & FLAG_TRACK and m.flags & (FLAG_HAS_PRIOR | FLAG_NEWEST_SCANS) != FLAG_HAS_PRIOR | FLAG_NEWEST_SCANS:
+            raise DecodeError(DecodeStatus.BAD_FIELD, "the track bit needs a prior and the newest scans")
         if stride not in (3, 4):
             raise DecodeError(DecodeStatus.BAD_STRIDE, f"stride {stride}")
         trailer = 8 if m.flags & FLAG_PRIOR_HEADING else 0

@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar, Optional, Tuple
 
-from ._constants import (FLAG_DETAIL, FLAG_HAS_PRIOR, FLAG_NEWEST_SCANS, FLAG_PRIOR_HEADING, FLAG_REFUSAL_CODE,
+from ._constants import (FLAG_DETAIL, FLAG_HAS_PRIOR, FLAG_NEWEST_SCANS, FLAG_PRIOR_HEADING, FLAG_REFUSAL_CODE, FLAG_TRACK,
                          FLAG_VOXELIZED, HEADER_BYTES, MAGIC, MAX_PAYLOAD_BYTES, REVISION, VERSION, LocalizeStatus,
                          MessageType, RefusalCode)
 from ._wire import MAX_STRING_BYTES, Reader, Writer, all_finite
@@ -208,7 +208,7 @@ _MESSAGES = {int(c.TYPE): c for c in (Hello, HelloOk, Ping, Pong, Info, InfoRepl
                                       LocalizeReply, Error)}
 
 __all__ = ["MAGIC", "VERSION", "REVISION", "HEADER_BYTES", "MAX_PAYLOAD_BYTES", "FLAG_HAS_PRIOR", "FLAG_VOXELIZED",
-           "FLAG_PRIOR_HEADING", "FLAG_REFUSAL_CODE", "FLAG_DETAIL", "FLAG_NEWEST_SCANS", "ReplyDetail", "RefusalCode",
+           "FLAG_PRIOR_HEADING", "FLAG_REFUSAL_CODE", "FLAG_DETAIL", "FLAG_NEWEST_SCANS", "FLAG_TRACK", "ReplyDetail", "RefusalCode",
            "MessageType", "LocalizeStatus", "Header", "decode_header", "Hello", "HelloOk", "Ping", "Pong", "Info",
            "InfoReply", "Localize", "LocalizeSegments", "WireSegment", "segments_digest", "Timings", "LocalizeReply",
            "Error", "encode", "decode_payload", "decode_frame", "Pose", "ErrorCode", "DecodeError", "DecodeStatus"]

@@ -221,10 +221,28 @@ LocalizationResult localize_cloud(const LoadedMap& map, const api::LocalizeReque
       crop_cylinder(request.points, request.sensor_position_local, map.config.local_cloud.radius_m);
   const CloudKind kind = (request.flags & api::kFlagVoxelized) ? CloudKind::kVoxelized : CloudKind::kRaw;
   const std::optional<PosePrior> prior = pose_prior_of(request_fields(request));
-  LocalizationResult r = map.localizer->localize(cloud, request.sensor_position_local.cast<float>(), kind,
-                                                 prior ? &*prior : nullptr, deadline);
+  const Eigen::Vector3f sensor = request.sensor_position_local.cast<float>();
+  if ((request.flags & api::kFlagTrack) && prior) {  // revision 11: tracking first, on the segments made here
+    ModuleTimings timings;
+    Segments segments = kind == CloudKind::kVoxelized
+                            ? extract_segments_from_voxels(cloud, sensor, map.localizer->config().segmentation, nullptr, &timings, deadline)
+                            : extract_segments(cloud, sensor, map.localizer->config().segmentation, nullptr, &timings, deadline);
+    timings.total_ms = timings.voxel_ms + timings.ground_ms + timings.segment_ms + timings.describe_ms;
+    if (deadline.passed()) return map.localizer->localize_segments({}, sensor, &*prior, timings, deadline);
+    LocalizationResult tracked = map.localizer->track(segments, request.newest_points, sensor, *prior);
+    if (tracked.localized()) {
+      tracked.timings.voxel_ms = timings.voxel_ms, tracked.timings.ground_ms = timings.ground_ms;
+      tracked.timings.segment_ms = timings.segment_ms, tracked.timings.describe_ms = timings.describe_ms;
+      tracked.timings.total_ms += timings.total_ms;
+      return tracked;
+    }
+    LocalizationResult r = map.localizer->localize_segments(std::move(segments), sensor, &*prior, timings, deadline);
+    if (!deadline.passed()) map.localizer->refine_to_newest_scans(request.newest_points, sensor, r);
+    return r;
+  }
+  LocalizationResult r = map.localizer->localize(cloud, sensor, kind, prior ? &*prior : nullptr, deadline);
   if ((request.flags & api::kFlagNewestScans) && !deadline.passed())
-    map.localizer->refine_to_newest_scans(request.newest_points, request.sensor_position_local.cast<float>(), r);
+    map.localizer->refine_to_newest_scans(request.newest_points, sensor, r);
   return r;
 }
 

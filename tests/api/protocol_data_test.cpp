@@ -97,7 +97,7 @@ const std::set<std::string> kFiles = {
     "localize_reply_localized.bin", "localize_reply_not_localized.bin", "localize_reply_outside_prior.bin",
     "localize_refusal_code.bin", "localize_reply_refused.bin", "localize_detail.bin", "localize_reply_detail.bin",
     "localize_reply_estimate.bin", "localize_newest.bin", "localize_segments_newest.bin", "localize_reply_off_map.bin", "error.bin",
-    "localize_segments_track.bin", "localize_reply_tracking_lost.bin", "localize_reply_surfaces.bin"};
+    "localize_segments_track.bin", "localize_reply_tracking_lost.bin", "localize_reply_surfaces.bin", "localize_track.bin"};
 
 }  // namespace
 
@@ -332,6 +332,27 @@ TEST(ProtocolData, LocalizeReplyOffMap) {
     EXPECT_STREQ(to_string(static_cast<RefusalCode>(12)), "UNKNOWN") << "a later revision's code";
     EXPECT_EQ(m.status, LocalizeStatus::kNotLocalized);
   });
+}
+
+// Revision 11: LOCALIZE bit 6, tracking first (the cloud is there for the rest).
+TEST(ProtocolData, LocalizeTrack) {
+  LocalizeRequest r;
+  r.request_id = 17;
+  r.flags = kFlagHasPrior | kFlagNewestScans | kFlagTrack;
+  r.sensor_position_local = Eigen::Vector3d(1.0, 2.0, 0.5);
+  r.T_map_local_prior = pose(0.0, Eigen::Vector3d(100.0, 200.0, 0.0));
+  r.prior_radius_m = 3.0;
+  r.point_stride = 3;
+  r.points = {{1.f, 0.f, 0.f, 0.f}, {0.f, 1.f, 0.f, 0.f}, {0.f, 0.f, 1.f, 0.f}};
+  r.newest_points = {{1.5f, -2.f, 0.25f, 0.f}, {3.f, 4.f, -0.5f, 0.f}};
+  check_file<LocalizeRequest>("localize_track.bin", r, [](const LocalizeRequest& m) { EXPECT_EQ(m.flags, 97u); });
+  for (uint32_t drop : {kFlagHasPrior, kFlagNewestScans}) {
+    LocalizeRequest bad = r;
+    bad.flags &= ~drop;
+    if (drop == kFlagNewestScans) bad.newest_points.clear();
+    LocalizeRequest out;
+    EXPECT_EQ(decode_frame(encode(bad), Limits{}, out), DecodeStatus::kBadField) << drop;
+  }
 }
 
 // Revision 11: LOCALIZE_SEGMENTS bit 5, tracking on the surface layer: segments without points,

@@ -76,6 +76,10 @@ EXPECTED = {
         11, p.LocalizeStatus.NOT_LOCALIZED,
         "the vehicle's newest scans do not lie on the map's surfaces at the answer (fitness 0.53, at least 0.55)",
         Pose(), 0, 0.0, 0, [], TIMINGS, refusal=p.RefusalCode.OFF_MAP),
+    "localize_track.bin": p.Localize(17, p.FLAG_HAS_PRIOR | p.FLAG_NEWEST_SCANS | p.FLAG_TRACK, (1.0, 2.0, 0.5),
+                                     (1.0, 0.0, 0.0, 0.0), Pose((1.0, 0.0, 0.0, 0.0), (100.0, 200.0, 0.0)), 3.0,
+                                     points=pts([[1, 0, 0], [0, 1, 0], [0, 0, 1]]),
+                                     newest_points=pts([[1.5, -2, 0.25], [3, 4, -0.5]])),
     "localize_reply_tracking_lost.bin": p.LocalizeReply(
         16, p.LocalizeStatus.NOT_LOCALIZED, "tracking on the surface layer: registration fitness 0.61 below 0.75",
         Pose(), 0, 0.0, 0, [], TIMINGS, refusal=p.RefusalCode.TRACKING_LOST),
@@ -361,7 +365,7 @@ class NewestScans(unittest.TestCase):
         return p.MAGIC + struct.pack("<HHI", p.VERSION, int(p.MessageType.LOCALIZE), len(payload)) + payload
 
     def test_the_flag(self):
-        self.assertEqual((p.REVISION, p.FLAG_NEWEST_SCANS), (8, 1 << 5))
+        self.assertEqual((p.REVISION, p.FLAG_NEWEST_SCANS, p.FLAG_TRACK), (11, 1 << 5, 1 << 6))
 
     def test_round_trip_with_and_without_the_heading_tolerance(self):
         for flags, points in ((p.FLAG_NEWEST_SCANS | p.FLAG_PRIOR_HEADING, [[1, 2, 3], [4, 5, 6]]),

@@ -266,7 +266,7 @@ TEST(ServerSegments, TrackingRequestsAnswerFromTheSurfaceLayerOrSayTrackingLost)
   }
   const std::shared_ptr<const server::LoadedMap> map = server::load_map(path);
   const vehicle::SegmentQuery v(server::info_of(*map).parameters_json);
-  size_t tracked = 0, lost = 0, wrong = 0;
+  size_t tracked = 0, lost = 0, wrong = 0, cloud_by_surfaces = 0;
   std::vector<double> bytes;
   for (const Query& q : w.queries()) {
     api::LocalizeRequest cloud = q.request;
@@ -305,6 +305,18 @@ TEST(ServerSegments, TrackingRequestsAnswerFromTheSurfaceLayerOrSayTrackingLost)
     const api::LocalizeReply a = server::localize_segments_request(*map, wide), b = server::localize_segments_request(*map, plain);
     EXPECT_EQ(a.status, b.status) << q.frame;
     EXPECT_NE(a.refusal, api::RefusalCode::kTrackingLost) << q.frame;
+    // LOCALIZE bit 6: the same tracking on the segments the server makes of the cloud, and the
+    // full path after it when it does not answer (never TRACKING_LOST: the cloud is there).
+    api::LocalizeRequest tracked_cloud = cloud;
+    tracked_cloud.flags |= api::kFlagTrack;
+    const api::LocalizeReply t = server::localize_request(*map, tracked_cloud);
+    EXPECT_NE(t.refusal, api::RefusalCode::kTrackingLost);
+    if (t.status == api::LocalizeStatus::kLocalized) {
+      ASSERT_TRUE(t.detail && t.detail->estimate);
+      cloud_by_surfaces += t.detail->estimate->method == static_cast<uint8_t>(api::ReplyMethod::kSurfaces);
+      const Pose3d T_map_sensor = t.T_map_local * q.T_local_sensor;
+      wrong += position_error_m(T_map_sensor, q.T_world_sensor) > 0.3 || angle_error_deg(T_map_sensor, q.T_world_sensor) > 1.0;
+    }
     // The suite's map has no layer: TRACKING_LOST, by name.
     const api::LocalizeReply none = server::localize_segments_request(loaded_map(), light);
     EXPECT_EQ(none.refusal, api::RefusalCode::kTrackingLost);
@@ -314,6 +326,9 @@ TEST(ServerSegments, TrackingRequestsAnswerFromTheSurfaceLayerOrSayTrackingLost)
   std::sort(bytes.begin(), bytes.end());
   std::printf("[segments] tracking requests: %zu localized on the surface layer, %zu TRACKING_LOST, median %.0f KB\n", tracked, lost,
               bytes[bytes.size() / 2] / 1024);
+  // The cloud path checks the support with every segment of the cloud, the tracking request only
+  // with those within track.window_m: here 9 and 6 of 9.
+  EXPECT_GE(cloud_by_surfaces, tracked);
   EXPECT_GE(tracked * 2, w.queries().size());  // 6 of 9 (the others: too few matched segments for L2 on this short map)
   EXPECT_EQ(wrong, 0u);
 }

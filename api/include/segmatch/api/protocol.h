@@ -134,8 +134,10 @@ constexpr uint32_t kFlagDetail = 1u << 4;
 // Revision 8: the vehicle's newest scans follow (docs/protocol.md 5.4): the server refines the
 // answer to them, the sensor's pose now rather than the drift-warped whole cloud's.
 constexpr uint32_t kFlagNewestScans = 1u << 5;
+// Revision 11: track on the surface layer first (docs/protocol.md 5.4); needs bits 0 and 5.
+constexpr uint32_t kFlagTrack = 1u << 6;
 constexpr uint32_t kKnownFlags =
-    kFlagHasPrior | kFlagVoxelized | kFlagPriorHeading | kFlagRefusalCode | kFlagDetail | kFlagNewestScans;
+    kFlagHasPrior | kFlagVoxelized | kFlagPriorHeading | kFlagRefusalCode | kFlagDetail | kFlagNewestScans | kFlagTrack;
 
 struct LocalizeRequest {
   uint64_t request_id = 0;

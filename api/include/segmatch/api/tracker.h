@@ -31,7 +31,12 @@ struct TrackerConfig {
   double min_fix_sigma_m = 0.05;
   double max_radius_m = 30.0;
   double heading_tolerance_deg = 5.0;
-  int failures_before_global = 3;
+  // Tracked failures in a row before a global query. Most come from the place, not the prior:
+  // an unmapped street, or a local cloud that is mostly one. Back on a mapped street a tracked
+  // query is answered from the newest scans alone (tracking on the surface layer), where a
+  // global one needs the whole cloud to be mapped: with 3, riverside02 went global at frame 117,
+  // 10 m back on the map, and missed it; with 6 it was tracked and answered (README, 2026-12-06).
+  int failures_before_global = 6;
   // Squared Mahalanobis distance of the horizontal innovation: chi-square with 2 degrees of
   // freedom at 99.9 %.
   double gate_chi2 = 13.82;

@@ -123,6 +123,11 @@ struct SurfaceTrackingConfig {
   // answer of the wrong-prior stress without this check, 2.8 (README, 2026-12-06).
   float ambiguity_range_m = 12.0f;
   float max_shifted_support = 0.8f;
+  // Of the segments that land on map segments, at least this many pass the matcher (as
+  // RegistrationConfig::min_matched_segments, which is 3). The check above tells a pose slid
+  // along look-alike surfaces from the truth, so the floor is the least true registrations had
+  // (2 on riverside02); 3 refused riverside02 frame 37, support 25 (README, 2026-12-06).
+  int min_matched_segments = 2;
   void validate() const;      // throws std::invalid_argument naming the field
 };
 

@@ -28,6 +28,9 @@ struct LocalizationRunConfig {
   io::ReplayConfig replay;
   Thresholds thresholds;
   bool print_each = true;   // one line per query on stdout
+  // With a narrow prior and newest scans, ask the server to track on the surface layer first
+  // (LOCALIZE bit 6, protocol revision 11); --track-surfaces off clears it.
+  bool track_surfaces = true;
   // The local clouds are accumulated with the vehicle's odometry, as on a car: odometry_path,
   // or the replayed sequence's odom_poses.txt when empty (io::odometry_poses_path). The
   // sequence's poses only score. kReference builds them from the reference poses instead (a
