@@ -106,6 +106,10 @@ int replay(api::Client& client, const ReplayOptions& options) {
     }
     ++queries;
     const api::TrackMode mode = options.track ? tracker.prepare(request, q.odometer_m) : api::TrackMode::kGlobal;
+    // Tracked with the newest scans: the server tracks on the surface layer first (revision 11).
+    if (mode == api::TrackMode::kTracked && (request.flags & api::kFlagNewestScans) &&
+        request.prior_radius_m <= map_parameters.localizer.registration.max_prior_radius_m)
+      request.flags |= api::kFlagTrack;
     tracked += mode == api::TrackMode::kTracked;
     std::printf("frame %6zu  %7.1f m  %7zu points  %-7s ", q.frame, q.odometer_m, request.points.size(), api::to_string(mode));
     const auto start = std::chrono::steady_clock::now();
@@ -115,8 +119,12 @@ int replay(api::Client& client, const ReplayOptions& options) {
         ModuleTimings t;
         const api::LocalizeSegmentsRequest s = segmenter->make_request(request, &t);
         vehicle_ms.push_back(t.total_ms);
-        request_kb.push_back(api::encode(s).size() / 1024.0);
-        r = client.localize_segments(s);
+        // Tracked, with the newest scans: the tracking request first (revision 11), the full one
+        // after TRACKING_LOST.
+        const vehicle::SegmentQuery::TrackedReply tr =
+            segmenter->localize_tracking_first(s, [&](const api::LocalizeSegmentsRequest& m) { return client.localize_segments(m); });
+        request_kb.push_back(static_cast<double>(tr.request_bytes) / 1024.0);
+        r = tr.reply;
       } else {
         r = client.localize(request);
       }

@@ -45,35 +45,21 @@ struct SegmentsSide {
     vehicle_ms.push_back(t.total_ms);
     return s;
   }
-  bool tracks(const api::LocalizeSegmentsRequest& s) const {
-    const uint32_t needs = api::kSegmentsFlagHasPrior | api::kSegmentsFlagNewestScans;
-    return track && (s.flags & needs) == needs && s.prior_radius_m > 0.0 &&
-           s.prior_radius_m <= query->parameters().localizer.registration.max_prior_radius_m;
-  }
   template <typename Send>
   api::LocalizeReply exchange(const api::LocalizeRequest& r, Send&& send) {
     const api::LocalizeSegmentsRequest full = make(r);
-    if (!tracks(full)) {
+    if (!track) {
       request_bytes.push_back(static_cast<double>(api::encode(full).size()));
       return send(full);
     }
-    api::LocalizeSegmentsRequest light = query->tracking_request(full);
-    light.flags |= api::kSegmentsFlagRefusalCode;
-    const double light_bytes = static_cast<double>(api::encode(light).size());
-    tracking_bytes.push_back(light_bytes);
-    ++tracked;
-    api::LocalizeReply reply = send(light);
-    if (reply.refusal != api::RefusalCode::kTrackingLost) {
-      request_bytes.push_back(light_bytes);
-      return reply;
+    const vehicle::SegmentQuery::TrackedReply t = query->localize_tracking_first(full, send);
+    request_bytes.push_back(static_cast<double>(t.request_bytes));
+    if (t.tracking) {
+      ++tracked;
+      lost += t.lost;
+      tracking_bytes.push_back(static_cast<double>(t.tracking_bytes));
     }
-    ++lost;
-    request_bytes.push_back(light_bytes + static_cast<double>(api::encode(full).size()));
-    const float first_ms = reply.timings.server_total;
-    api::LocalizeReply again = send(full);
-    again.timings.server_total += first_ms;
-    if (again.status != api::LocalizeStatus::kLocalized) again.reason += " [" + reply.reason + "]";
-    return again;
+    return t.reply;
   }
   void print() const {
     if (!query || vehicle_ms.empty()) return;

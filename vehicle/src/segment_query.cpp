@@ -64,6 +64,12 @@ api::LocalizeSegmentsRequest SegmentQuery::make_request(const api::LocalizeReque
   return r;
 }
 
+bool SegmentQuery::can_track(const api::LocalizeSegmentsRequest& full) const {
+  const uint32_t needs = api::kSegmentsFlagHasPrior | api::kSegmentsFlagNewestScans;
+  return (full.flags & needs) == needs && full.prior_radius_m > 0.0 &&
+         full.prior_radius_m <= parameters_.localizer.registration.max_prior_radius_m;
+}
+
 api::LocalizeSegmentsRequest SegmentQuery::tracking_request(const api::LocalizeSegmentsRequest& full) const {
   const uint32_t needs = api::kSegmentsFlagHasPrior | api::kSegmentsFlagNewestScans;
   if ((full.flags & needs) != needs)

@@ -39,6 +39,41 @@ class SegmentQuery {
   // track.window_m, bit 5 set. For a vehicle with a fix (a prior and newest scans in `full`);
   // throws std::invalid_argument otherwise. A TRACKING_LOST reply means: send `full`.
   api::LocalizeSegmentsRequest tracking_request(const api::LocalizeSegmentsRequest& full) const;
+  // Whether `full` may go as a tracking request: it has the newest scans and a prior whose
+  // radius is > 0 and at most the map's registration.max_prior_radius_m (wider ones are not
+  // tracked, so the request would only come back TRACKING_LOST).
+  bool can_track(const api::LocalizeSegmentsRequest& full) const;
+
+  // What localize_tracking_first did: the reply that counts, the bytes sent in all, and whether
+  // a tracking request went first and came back TRACKING_LOST.
+  struct TrackedReply {
+    api::LocalizeReply reply;
+    size_t request_bytes = 0, tracking_bytes = 0;  // all sent; the tracking request's
+    bool tracking = false, lost = false;
+  };
+  // Sends the tracking request of `full` when it can track, and `full` itself when it cannot or
+  // the tracking request came back TRACKING_LOST (its server time is added to the reply's).
+  // send(request) -> api::LocalizeReply: a Client's localize_segments, or in-process.
+  template <typename Send>
+  TrackedReply localize_tracking_first(const api::LocalizeSegmentsRequest& full, Send&& send) const {
+    TrackedReply out;
+    if (can_track(full)) {
+      api::LocalizeSegmentsRequest light = tracking_request(full);
+      light.flags |= api::kSegmentsFlagRefusalCode;
+      out.tracking = true;
+      out.request_bytes = out.tracking_bytes = api::encode(light).size();
+      out.reply = send(light);
+      if (out.reply.refusal != api::RefusalCode::kTrackingLost) return out;
+      out.lost = true;
+    }
+    const float tracking_ms = out.reply.timings.server_total;
+    const std::string tracking_reason = out.reply.reason;
+    out.request_bytes += api::encode(full).size();
+    out.reply = send(full);
+    out.reply.timings.server_total += tracking_ms;
+    if (out.lost && out.reply.status != api::LocalizeStatus::kLocalized) out.reply.reason += " [" + tracking_reason + "]";
+    return out;
+  }
 
   // The described segments of a local cloud (query frame), every point kept.
   Segments segment(const PointCloud& cloud, const Eigen::Vector3d& sensor_position, CloudKind kind,
