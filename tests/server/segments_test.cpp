@@ -317,10 +317,22 @@ TEST(ServerSegments, TrackingRequestsAnswerFromTheSurfaceLayerOrSayTrackingLost)
       const Pose3d T_map_sensor = t.T_map_local * q.T_local_sensor;
       wrong += position_error_m(T_map_sensor, q.T_world_sensor) > 0.3 || angle_error_deg(T_map_sensor, q.T_world_sensor) > 1.0;
     }
-    // The suite's map has no layer: TRACKING_LOST, by name.
+    // The suite's map has no layer: TRACKING_LOST, by name; the vehicle library then sends the
+    // full request and gets its answer.
     const api::LocalizeReply none = server::localize_segments_request(loaded_map(), light);
     EXPECT_EQ(none.refusal, api::RefusalCode::kTrackingLost);
     EXPECT_NE(none.reason.find("no surface layer"), std::string::npos) << none.reason;
+    auto in_process = [](const server::LoadedMap& m) {
+      return [&m](const api::LocalizeSegmentsRequest& x) { return server::localize_segments_request(m, x); };
+    };
+    const auto first = v.localize_tracking_first(full, in_process(loaded_map()));
+    EXPECT_TRUE(first.tracking && first.lost);
+    EXPECT_EQ(first.reply.status, server::localize_segments_request(loaded_map(), full).status) << q.frame;
+    EXPECT_EQ(first.request_bytes, first.tracking_bytes + api::encode(full).size());
+    const auto here = v.localize_tracking_first(full, in_process(*map));
+    EXPECT_TRUE(here.tracking);
+    EXPECT_EQ(here.lost, r.status != api::LocalizeStatus::kLocalized) << q.frame;
+    EXPECT_FALSE(v.can_track(plain)) << "a 25 m prior is not tracked";
   }
   std::filesystem::remove(path);
   std::sort(bytes.begin(), bytes.end());
