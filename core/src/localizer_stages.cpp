@@ -55,7 +55,6 @@ PointCloud gather(const Segments& segments, const Matches& inliers, bool query_s
 
 namespace {
 
-constexpr double kWindowMarginM = 10.0;  // map segments straddling a window's edge
 
 // Every query segment's points (every stride-th of each).
 PointCloud all_query_points(const Segments& query, size_t stride) {
@@ -102,11 +101,6 @@ void refine_recent_window(const WindowPoints& points, const Eigen::Vector3f& sen
   r.T_map_query = window.T_target_query;
 }
 
-namespace {
-
-// The segment check of a registered pose: enough query segments land on map segments, and
-// enough of those pairs pass the matcher (RegistrationConfig::min_support, min_matched_segments).
-// Fills r's support and inliers; false, with r's registration refusal, when too few.
 bool well_supported(const Segments& targets, const CentroidIndex& centroids, const RandomForestMatcher* classifier,
                     const LocalizerConfig& config, const Pose3d& T_map_query, LocalizationResult& r) {
   const Support support = support_of(r.query, centroids, T_map_query, config.support_radius_m);
@@ -122,19 +116,8 @@ bool well_supported(const Segments& targets, const CentroidIndex& centroids, con
   return false;
 }
 
-// Over a wide prior the support must also reach the localizer's own floors, with and without a
-// prior, whichever is higher (CorrelativeSearchConfig).
-bool supported_globally(const LocalizerConfig& config, LocalizationResult& r) {
-  const int floor = std::max({config.min_support, config.min_support_with_prior, config.registration.min_support});
-  if (r.support >= static_cast<size_t>(floor)) return true;
-  r.registration_refusal = RegistrationRefusal::kLowSupport;
-  r.registration_reason = std::to_string(r.support) + " query segments land on map segments under the registered pose (over a wide prior at least " +
-                          std::to_string(floor) + ")";
-  return false;
-}
-
 void localized_by(const RegistrationResult& reg, LocalizationResult& r,
-                  LocalizationMethod method = LocalizationMethod::kRegistration) {
+                  LocalizationMethod method) {
   r.registration_refusal = RegistrationRefusal::kNone;
   r.registration_reason.clear();
   r.refine_fitness = reg.fitness;
@@ -144,6 +127,19 @@ void localized_by(const RegistrationResult& reg, LocalizationResult& r,
   r.T_map_query = reg.T_map_query;
   r.covariance = reg.covariance;
   r.confidence = reg.fitness;
+}
+
+namespace {
+
+// Over a wide prior the support must also reach the localizer's own floors, with and without a
+// prior, whichever is higher (CorrelativeSearchConfig).
+bool supported_globally(const LocalizerConfig& config, LocalizationResult& r) {
+  const int floor = std::max({config.min_support, config.min_support_with_prior, config.registration.min_support});
+  if (r.support >= static_cast<size_t>(floor)) return true;
+  r.registration_refusal = RegistrationRefusal::kLowSupport;
+  r.registration_reason = std::to_string(r.support) + " query segments land on map segments under the registered pose (over a wide prior at least " +
+                          std::to_string(floor) + ")";
+  return false;
 }
 
 // A prior too wide for ICP (CorrelativeSearchConfig): the correlative search's best distinct
@@ -238,101 +234,6 @@ void register_near_prior(const Segments& targets, const TargetPoints* source, co
   r.refine_rmse_m = reg.rmse_m;
   if (!reg.accepted() || !well_supported(targets, centroids, classifier, config, reg.T_map_query, r)) return;
   localized_by(reg, r);
-}
-
-namespace {
-
-struct ShiftedSupport {
-  size_t support = 0;
-  double offset_m = 0.0;
-  bool along = true;
-};
-
-// The best support of the query segments under the registered pose shifted horizontally along
-// its weakest axis, and across it, by 1.5 m to SurfaceTrackingConfig::ambiguity_range_m (0.5 m
-// steps, a half support radius). Walls and ground hold a street's cross-section, not where along
-// it the vehicle is: a scan registered a few metres along a street of look-alike facades fits
-// them (fitness 0.89 on the simulated demo city, a prior 6 m off), while the objects fit at the
-// truth, where their support is far higher (README, 2026-12-06).
-ShiftedSupport best_shifted_support(const Segments& query, const CentroidIndex& centroids, const LocalizerConfig& config,
-                                    const RegistrationResult& reg) {
-  Eigen::Vector3d along(reg.weakest_axis.x(), reg.weakest_axis.y(), 0.0);
-  if (along.norm() < 1e-6) along = Eigen::Vector3d::UnitX();
-  along.normalize();
-  const Eigen::Vector3d across(-along.y(), along.x(), 0.0);
-  ShiftedSupport best;
-  for (const Eigen::Vector3d* axis : {static_cast<const Eigen::Vector3d*>(&along), &across})
-    for (double d = 1.5; d <= config.track.ambiguity_range_m + 1e-9; d += 0.5)
-      for (double sign : {-1.0, 1.0}) {
-        Pose3d shifted = reg.T_map_query;
-        shifted.translation() += sign * d * *axis;
-        const size_t n = support_of(query, centroids, shifted, config.support_radius_m).count();
-        if (n > best.support) best = {n, sign * d, axis == &along};
-      }
-  return best;
-}
-
-}  // namespace
-
-void track_on_surfaces(const PointCloud& newest, const Segments& targets, const TargetPoints* source, const CentroidIndex& centroids,
-                       const RandomForestMatcher* classifier, const MapSurfaces* surfaces, const LocalizerConfig& config,
-                       const PosePrior& prior, const Eigen::Vector3f& sensor, LocalizationResult& r) {
-  const SurfaceTrackingConfig& c = config.track;
-  auto lost = [&r](std::string why) {
-    r = refuse(std::move(r), Refusal::kTrackingLost, "tracking on the surface layer: " + why);
-    r.registration_reason.clear();  // it is the reason now; the typed registration_refusal stays
-  };
-  if (!c.enabled) return lost("off in this map's parameters (track.enabled)");
-  if (!surfaces) return lost("the map has no surface layer");
-  if (prior.radius_m > config.registration.max_prior_radius_m)
-    return lost("the prior's radius " + std::to_string(prior.radius_m) + " m is wider than registration.max_prior_radius_m");
-  const Eigen::Vector3d s = sensor.cast<double>();
-  VoxelGridConfig thin;
-  thin.leaf_m = c.leaf_m;
-  thin.min_points_per_voxel = 1;
-  const PointCloud points = voxel_filter(crop_cylinder(newest, s, c.window_m), thin);
-  if (points.size() < static_cast<size_t>(c.min_points))
-    return lost(std::to_string(points.size()) + " newest points near the sensor (at least " + std::to_string(c.min_points) + ")");
-  const Eigen::Vector3d centre = prior.T_map_query * s;
-  const double reach = c.window_m + prior.radius_m + kWindowMarginM;
-  RegistrationConfig gates = config.registration;
-  gates.window_m = c.window_m;
-  gates.min_query_points = c.min_points;
-  gates.min_fitness = c.min_fitness;
-  const float max_rmse_m = std::max(config.max_refine_rmse_voxels * config.segmentation.voxel.leaf_m, c.leaf_m);
-  const PointCloud layer = crop_cylinder(surfaces->near(centre, reach), centre, reach);
-  auto registered = [&](const RegistrationConfig& g) {
-    return register_to_map(points, layer, prior.T_map_query, s, prior.radius_m, prior.max_rotation_deg, max_rmse_m, g,
-                           config.refine, config.covariance);
-  };
-  RegistrationResult reg;
-  if (c.fine_first_m > 0.0f) {  // SurfaceTrackingConfig::fine_first_m
-    RegistrationConfig fine_only = gates;
-    fine_only.coarse_stage = false;
-    reg = registered(fine_only);
-    if (reg.accepted() && (reg.T_map_query * s - centre).norm() > c.fine_first_m) reg.refusal = RegistrationRefusal::kOutsidePrior;
-  }
-  if (!reg.accepted()) reg = registered(gates);
-  r.registration_refusal = reg.refusal;
-  r.registration_reason = reg.reason;
-  r.refine_fitness = reg.fitness;
-  r.refine_rmse_m = reg.rmse_m;
-  r.T_map_query = reg.T_map_query;
-  if (!reg.accepted()) return lost(reg.reason);
-  LocalizerConfig floors = config;  // the surface layer's own floor of matched segments
-  floors.registration.min_matched_segments = c.min_matched_segments;
-  if (!well_supported(targets, centroids, classifier, floors, reg.T_map_query, r)) return lost(r.registration_reason);
-  const ShiftedSupport shifted = best_shifted_support(r.query, centroids, config, reg);
-  if (static_cast<float>(shifted.support) >= c.max_shifted_support * static_cast<float>(r.support)) {
-    r.registration_refusal = RegistrationRefusal::kAmbiguous;
-    char why[200];
-    std::snprintf(why, sizeof(why), "the pose %.1f m away (%s the weakest axis) has %zu supporting segments, the registered one %zu: "
-                  "the scans fit the surfaces, the objects fit elsewhere", shifted.offset_m, shifted.along ? "along" : "across",
-                  shifted.support, r.support);
-    return lost(why);
-  }
-  r.window_points = points.size();
-  localized_by(reg, r, LocalizationMethod::kSurfaces);
 }
 
 // The newest scans are raw points, ground included. Onto the map's surface layer they register

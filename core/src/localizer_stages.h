@@ -10,6 +10,8 @@
 namespace segmatch {
 namespace detail {
 
+constexpr double kWindowMarginM = 10.0;  // map segments (or surfaces) straddling a window's edge
+
 // The map segments whose centroids lie within radius_m of center, horizontally.
 // r, not localized, with its typed refusal and the reason in words (a refused pose has no
 // covariance).
@@ -35,6 +37,16 @@ WindowPoints window_points(const Segments& query, const Segments& targets, const
 void refine_recent_window(const WindowPoints& points, const Eigen::Vector3f& sensor, float min_fitness,
                           const RefineConfig& config, const CovarianceConfig& covariance, LocalizationResult& r);
 
+// The segment check of a registered pose: enough query segments land on map segments, and
+// enough of those pairs pass the matcher (RegistrationConfig::min_support, min_matched_segments).
+// Fills r's support and inliers; false, with r's registration refusal, when too few.
+bool well_supported(const Segments& targets, const CentroidIndex& centroids, const RandomForestMatcher* classifier,
+                    const LocalizerConfig& config, const Pose3d& T_map_query, LocalizationResult& r);
+
+// A registration's answer as r's: localized by `method`, its pose, covariance and fitness.
+void localized_by(const RegistrationResult& reg, LocalizationResult& r,
+                  LocalizationMethod method = LocalizationMethod::kRegistration);
+
 // Tracking by registration (registration.h): localizes r, or says in r why registration did not.
 void register_near_prior(const Segments& targets, const TargetPoints* source, const CentroidIndex& centroids,
                          const RandomForestMatcher* classifier, const LocalizerConfig& config, const PosePrior& prior,
@@ -44,8 +56,9 @@ void register_near_prior(const Segments& targets, const TargetPoints* source, co
 // covariance and window fields when they agree with it.
 // With the map's surface layer the scans keep their ground and register onto it; without, onto
 // the segments' points, ground removed.
-// Tracking on the surface layer (Localizer::track, SurfaceTrackingConfig): localized by the
-// newest scans' registration around the prior, or refused with Refusal::kTrackingLost.
+// Tracking on the surface layer (Localizer::track, SurfaceTrackingConfig; surface_tracking.cpp):
+// localized by the newest scans' registration around the prior, or refused with
+// Refusal::kTrackingLost.
 void track_on_surfaces(const PointCloud& newest, const Segments& targets, const TargetPoints* source, const CentroidIndex& centroids,
                        const RandomForestMatcher* classifier, const MapSurfaces* surfaces, const LocalizerConfig& config,
                        const PosePrior& prior, const Eigen::Vector3f& sensor, LocalizationResult& r);
