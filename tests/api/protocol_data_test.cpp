@@ -170,17 +170,23 @@ TEST(ProtocolData, LocalizeWithPriorVoxelizedAndHeading) {
   });
 }
 
-// Revision 8: the vehicle's newest scans after the points (bit 5).
-TEST(ProtocolData, LocalizeNewest) {
+// A LOCALIZE with a prior at (100, 200, 0), three points and two newest points (bit 5).
+LocalizeRequest newest_request(uint64_t id, uint32_t flags, double radius_m) {
   LocalizeRequest r;
-  r.request_id = 11;
-  r.flags = kFlagHasPrior | kFlagNewestScans;
+  r.request_id = id;
+  r.flags = flags;
   r.sensor_position_local = Eigen::Vector3d(1.0, 2.0, 0.5);
   r.T_map_local_prior = pose(0.0, Eigen::Vector3d(100.0, 200.0, 0.0));
-  r.prior_radius_m = 5.0;
+  r.prior_radius_m = radius_m;
   r.point_stride = 3;
   r.points = {{1.f, 0.f, 0.f, 0.f}, {0.f, 1.f, 0.f, 0.f}, {0.f, 0.f, 1.f, 0.f}};
   r.newest_points = {{1.5f, -2.f, 0.25f, 0.f}, {3.f, 4.f, -0.5f, 0.f}};
+  return r;
+}
+
+// Revision 8: the vehicle's newest scans after the points (bit 5).
+TEST(ProtocolData, LocalizeNewest) {
+  const LocalizeRequest r = newest_request(11, kFlagHasPrior | kFlagNewestScans, 5.0);
   check_file<LocalizeRequest>("localize_newest.bin", r, [](const LocalizeRequest& m) {
     EXPECT_EQ(m.flags, 33u);
     ASSERT_EQ(m.points.size(), 3u);
@@ -296,15 +302,20 @@ TEST(ProtocolData, LocalizeDetail) {
   });
 }
 
+// A revision-7 detail block: the window fields, the method and covariance entries (k + first) / scale.
+ReplyDetail detail_with_estimate(float warp_m, float warp_deg, uint32_t points, ReplyMethod method, int first, float scale) {
+  ReplyDetail d{warp_m, warp_deg, points, {}};
+  ReplyDetail::Estimate e;
+  e.method = static_cast<uint8_t>(method);
+  for (size_t k = 0; k < e.covariance_upper.size(); ++k) e.covariance_upper[k] = static_cast<float>(k + first) / scale;
+  d.estimate = e;
+  return d;
+}
+
 // Revision 7: the detail block with the answer's method and covariance (D = 100).
 TEST(ProtocolData, LocalizeEstimate) {
   LocalizeReply with = localized_reply(14);
-  ReplyDetail d{0.125f, 0.0625f, 2000, {}};
-  ReplyDetail::Estimate e;
-  e.method = static_cast<uint8_t>(ReplyMethod::kRegistration);
-  for (size_t k = 0; k < e.covariance_upper.size(); ++k) e.covariance_upper[k] = static_cast<float>(k + 1) / 4096.0f;
-  d.estimate = e;
-  with.detail = d;
+  with.detail = detail_with_estimate(0.125f, 0.0625f, 2000, ReplyMethod::kRegistration, 1, 4096.0f);
   check_file<LocalizeReply>("localize_reply_estimate.bin", with, [](const LocalizeReply& m) {
     ASSERT_TRUE(m.detail.has_value());
     ASSERT_TRUE(m.detail->estimate.has_value());
@@ -336,15 +347,7 @@ TEST(ProtocolData, LocalizeReplyOffMap) {
 
 // Revision 11: LOCALIZE bit 6, tracking first (the cloud is there for the rest).
 TEST(ProtocolData, LocalizeTrack) {
-  LocalizeRequest r;
-  r.request_id = 17;
-  r.flags = kFlagHasPrior | kFlagNewestScans | kFlagTrack;
-  r.sensor_position_local = Eigen::Vector3d(1.0, 2.0, 0.5);
-  r.T_map_local_prior = pose(0.0, Eigen::Vector3d(100.0, 200.0, 0.0));
-  r.prior_radius_m = 3.0;
-  r.point_stride = 3;
-  r.points = {{1.f, 0.f, 0.f, 0.f}, {0.f, 1.f, 0.f, 0.f}, {0.f, 0.f, 1.f, 0.f}};
-  r.newest_points = {{1.5f, -2.f, 0.25f, 0.f}, {3.f, 4.f, -0.5f, 0.f}};
+  const LocalizeRequest r = newest_request(17, kFlagHasPrior | kFlagNewestScans | kFlagTrack, 3.0);
   check_file<LocalizeRequest>("localize_track.bin", r, [](const LocalizeRequest& m) { EXPECT_EQ(m.flags, 97u); });
   for (uint32_t drop : {kFlagHasPrior, kFlagNewestScans}) {
     LocalizeRequest bad = r;
@@ -400,12 +403,7 @@ TEST(ProtocolData, LocalizeSegmentsTrack) {
     EXPECT_STREQ(to_string(m.refusal), "TRACKING_LOST");
   });
   LocalizeReply tracked = localized_reply(16);
-  ReplyDetail d{0.f, 0.f, 3100, {}};
-  ReplyDetail::Estimate e;
-  e.method = static_cast<uint8_t>(ReplyMethod::kSurfaces);
-  for (size_t k = 0; k < e.covariance_upper.size(); ++k) e.covariance_upper[k] = static_cast<float>(k + 2) / 8192.0f;
-  d.estimate = e;
-  tracked.detail = d;
+  tracked.detail = detail_with_estimate(0.f, 0.f, 3100, ReplyMethod::kSurfaces, 2, 8192.0f);
   check_file<LocalizeReply>("localize_reply_surfaces.bin", tracked, [](const LocalizeReply& m) {
     ASSERT_TRUE(m.detail && m.detail->estimate);
     EXPECT_EQ(m.detail->estimate->method, 2u);

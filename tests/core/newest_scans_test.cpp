@@ -100,32 +100,14 @@ TEST(NewestScans, LeaveTheAnswerWhenTheyDoNotQualify) {
   unchanged(off, s.newest(), off_switch.localizer(), "disabled");
 }
 
-// The map's surface layer, in memory: the points of the street and its ground.
-class Surfaces : public MapSurfaces {
- public:
-  explicit Surfaces(PointCloud points) : points_(std::move(points)) {}
-  PointCloud near(const Eigen::Vector3d& centre, double radius_m) const override {
-    return crop_cylinder(points_, centre, radius_m);
-  }
-
- private:
-  PointCloud points_;
-};
-
-PointCloud with_ground(PointCloud cloud) {
-  for (float x = -10.f; x <= 60.f; x += 0.1f)
-    for (float y = -20.f; y <= 20.f; y += 0.1f) cloud.push_back(Point{x, y, 0.f, 0.f});
-  return cloud;
-}
-
 // Segments alone hold the height, roll and pitch weakly (the poles and walls are vertical);
 // with the surface layer the scans keep their ground and register onto it: an answer off in
 // height and tilted comes back to the truth.
 TEST(NewestScans, OntoTheSurfaceLayerTheGroundHoldsHeightRollAndPitch) {
   Street s;
   const Localizer segments_only = s.localizer();
-  const PointCloud surfaces = with_ground(s.map_cloud);
-  const Localizer layered(s.config, segments_only.targets(), nullptr, nullptr, std::make_shared<Surfaces>(surfaces));
+  const PointCloud surfaces = test::with_ground(s.map_cloud);
+  const Localizer layered(s.config, segments_only.targets(), nullptr, nullptr, std::make_shared<test::InMemorySurfaces>(surfaces));
   LocalizationResult off = answer_off(s.T_query.inverse(), s.sensor_query(), 0.0, 0.0);
   Pose3d tilt = Pose3d::Identity();  // 0.6 deg of roll and 0.12 m of height about the sensor
   const Eigen::Vector3d at = s.sensor_map.cast<double>();
@@ -147,7 +129,7 @@ TEST(NewestScans, OntoTheSurfaceLayerTheGroundHoldsHeightRollAndPitch) {
 TEST(NewestScans, SeeingWhatTheSurfaceLayerNeverSawRefusesTheAnswerAsOffMap) {
   Street s;
   const Localizer segments_only = s.localizer();
-  const PointCloud surfaces = with_ground(s.map_cloud);
+  const PointCloud surfaces = test::with_ground(s.map_cloud);
   PointCloud unmapped;  // a block of buildings where the map has open ground
   for (float x = 0.f; x <= 50.f; x += 10.f)
     for (float y : {-15.f, 10.f}) test::add_box(unmapped, x, y, 6.f, 4.f, 8.f);
@@ -155,7 +137,7 @@ TEST(NewestScans, SeeingWhatTheSurfaceLayerNeverSawRefusesTheAnswerAsOffMap) {
   const Eigen::Vector3f sensor = s.sensor_query().cast<float>();
   const LocalizationResult answer = answer_off(s.T_query.inverse(), s.sensor_query(), 0.1, 0.2);
 
-  const Localizer layered(s.config, segments_only.targets(), nullptr, nullptr, std::make_shared<Surfaces>(surfaces));
+  const Localizer layered(s.config, segments_only.targets(), nullptr, nullptr, std::make_shared<test::InMemorySurfaces>(surfaces));
   LocalizationResult r = answer;
   layered.refine_to_newest_scans(newest, sensor, r);
   EXPECT_FALSE(r.localized());
@@ -181,7 +163,7 @@ TEST(NewestScans, SeeingWhatTheSurfaceLayerNeverSawRefusesTheAnswerAsOffMap) {
 
   Street off_switch;
   off_switch.config.newest.refuse_off_map = false;
-  const Localizer lenient(off_switch.config, segments_only.targets(), nullptr, nullptr, std::make_shared<Surfaces>(surfaces));
+  const Localizer lenient(off_switch.config, segments_only.targets(), nullptr, nullptr, std::make_shared<test::InMemorySurfaces>(surfaces));
   for (const Localizer* l : {&lenient, &segments_only}) {
     LocalizationResult kept = answer;
     l->refine_to_newest_scans(newest, sensor, kept);

@@ -16,23 +16,6 @@ using test::transformed;
 
 constexpr double kDeg = M_PI / 180.0;
 
-class Surfaces : public MapSurfaces {
- public:
-  explicit Surfaces(PointCloud points) : points_(std::move(points)) {}
-  PointCloud near(const Eigen::Vector3d& centre, double radius_m) const override {
-    return crop_cylinder(points_, centre, radius_m);
-  }
-
- private:
-  PointCloud points_;
-};
-
-PointCloud with_ground(PointCloud cloud) {
-  for (float x = -10.f; x <= 60.f; x += 0.1f)
-    for (float y = -20.f; y <= 20.f; y += 0.1f) cloud.push_back(Point{x, y, 0.f, 0.f});
-  return cloud;
-}
-
 struct Street {
   LocalizerConfig config = test::street_localizer_config();
   PointCloud map_cloud = test::street_with_platforms();
@@ -45,10 +28,10 @@ struct Street {
   }();
   Segments map_segments() const { return extract_segments(map_cloud, sensor_map, config.segmentation); }
   Localizer layered() const {
-    return Localizer(config, map_segments(), nullptr, nullptr, std::make_shared<Surfaces>(with_ground(map_cloud)));
+    return Localizer(config, map_segments(), nullptr, nullptr, std::make_shared<test::InMemorySurfaces>(test::with_ground(map_cloud)));
   }
   Eigen::Vector3d sensor_query() const { return T_query * sensor_map.cast<double>(); }
-  PointCloud newest() const { return transformed(with_ground(map_cloud), T_query); }
+  PointCloud newest() const { return transformed(test::with_ground(map_cloud), T_query); }
   // The query's segments as a tracking request brings them: no points.
   Segments query_segments() const {
     Segments s = extract_segments(transformed(map_cloud, T_query), sensor_query().cast<float>(), config.segmentation);

@@ -71,6 +71,24 @@ inline PointCloud transformed(const PointCloud& cloud, const Pose3d& T) {
   return out;
 }
 
+// A map's surface layer held in memory (the server reads it from the map file's tiles).
+class InMemorySurfaces : public MapSurfaces {
+ public:
+  explicit InMemorySurfaces(PointCloud points) : points_(std::move(points)) {}
+  PointCloud near(const Eigen::Vector3d& centre, double radius_m) const override { return crop_cylinder(points_, centre, radius_m); }
+
+ private:
+  PointCloud points_;
+};
+
+// The scene with flat ground under it (x -10..60 m, y -20..20 m, 0.1 m grid): what a surface
+// layer holds and segments leave out.
+inline PointCloud with_ground(PointCloud cloud) {
+  for (float x = -10.f; x <= 60.f; x += 0.1f)
+    for (float y = -20.f; y <= 20.f; y += 0.1f) cloud.push_back(Point{x, y, 0.f, 0.f});
+  return cloud;
+}
+
 // L2 matching on eigen features (the scene is too small to train a forest on), no ground.
 inline LocalizerConfig street_localizer_config() {
   LocalizerConfig c;
