@@ -29,6 +29,9 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <deque>
+#include <map>
+#include <set>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
@@ -54,6 +57,39 @@ std::vector<api::LocalizeRequest> revisit_requests(const sim::City& city, const 
   schedule.every_m = every_m;
   schedule.odometry = &odometry;
   std::vector<api::LocalizeRequest> out;
+  // The vehicle's newest scans (the last newest_m of kept scans, placed by its odometry, thinned
+  // to 0.2 m as segmatch-eval sends them) at each query's frame: a second pass over the same scans.
+  constexpr double kNewestM = 10.0;
+  std::map<size_t, PointCloud> newest_at;
+  {
+    std::deque<std::pair<size_t, PointCloud>> recent;  // (frame, points in the odometry frame)
+    std::set<size_t> query_frames;
+    sim::for_each_local_cloud(caster, sim::hdl64e(), city.second, local_cloud, schedule,
+                              [&](const sim::SimulatedLocalCloud& lc) { query_frames.insert(lc.frame); });
+    VoxelGridConfig thin;
+    thin.leaf_m = 0.2f;
+    thin.min_points_per_voxel = 1;
+    auto emit_before = [&](size_t frame) {  // query frames up to `frame` see the scans kept so far
+      while (!query_frames.empty() && *query_frames.begin() <= frame) {
+        PointCloud all;
+        for (const auto& kept : recent) all.insert(all.end(), kept.second.begin(), kept.second.end());
+        newest_at[*query_frames.begin()] = voxel_filter(all, thin);
+        query_frames.erase(query_frames.begin());
+      }
+    };
+    sim::for_each_kept_scan(caster, sim::hdl64e(), city.second, local_cloud, schedule, [&](size_t frame, const sim::SimulatedScan& scan) {
+      if (frame > 0) emit_before(frame - 1);
+      PointCloud placed = scan.points;
+      for (Point& p : placed) {
+        const Eigen::Vector3f q = odometry[frame].cast<float>() * p.xyz();
+        p.x = q.x(), p.y = q.y(), p.z = q.z();
+      }
+      recent.emplace_back(frame, voxel_filter(placed, thin));
+      while (city.second.odometer_m[frame] - city.second.odometer_m[recent.front().first] > kNewestM) recent.pop_front();
+      emit_before(frame);
+    });
+    emit_before(SIZE_MAX);
+  }
   sim::for_each_local_cloud(caster, sim::hdl64e(), city.second, local_cloud, schedule,
                             [&](const sim::SimulatedLocalCloud& lc) {
     api::LocalizeRequest r;
@@ -63,6 +99,7 @@ std::vector<api::LocalizeRequest> revisit_requests(const sim::City& city, const 
     // priors; not sent without kFlagHasPrior.
     r.T_map_local_prior = lc.T_world_sensor * lc.T_cloud_sensor.inverse();
     r.points = lc.cloud;
+    if (const auto n = newest_at.find(lc.frame); n != newest_at.end()) r.newest_points = n->second;  // sent with bit 5 only
     // What a vehicle sends (docs/protocol.md 5.4): its local cloud voxelized with the map's grid.
     if (voxel) {
       r.points = voxel_filter(r.points, *voxel);
@@ -384,15 +421,14 @@ int main(int argc, char** argv) {
   out["tracked_cloud"] = run_kind(server.port(), tracked_cloud, median_bytes(tracked), o.bench, {1, 4}, false);
   out["tracked_segments"] = run_kind(server.port(), tracked_segs, median_bytes(tracked_segments), o.bench, {1, 4}, false);
   // Tracking on the surface layer (protocol revision 11): the same queries as tracking requests,
-  // segments without points and at most track.max_points newest points. The simulated local
-  // clouds come whole: their points within the map's track.window_m of the sensor stand in for
-  // the newest scans (the request keeps at most track.max_points of them either way).
+  // the segments within track.window_m without points and at most track.max_points of the
+  // newest scans (the last 10 m of kept scans, placed by the drifting odometry).
   const vehicle::SegmentQuery vehicle_side = vehicle::SegmentQuery::from_info(connect(server.port()).info());
   std::vector<api::LocalizeSegmentsRequest> tracking;
   for (size_t i = 0; i < tracked_segments.size(); ++i) {
     api::LocalizeSegmentsRequest full = tracked_segments[i];
     full.flags |= api::kSegmentsFlagNewestScans | api::kSegmentsFlagRefusalCode | api::kSegmentsFlagDetail;
-    full.newest_points = crop_cylinder(tracked[i].points, tracked[i].sensor_position_local, config.localizer.track.window_m);
+    full.newest_points = tracked[i].newest_points;
     tracking.push_back(vehicle_side.tracking_request(full));
   }
   const Kind tracking_kind{"tracking requests (LOCALIZE_SEGMENTS bit 5, 3 m prior)",

@@ -52,6 +52,8 @@ void SurfaceTrackingConfig::validate() const {
   if (min_matched_segments < 0) throw std::invalid_argument("SurfaceTrackingConfig.min_matched_segments must be >= 0");
   if (!(fine_first_m >= 0.0f) || !std::isfinite(fine_first_m))
     throw std::invalid_argument("SurfaceTrackingConfig.fine_first_m must be finite and >= 0 (0: off)");
+  if (!(fine_first_max_radius_m >= 0.0f) || !std::isfinite(fine_first_max_radius_m))
+    throw std::invalid_argument("SurfaceTrackingConfig.fine_first_max_radius_m must be finite and >= 0");
   positive(max_shifted_support, "max_shifted_support");
   if (!(min_fitness >= 0.0f && min_fitness <= 1.0f)) throw std::invalid_argument("SurfaceTrackingConfig.min_fitness must be in 0..1");
 }

@@ -65,7 +65,7 @@ RegistrationResult register_on_layer(const PointCloud& points, const MapSurfaces
     return register_to_map(points, layer, prior.T_map_query, s, prior.radius_m, prior.max_rotation_deg, max_rmse_m, g,
                            config.refine, config.covariance);
   };
-  if (c.fine_first_m > 0.0f) {
+  if (c.fine_first_m > 0.0f && prior.radius_m <= c.fine_first_max_radius_m) {
     RegistrationConfig fine_only = gates;
     fine_only.coarse_stage = false;
     // A point moves at most fine_first_m plus its lever on the turn; its neighbours for the

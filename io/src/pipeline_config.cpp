@@ -152,6 +152,7 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("max_shifted_support", l.track.max_shifted_support);
   v("min_matched_segments", l.track.min_matched_segments);
   v("fine_first_m", l.track.fine_first_m);
+  v("fine_first_max_radius_m", l.track.fine_first_max_radius_m);
   v.section("localizer");
   v("support_radius_m", l.support_radius_m);
   v("min_support", l.min_support);

@@ -150,6 +150,9 @@ TEST(SurfaceTracking, ConfigRefusesBadValuesByName) {
   c = {};
   c.max_shifted_support = 0.0f;
   EXPECT_THROW(c.validate(), std::invalid_argument);
+  c = {};
+  c.fine_first_max_radius_m = -1.0f;
+  EXPECT_THROW(c.validate(), std::invalid_argument);
 }
 
 }  // namespace
