@@ -17,10 +17,9 @@ void CorrelativeSearchConfig::validate() const {
   positive(max_radius_m, "max_radius_m");
   positive(resolution_m, "resolution_m");
   positive(angle_step_deg, "angle_step_deg");
-  if (!(min_separation_m >= 0.0f) || !std::isfinite(min_separation_m))
-    throw std::invalid_argument("CorrelativeSearchConfig.min_separation_m must be finite and >= 0");
+  detail::require_non_negative(min_separation_m, "CorrelativeSearchConfig", "min_separation_m");
   if (max_query_points < 10) throw std::invalid_argument("CorrelativeSearchConfig.max_query_points must be >= 10");
-  if (!(min_fitness >= 0.0f && min_fitness <= 1.0f)) throw std::invalid_argument("CorrelativeSearchConfig.min_fitness must be in 0..1");
+  detail::require_fraction(min_fitness, "CorrelativeSearchConfig", "min_fitness");
   if (candidates < 1) throw std::invalid_argument("CorrelativeSearchConfig.candidates must be >= 1");
 }
 

@@ -271,22 +271,54 @@ Localizer::Localizer(const LocalizerConfig& config, Segments targets,
   index_.build(targets_);
 }
 
-LocalizationResult Localizer::localize(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
-                                       CloudKind kind, const PosePrior* prior, const Deadline& deadline) const {
-  check_prior(prior);
-  if (deadline.passed()) return stopped({}, "before segmentation");  // it waited past it
-  ModuleTimings timings;
+Segments Localizer::segment_query(const PointCloud& cloud, const Eigen::Vector3f& sensor_position, CloudKind kind,
+                                   ModuleTimings& timings, const Deadline& deadline) const {
   Stopwatch clock;
   Segments query = kind == CloudKind::kVoxelized
                        ? extract_segments_from_voxels(cloud, sensor_position, config_.segmentation, nullptr, &timings, deadline)
                        : extract_segments(cloud, sensor_position, config_.segmentation, nullptr, &timings, deadline);
   timings.total_ms = clock.lap();
+  return query;
+}
+
+LocalizationResult Localizer::localize(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
+                                       CloudKind kind, const PosePrior* prior, const Deadline& deadline) const {
+  check_prior(prior);
+  if (deadline.passed()) return stopped({}, "before segmentation");  // it waited past it
+  ModuleTimings timings;
+  Segments query = segment_query(cloud, sensor_position, kind, timings, deadline);
   if (deadline.passed()) {  // the segments may be incomplete: never match them
     LocalizationResult r;
     r.timings = timings;
     return stopped(std::move(r), "during segmentation");
   }
   return localize_segments(std::move(query), sensor_position, prior, timings, deadline);
+}
+
+LocalizationResult Localizer::localize_tracking_first(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
+                                                      CloudKind kind, const PointCloud& newest, const PosePrior& prior,
+                                                      const Deadline& deadline) const {
+  check_prior(&prior);
+  if (deadline.passed()) return stopped({}, "before segmentation");
+  ModuleTimings timings;
+  Segments query = segment_query(cloud, sensor_position, kind, timings, deadline);
+  if (deadline.passed()) {
+    LocalizationResult r;
+    r.timings = timings;
+    return stopped(std::move(r), "during segmentation");
+  }
+  LocalizationResult tracked = track(std::move(query), newest, sensor_position, prior);
+  if (tracked.localized()) {
+    const double tracking_ms = tracked.timings.refine_ms;
+    tracked.timings = timings;
+    tracked.timings.refine_ms = tracking_ms;
+    tracked.timings.total_ms += tracking_ms;
+    return tracked;
+  }
+  // A refused result keeps its query: the same segments go on, not segmented again.
+  LocalizationResult r = localize_segments(std::move(tracked.query), sensor_position, &prior, timings, deadline);
+  if (!deadline.passed()) refine_to_newest_scans(newest, sensor_position, r);
+  return r;
 }
 
 LocalizationResult Localizer::localize_segments(Segments query, const Eigen::Vector3f& sensor_position,

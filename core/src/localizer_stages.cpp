@@ -102,17 +102,16 @@ void refine_recent_window(const WindowPoints& points, const Eigen::Vector3f& sen
 }
 
 bool well_supported(const Segments& targets, const CentroidIndex& centroids, const RandomForestMatcher* classifier,
-                    const LocalizerConfig& config, const Pose3d& T_map_query, LocalizationResult& r) {
+                    const LocalizerConfig& config, const Pose3d& T_map_query, int min_matched_segments, LocalizationResult& r) {
   const Support support = support_of(r.query, centroids, T_map_query, config.support_radius_m);
   r.support = support.count();
   r.inliers = filter_matches(r.query, targets, support.pairs, config.matcher, classifier);
-  const RegistrationConfig& c = config.registration;
-  if (r.support >= static_cast<size_t>(c.min_support) && r.inliers.size() >= static_cast<size_t>(c.min_matched_segments))
-    return true;
+  const int min_support = config.registration.min_support;
+  if (r.support >= static_cast<size_t>(min_support) && r.inliers.size() >= static_cast<size_t>(min_matched_segments)) return true;
   r.registration_refusal = RegistrationRefusal::kLowSupport;
   r.registration_reason = std::to_string(r.support) + " query segments land on map segments under the registered pose, " +
-                          std::to_string(r.inliers.size()) + " of them matched (at least " + std::to_string(c.min_support) +
-                          " and " + std::to_string(c.min_matched_segments) + ")";
+                          std::to_string(r.inliers.size()) + " of them matched (at least " + std::to_string(min_support) +
+                          " and " + std::to_string(min_matched_segments) + ")";
   return false;
 }
 
@@ -180,7 +179,7 @@ void register_over_wide_prior(const Segments& targets, const TargetPoints* sourc
     }
     trial.registration_refusal = reg.refusal;
     trial.registration_reason = reg.reason;
-    if (reg.accepted() && well_supported(targets, centroids, classifier, config, reg.T_map_query, trial) &&
+    if (reg.accepted() && well_supported(targets, centroids, classifier, config, reg.T_map_query, config.registration.min_matched_segments, trial) &&
         supported_globally(config, trial)) {
       bool same = false;
       for (const RegistrationResult& p : passed)
@@ -232,7 +231,9 @@ void register_near_prior(const Segments& targets, const TargetPoints* source, co
   r.registration_reason = reg.reason;
   r.refine_fitness = reg.fitness;
   r.refine_rmse_m = reg.rmse_m;
-  if (!reg.accepted() || !well_supported(targets, centroids, classifier, config, reg.T_map_query, r)) return;
+  if (!reg.accepted() || !well_supported(targets, centroids, classifier, config, reg.T_map_query,
+                                            config.registration.min_matched_segments, r))
+    return;
   localized_by(reg, r);
 }
 

@@ -37,11 +37,12 @@ WindowPoints window_points(const Segments& query, const Segments& targets, const
 void refine_recent_window(const WindowPoints& points, const Eigen::Vector3f& sensor, float min_fitness,
                           const RefineConfig& config, const CovarianceConfig& covariance, LocalizationResult& r);
 
-// The segment check of a registered pose: enough query segments land on map segments, and
-// enough of those pairs pass the matcher (RegistrationConfig::min_support, min_matched_segments).
-// Fills r's support and inliers; false, with r's registration refusal, when too few.
+// The segment check of a registered pose: enough query segments land on map segments
+// (RegistrationConfig::min_support), and at least min_matched_segments of those pairs pass the
+// matcher (the registration's floor, or the surface layer's: SurfaceTrackingConfig). Fills r's
+// support and inliers; false, with r's registration refusal, when too few.
 bool well_supported(const Segments& targets, const CentroidIndex& centroids, const RandomForestMatcher* classifier,
-                    const LocalizerConfig& config, const Pose3d& T_map_query, LocalizationResult& r);
+                    const LocalizerConfig& config, const Pose3d& T_map_query, int min_matched_segments, LocalizationResult& r);
 
 // A registration's answer as r's: localized by `method`, its pose, covariance and fitness.
 void localized_by(const RegistrationResult& reg, LocalizationResult& r,

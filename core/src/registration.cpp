@@ -21,13 +21,12 @@ void RegistrationConfig::validate() const {
   positive(window_m, "window_m");
   positive(coarse_correspondence_m, "coarse_correspondence_m");
   positive(max_prior_radius_m, "max_prior_radius_m");
-  if (!(coarse_leaf_m >= 0.0f) || !std::isfinite(coarse_leaf_m))
-    throw std::invalid_argument("RegistrationConfig.coarse_leaf_m must be finite and >= 0");
+  detail::require_non_negative(coarse_leaf_m, "RegistrationConfig", "coarse_leaf_m");
   positive(max_last_step_m, "max_last_step_m");
   if (min_support < 0) throw std::invalid_argument("RegistrationConfig.min_support must be >= 0");
   if (min_matched_segments < 0) throw std::invalid_argument("RegistrationConfig.min_matched_segments must be >= 0");
   if (min_query_points < 6) throw std::invalid_argument("RegistrationConfig.min_query_points must be >= 6");
-  if (!(min_fitness >= 0.0f && min_fitness <= 1.0f)) throw std::invalid_argument("RegistrationConfig.min_fitness must be in 0..1");
+  detail::require_fraction(min_fitness, "RegistrationConfig", "min_fitness");
   if (!(min_axis_share >= 0.0f && min_axis_share <= 1.0f / 3.0f))
     throw std::invalid_argument("RegistrationConfig.min_axis_share must be in 0..1/3");
 }
@@ -39,7 +38,7 @@ void NewestScansConfig::validate() const {
   positive(max_shift_m, "max_shift_m");
   positive(max_turn_deg, "max_turn_deg");
   if (min_points < 6) throw std::invalid_argument("NewestScansConfig.min_points must be >= 6");
-  if (!(min_fitness >= 0.0f && min_fitness <= 1.0f)) throw std::invalid_argument("NewestScansConfig.min_fitness must be in 0..1");
+  detail::require_fraction(min_fitness, "NewestScansConfig", "min_fitness");
 }
 
 void SurfaceTrackingConfig::validate() const {
@@ -50,19 +49,16 @@ void SurfaceTrackingConfig::validate() const {
   if (max_points < min_points) throw std::invalid_argument("SurfaceTrackingConfig.max_points must be >= min_points");
   positive(ambiguity_range_m, "ambiguity_range_m");
   if (min_matched_segments < 0) throw std::invalid_argument("SurfaceTrackingConfig.min_matched_segments must be >= 0");
-  if (!(fine_first_m >= 0.0f) || !std::isfinite(fine_first_m))
-    throw std::invalid_argument("SurfaceTrackingConfig.fine_first_m must be finite and >= 0 (0: off)");
-  if (!(fine_first_max_radius_m >= 0.0f) || !std::isfinite(fine_first_max_radius_m))
-    throw std::invalid_argument("SurfaceTrackingConfig.fine_first_max_radius_m must be finite and >= 0");
+  detail::require_non_negative(fine_first_m, "SurfaceTrackingConfig", "fine_first_m", "(0: off)");
+  detail::require_non_negative(fine_first_max_radius_m, "SurfaceTrackingConfig", "fine_first_max_radius_m");
   positive(max_shifted_support, "max_shifted_support");
-  if (!(min_fitness >= 0.0f && min_fitness <= 1.0f)) throw std::invalid_argument("SurfaceTrackingConfig.min_fitness must be in 0..1");
+  detail::require_fraction(min_fitness, "SurfaceTrackingConfig", "min_fitness");
 }
 
 void CovarianceConfig::validate() const {
-  if (!(scale > 0.0f) || !std::isfinite(scale)) throw std::invalid_argument("CovarianceConfig.scale must be finite and > 0");
-  if (!(floor_m >= 0.0f) || !std::isfinite(floor_m)) throw std::invalid_argument("CovarianceConfig.floor_m must be finite and >= 0");
-  if (!(floor_deg >= 0.0f) || !std::isfinite(floor_deg))
-    throw std::invalid_argument("CovarianceConfig.floor_deg must be finite and >= 0");
+  detail::require_positive(scale, "CovarianceConfig", "scale");
+  detail::require_non_negative(floor_m, "CovarianceConfig", "floor_m");
+  detail::require_non_negative(floor_deg, "CovarianceConfig", "floor_deg");
 }
 
 Matrix6d pose_covariance(const RefineResult& refined, const CovarianceConfig& config) {

@@ -106,9 +106,8 @@ void track_on_surfaces(const PointCloud& newest, const Segments& targets, const 
   r.refine_rmse_m = reg.rmse_m;
   r.T_map_query = reg.T_map_query;
   if (!reg.accepted()) return lost(reg.reason);
-  LocalizerConfig floors = config;  // the surface layer's own floor of matched segments
-  floors.registration.min_matched_segments = c.min_matched_segments;
-  if (!well_supported(targets, centroids, classifier, floors, reg.T_map_query, r)) return lost(r.registration_reason);
+  if (!well_supported(targets, centroids, classifier, config, reg.T_map_query, c.min_matched_segments, r))
+    return lost(r.registration_reason);
   const ShiftedSupport shifted = best_shifted_support(r.query, centroids, config, reg);
   if (static_cast<float>(shifted.support) >= c.max_shifted_support * static_cast<float>(r.support)) {
     r.registration_refusal = RegistrationRefusal::kAmbiguous;

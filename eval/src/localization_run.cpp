@@ -1,5 +1,7 @@
 #include "segmatch/eval/localization_run.h"
 
+#include <segmatch/api/tracker.h>
+
 #include "query_priors.h"
 
 #include "segmatch/cli/progress.h"
@@ -121,9 +123,7 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
         const std::string mode = priors.prepare(request, q);
         // A narrow prior with the newest scans: track on the surface layer first (revision 11;
         // the segments path sends its own tracking request instead, eval_main.cpp).
-        if (c.track_surfaces && (request.flags & api::kFlagHasPrior) && (request.flags & api::kFlagNewestScans) &&
-            request.prior_radius_m > 0.0 && request.prior_radius_m <= max_track_radius_m)
-          request.flags |= api::kFlagTrack;
+        if (c.track_surfaces) api::ask_to_track_first(request, max_track_radius_m);
         const auto start = std::chrono::steady_clock::now();
         const api::LocalizeReply reply = localize(request);
         const double latency_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();

@@ -2,6 +2,7 @@
 
 #include <segmatch/storage/map_reader.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <optional>
@@ -222,24 +223,8 @@ LocalizationResult localize_cloud(const LoadedMap& map, const api::LocalizeReque
   const CloudKind kind = (request.flags & api::kFlagVoxelized) ? CloudKind::kVoxelized : CloudKind::kRaw;
   const std::optional<PosePrior> prior = pose_prior_of(request_fields(request));
   const Eigen::Vector3f sensor = request.sensor_position_local.cast<float>();
-  if ((request.flags & api::kFlagTrack) && prior) {  // revision 11: tracking first, on the segments made here
-    ModuleTimings timings;
-    Segments segments = kind == CloudKind::kVoxelized
-                            ? extract_segments_from_voxels(cloud, sensor, map.localizer->config().segmentation, nullptr, &timings, deadline)
-                            : extract_segments(cloud, sensor, map.localizer->config().segmentation, nullptr, &timings, deadline);
-    timings.total_ms = timings.voxel_ms + timings.ground_ms + timings.segment_ms + timings.describe_ms;
-    if (deadline.passed()) return map.localizer->localize_segments({}, sensor, &*prior, timings, deadline);
-    LocalizationResult tracked = map.localizer->track(segments, request.newest_points, sensor, *prior);
-    if (tracked.localized()) {
-      tracked.timings.voxel_ms = timings.voxel_ms, tracked.timings.ground_ms = timings.ground_ms;
-      tracked.timings.segment_ms = timings.segment_ms, tracked.timings.describe_ms = timings.describe_ms;
-      tracked.timings.total_ms += timings.total_ms;
-      return tracked;
-    }
-    LocalizationResult r = map.localizer->localize_segments(std::move(segments), sensor, &*prior, timings, deadline);
-    if (!deadline.passed()) map.localizer->refine_to_newest_scans(request.newest_points, sensor, r);
-    return r;
-  }
+  if ((request.flags & api::kFlagTrack) && prior)  // revision 11: tracking first, on the segments made here
+    return map.localizer->localize_tracking_first(cloud, sensor, kind, request.newest_points, *prior, deadline);
   LocalizationResult r = map.localizer->localize(cloud, sensor, kind, prior ? &*prior : nullptr, deadline);
   if ((request.flags & api::kFlagNewestScans) && !deadline.passed())
     map.localizer->refine_to_newest_scans(request.newest_points, sensor, r);
@@ -289,17 +274,21 @@ Outcome serve_localize_segments(const LoadedMap& map, api::LocalizeSegmentsReque
   // Tracking on the surface layer first (revision 11, docs/protocol.md 5.5); the full request's
   // path when it does not answer and the segments carry points, TRACKING_LOST when they do not.
   if (request.flags & api::kSegmentsFlagTrack) {
-    LocalizationResult tracked = prior ? map.localizer->track(request.segments, request.newest_points, sensor, *prior)
-                                       : LocalizationResult{};
-    if (!prior) tracked.refusal = Refusal::kTrackingLost, tracked.reason = "tracking on the surface layer needs a prior radius > 0";
-    bool has_points = false;
-    for (const Segment& s : request.segments) has_points = has_points || !s.points.empty();
+    const bool has_points = std::any_of(request.segments.begin(), request.segments.end(),
+                                        [](const Segment& s) { return !s.points.empty(); });
+    LocalizationResult tracked;
+    if (prior) {
+      tracked = map.localizer->track(std::move(request.segments), request.newest_points, sensor, *prior);
+      if (!tracked.localized()) request.segments = std::move(tracked.query);  // a refusal keeps them, for the full path
+    } else {
+      tracked.refusal = Refusal::kTrackingLost, tracked.reason = "tracking on the surface layer needs a prior radius > 0";
+    }
     if (tracked.localized() || !has_points) return outcome_of(map, tracked, request.request_id, fields, start);
   }
-  LocalizationResult r = map.localizer->localize_segments(
-      std::move(request.segments), request.sensor_position_local.cast<float>(), prior ? &*prior : nullptr, {}, deadline);
+  LocalizationResult r =
+      map.localizer->localize_segments(std::move(request.segments), sensor, prior ? &*prior : nullptr, {}, deadline);
   if ((request.flags & api::kSegmentsFlagNewestScans) && !deadline.passed())  // revision 10, as LOCALIZE bit 5
-    map.localizer->refine_to_newest_scans(request.newest_points, request.sensor_position_local.cast<float>(), r);
+    map.localizer->refine_to_newest_scans(request.newest_points, sensor, r);
   return outcome_of(map, r, request.request_id, fields, start);
 }
 

@@ -1,5 +1,7 @@
 #include "segmatch/vehicle/segment_query.h"
 
+#include <segmatch/api/tracker.h>
+
 #include <algorithm>
 #include <chrono>
 #include <stdexcept>
@@ -65,9 +67,8 @@ api::LocalizeSegmentsRequest SegmentQuery::make_request(const api::LocalizeReque
 }
 
 bool SegmentQuery::can_track(const api::LocalizeSegmentsRequest& full) const {
-  const uint32_t needs = api::kSegmentsFlagHasPrior | api::kSegmentsFlagNewestScans;
-  return (full.flags & needs) == needs && full.prior_radius_m > 0.0 &&
-         full.prior_radius_m <= parameters_.localizer.registration.max_prior_radius_m;
+  return api::can_track(full.flags & api::kSegmentsFlagHasPrior, full.flags & api::kSegmentsFlagNewestScans,
+                        full.prior_radius_m, parameters_.localizer.registration.max_prior_radius_m);
 }
 
 api::LocalizeSegmentsRequest SegmentQuery::tracking_request(const api::LocalizeSegmentsRequest& full) const {

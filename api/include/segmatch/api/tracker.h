@@ -51,6 +51,18 @@ const char* to_string(TrackMode mode);
 enum class TrackUpdate { kFix, kRejected, kFailure };
 const char* to_string(TrackUpdate update);
 
+// Whether a request with a prior of radius_m and the newest scans may ask the server to track on
+// the surface layer first (revision 11: LOCALIZE bit 6, LOCALIZE_SEGMENTS bit 5): the prior is
+// given and no wider than the map's registration.max_prior_radius_m (wider ones are not tracked).
+inline bool can_track(bool has_prior, bool has_newest_scans, double radius_m, double max_prior_radius_m) {
+  return has_prior && has_newest_scans && radius_m > 0.0 && radius_m <= max_prior_radius_m;
+}
+// Sets LOCALIZE bit 6 when can_track holds for the request.
+inline void ask_to_track_first(LocalizeRequest& request, double max_prior_radius_m) {
+  if (can_track(request.flags & kFlagHasPrior, request.flags & kFlagNewestScans, request.prior_radius_m, max_prior_radius_m))
+    request.flags |= kFlagTrack;
+}
+
 class Tracker {
  public:
   explicit Tracker(const TrackerConfig& config = {});

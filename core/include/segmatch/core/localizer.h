@@ -255,6 +255,12 @@ class Localizer {
   void refine_to_newest_scans(const PointCloud& newest, const Eigen::Vector3f& sensor_position,
                               LocalizationResult& r) const;
 
+  // localize() for a tracked vehicle that sends its newest scans (LOCALIZE bit 6, revision 11):
+  // the cloud's segments go to track() first; when it does not answer, the same segments go on
+  // to localize_segments() with the prior, and the answer is refined to the newest scans.
+  LocalizationResult localize_tracking_first(const PointCloud& cloud, const Eigen::Vector3f& sensor_position, CloudKind kind,
+                                             const PointCloud& newest, const PosePrior& prior, const Deadline& deadline = {}) const;
+
   // Tracking on the surface layer (SurfaceTrackingConfig): the newest scans (query frame)
   // registered onto the map's surface layer around `prior`, the pose checked against the
   // query's segments (centroids and features; their points are not read). Localized with
@@ -270,6 +276,11 @@ class Localizer {
   const MapSurfaces* surfaces() const { return surfaces_.get(); }
 
  private:
+  // Voxel grid (unless kVoxelized), ground removal, segmentation and description of a query
+  // cloud; fills timings' voxel..describe and total.
+  Segments segment_query(const PointCloud& cloud, const Eigen::Vector3f& sensor_position, CloudKind kind,
+                         ModuleTimings& timings, const Deadline& deadline) const;
+
   LocalizerConfig config_;
   Segments targets_;
   FeatureIndex index_;
