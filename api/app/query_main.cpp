@@ -59,7 +59,9 @@ int main(int argc, char** argv) {
   localize->add_option("--sensor", sensor, "sensor position x,y,z in the cloud's frame")->capture_default_str();
   bool refusal_code = false;
   localize->add_flag("--refusal-code", refusal_code,
-                     "ask for the reply's typed refusal code (revision 5; older servers answer MALFORMED)");
+                     "ask for the reply's typed refusal code (the default since revision 5; a server older than "
+                     "revision 5 is asked again without it)")
+      ->group("");
   CLI::App* rep = app.add_subcommand("replay", "replay a sequence folder like a vehicle");
   rep->add_option("sequence", replay.folder, "KITTI sequence folder or PCD keyframe folder")->required();
   rep->add_option("--every-m", replay.every_m, "query every this many metres")->capture_default_str()->check(CLI::PositiveNumber);
@@ -101,9 +103,19 @@ int main(int argc, char** argv) {
       api::LocalizeRequest request;
       request.sensor_position_local = parse_xyz(sensor);
       request.points = io::read_cloud(cloud_path).points;
-      if (refusal_code) request.flags |= api::kFlagRefusalCode;
-      const auto sent = std::chrono::steady_clock::now();
-      const api::LocalizeReply reply = client.localize(request);
+      // Why an answer is refused is what a user asks next: always ask for the typed code. A
+      // server older than revision 5 answers MALFORMED ("reserved bits set"); ask it again without.
+      request.flags |= api::kFlagRefusalCode;
+      auto sent = std::chrono::steady_clock::now();
+      api::LocalizeReply reply;
+      try {
+        reply = client.localize(request);
+      } catch (const api::ClientError& e) {
+        if (e.kind != api::ClientError::Kind::kServer || e.server_code != api::ErrorCode::kMalformed) throw;
+        request.flags &= ~api::kFlagRefusalCode;
+        sent = std::chrono::steady_clock::now();
+        reply = client.localize(request);
+      }
       query::print_reply(reply, ms_since(sent));
       // Scripts tell a fix from a refusal by the status: 3 when the answer is not LOCALIZED.
       if (reply.status != api::LocalizeStatus::kLocalized) return 3;

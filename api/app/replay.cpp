@@ -107,7 +107,7 @@ int replay(api::Client& client, const ReplayOptions& options) {
     ++queries;
     const api::TrackMode mode = options.track ? tracker.prepare(request, q.odometer_m) : api::TrackMode::kGlobal;
     // Tracked with the newest scans: the server tracks on the surface layer first (revision 11).
-    if (mode == api::TrackMode::kTracked) api::ask_to_track_first(request, map_parameters.localizer.registration.max_prior_radius_m);
+    if (mode == api::TrackMode::kTracked) api::ask_to_track_first(request, max_tracked_radius_m(map_parameters.localizer));
     tracked += mode == api::TrackMode::kTracked;
     std::printf("frame %6zu  %7.1f m  %7zu points  %-7s ", q.frame, q.odometer_m, request.points.size(), api::to_string(mode));
     const auto start = std::chrono::steady_clock::now();

@@ -49,6 +49,8 @@ void SurfaceTrackingConfig::validate() const {
   if (max_points < min_points) throw std::invalid_argument("SurfaceTrackingConfig.max_points must be >= min_points");
   positive(ambiguity_range_m, "ambiguity_range_m");
   if (min_matched_segments < 0) throw std::invalid_argument("SurfaceTrackingConfig.min_matched_segments must be >= 0");
+  if (min_matched_segments_near_prior < 0)
+    throw std::invalid_argument("SurfaceTrackingConfig.min_matched_segments_near_prior must be >= 0");
   detail::require_non_negative(fine_first_m, "SurfaceTrackingConfig", "fine_first_m", "(0: off)");
   detail::require_non_negative(fine_first_max_radius_m, "SurfaceTrackingConfig", "fine_first_max_radius_m");
   positive(max_shifted_support, "max_shifted_support");

@@ -4,6 +4,7 @@
 // and across the street they would fit better. Private to the core.
 #include "localizer_stages.h"
 
+#include "segmatch/core/correlative_search.h"
 #include "segmatch/core/preprocess.h"
 #include "segmatch/core/registration.h"
 
@@ -24,20 +25,20 @@ struct ShiftedSupport {
 };
 
 // The best support of the query segments under the registered pose shifted horizontally along
-// its weakest axis, and across it, by 1.5 m to SurfaceTrackingConfig::ambiguity_range_m (0.5 m
-// steps, a half support radius). Walls and ground hold a street's cross-section, not where along
+// its weakest axis, and across it, by 1.5 m to range_m (SurfaceTrackingConfig::ambiguity_range_m,
+// or a wide prior's diameter; 0.5 m steps, a half support radius). Walls and ground hold a street's cross-section, not where along
 // it the vehicle is: a scan registered a few metres along a street of look-alike facades fits
 // them (fitness 0.89 on the simulated demo city, a prior 6 m off), while the objects fit at the
 // truth, where their support is far higher (README, 2026-12-06).
 ShiftedSupport best_shifted_support(const Segments& query, const CentroidIndex& centroids, const LocalizerConfig& config,
-                                    const RegistrationResult& reg) {
+                                    const RegistrationResult& reg, double range_m) {
   Eigen::Vector3d along(reg.weakest_axis.x(), reg.weakest_axis.y(), 0.0);
   if (along.norm() < 1e-6) along = Eigen::Vector3d::UnitX();
   along.normalize();
   const Eigen::Vector3d across(-along.y(), along.x(), 0.0);
   ShiftedSupport best;
   for (const Eigen::Vector3d* axis : {static_cast<const Eigen::Vector3d*>(&along), &across})
-    for (double d = 1.5; d <= config.track.ambiguity_range_m + 1e-9; d += 0.5)
+    for (double d = 1.5; d <= range_m + 1e-9; d += 0.5)
       for (double sign : {-1.0, 1.0}) {
         Pose3d shifted = reg.T_map_query;
         shifted.translation() += sign * d * *axis;
@@ -52,7 +53,8 @@ ShiftedSupport best_shifted_support(const Segments& query, const CentroidIndex& 
 // of a pose that moves at most fine_first_m; both stages onto the wider disc a prior of this
 // radius needs when that does not pass every gate.
 RegistrationResult register_on_layer(const PointCloud& points, const MapSurfaces& surfaces, const LocalizerConfig& config,
-                                     const PosePrior& prior, const Eigen::Vector3d& s) {
+                                     const PosePrior& prior, const Eigen::Vector3d& s, bool* near_prior) {
+  *near_prior = false;
   const SurfaceTrackingConfig& c = config.track;
   const Eigen::Vector3d centre = prior.T_map_query * s;
   RegistrationConfig gates = config.registration;
@@ -73,14 +75,130 @@ RegistrationResult register_on_layer(const PointCloud& points, const MapSurfaces
     const double reach_m = c.window_m * (1.0 + prior.max_rotation_deg * M_PI / 180.0) + c.fine_first_m +
                            3.0 * config.refine.max_correspondence_m;
     RegistrationResult fine = registered(fine_only, reach_m);
-    if (fine.accepted() && (fine.T_map_query * s - centre).norm() <= c.fine_first_m) return fine;
+    if (fine.accepted() && (fine.T_map_query * s - centre).norm() <= c.fine_first_m) {
+      *near_prior = true;
+      return fine;
+    }
   }
   return registered(gates, c.window_m + prior.radius_m + kWindowMarginM);
 }
 
+// The newest points (thinned) registered around one prior and checked; false with r's
+// registration refusal and reason when a gate refuses.
+bool track_from(const PointCloud& points, const Segments& targets, const CentroidIndex& centroids,
+                const RandomForestMatcher* classifier, const MapSurfaces& surfaces, const LocalizerConfig& config,
+                const PosePrior& prior, const Eigen::Vector3d& s, double ambiguity_range_m, LocalizationResult& r,
+                RegistrationResult& reg) {
+  const SurfaceTrackingConfig& c = config.track;
+  bool near_prior = false;
+  reg = register_on_layer(points, surfaces, config, prior, s, &near_prior);
+  r.registration_refusal = reg.refusal;
+  r.registration_reason = reg.reason;
+  r.refine_fitness = reg.fitness;
+  r.refine_rmse_m = reg.rmse_m;
+  r.T_map_query = reg.T_map_query;
+  if (!reg.accepted()) return false;
+  const int min_matched = near_prior ? c.min_matched_segments_near_prior : c.min_matched_segments;
+  if (!well_supported(targets, centroids, classifier, config, reg.T_map_query, min_matched, r)) return false;
+  const ShiftedSupport shifted = best_shifted_support(r.query, centroids, config, reg, ambiguity_range_m);
+  if (static_cast<float>(shifted.support) >= c.max_shifted_support * static_cast<float>(r.support)) {
+    r.registration_refusal = RegistrationRefusal::kAmbiguous;
+    char why[200];
+    std::snprintf(why, sizeof(why), "the pose %.1f m away (%s the weakest axis) has %zu supporting segments, the registered one %zu: "
+                  "the scans fit the surfaces, the objects fit elsewhere", shifted.offset_m, shifted.along ? "along" : "across",
+                  shifted.support, r.support);
+    r.registration_reason = why;
+    return false;
+  }
+  return true;
+}
+
+// A pose tracked from a search peak still answers the wide prior: inside its disc and heading
+// tolerance, and with the search's own fitness floor; false with the refusal in r otherwise.
+bool within_wide_prior(const RegistrationResult& reg, const PosePrior& prior, const Eigen::Vector3d& s,
+                       const CorrelativeSearchConfig& search, LocalizationResult& r) {
+  const double moved_m = (reg.T_map_query * s - prior.T_map_query * s).norm();
+  const double turned_deg =
+      Eigen::AngleAxisd(reg.T_map_query.linear() * prior.T_map_query.linear().transpose()).angle() * 180.0 / M_PI;
+  if (moved_m > prior.radius_m || turned_deg > prior.max_rotation_deg) {
+    r.registration_refusal = RegistrationRefusal::kOutsidePrior;
+    r.registration_reason = "registered outside the prior";
+    return false;
+  }
+  if (reg.fitness < search.min_fitness) {
+    r.registration_refusal = RegistrationRefusal::kLowFitness;
+    r.registration_reason = "registration fitness " + std::to_string(reg.fitness) + " below the wide prior's " +
+                            std::to_string(search.min_fitness);
+    return false;
+  }
+  return true;
+}
+
+// A prior too wide for registration (a GNSS fix, a tracker long without one): the correlative
+// search (correlative_search.h) of the newest points over the surface layer, both without their
+// ground (it is everywhere, top-down), gives the best distinct peaks; tracking from each, with
+// the wide prior's fitness floor (CorrelativeSearchConfig::min_fitness) over every tracking gate.
+// One passing answers; two at distinct places are an ambiguity.
+bool track_over_wide_prior(const PointCloud& points, const Segments& targets, const CentroidIndex& centroids,
+                           const RandomForestMatcher* classifier, const MapSurfaces& surfaces, const LocalizerConfig& config,
+                           const PosePrior& prior, const Eigen::Vector3d& s, LocalizationResult& r, RegistrationResult& answer) {
+  const CorrelativeSearchConfig& search = config.search;
+  const Eigen::Vector3d centre = prior.T_map_query * s;
+  const double reach_m = config.track.window_m + prior.radius_m + kWindowMarginM;
+  const PointCloud layer = crop_cylinder(surfaces.near(centre, reach_m), centre, reach_m);
+  const PointCloud map_objects = remove_ground(layer, config.segmentation.ground, centre.cast<float>());
+  const PointCloud query_objects = remove_ground(points, config.segmentation.ground, s.cast<float>());
+  const std::vector<SearchCandidate> peaks = correlative_search(query_objects, map_objects, prior.T_map_query, s, prior.radius_m,
+                                                                prior.max_rotation_deg, config.track.window_m, search);
+  if (peaks.empty()) {
+    r.registration_refusal = RegistrationRefusal::kFewPoints;
+    r.registration_reason = "no newest or layer points above the ground to search the prior with";
+    return false;
+  }
+  // A look-alike anywhere in the disc may be where the scans fit: every pose the prior allows,
+  // and the truth just beyond it, is tested for a better support (a wrong 20 m prior on the
+  // simulated city was otherwise answered 30.5 m off, 3 matched, support 17).
+  const double ambiguity_range_m = std::max<double>(config.track.ambiguity_range_m, 2.0 * prior.radius_m);
+  std::vector<RegistrationResult> passed;
+  LocalizationResult first = r, last = r;
+  for (const SearchCandidate& peak : peaks) {
+    // Each peak is a prior as wide as registration takes: along a street of facades the 1 m
+    // grid's peak can lie metres and degrees from where the scans fit (on riverside02 up to
+    // 5.6 m and 2.1 degrees). Where it settles, every gate decides, and the other peaks' answers
+    // with it.
+    const PosePrior at{peak.T_map_query, config.registration.max_prior_radius_m, prior.max_rotation_deg};
+    LocalizationResult trial = r;
+    RegistrationResult reg;
+    const bool ok = track_from(points, targets, centroids, classifier, surfaces, config, at, s, ambiguity_range_m, trial, reg) &&
+                    within_wide_prior(reg, prior, s, search, trial);
+    if (!ok) {
+      if (passed.empty()) last = std::move(trial);
+      continue;
+    }
+    bool same = false;
+    for (const RegistrationResult& p : passed) same = same || (p.T_map_query * s - reg.T_map_query * s).norm() < search.min_separation_m;
+    if (same) continue;
+    if (passed.empty()) first = std::move(trial);
+    passed.push_back(reg);
+  }
+  if (passed.size() == 1) {
+    r = std::move(first);
+    answer = passed.front();
+    return true;
+  }
+  r = std::move(last);
+  if (passed.size() > 1) {
+    r.registration_refusal = RegistrationRefusal::kAmbiguous;
+    r.registration_reason = std::to_string(passed.size()) + " distinct poses within the prior pass tracking";
+  } else {
+    r.registration_reason = "none of " + std::to_string(peaks.size()) + " search peaks tracked: " + r.registration_reason;
+  }
+  return false;
+}
+
 }  // namespace
 
-void track_on_surfaces(const PointCloud& newest, const Segments& targets, const TargetPoints* source, const CentroidIndex& centroids,
+void track_on_surfaces(const PointCloud& newest, const Segments& targets, const TargetPoints* /*source*/, const CentroidIndex& centroids,
                        const RandomForestMatcher* classifier, const MapSurfaces* surfaces, const LocalizerConfig& config,
                        const PosePrior& prior, const Eigen::Vector3f& sensor, LocalizationResult& r) {
   const SurfaceTrackingConfig& c = config.track;
@@ -90,8 +208,8 @@ void track_on_surfaces(const PointCloud& newest, const Segments& targets, const 
   };
   if (!c.enabled) return lost("off in this map's parameters (track.enabled)");
   if (!surfaces) return lost("the map has no surface layer");
-  if (prior.radius_m > config.registration.max_prior_radius_m)
-    return lost("the prior's radius " + std::to_string(prior.radius_m) + " m is wider than registration.max_prior_radius_m");
+  if (prior.radius_m > max_tracked_radius_m(config))
+    return lost("the prior's radius " + std::to_string(prior.radius_m) + " m is wider than the widest tracked (max_tracked_radius_m)");
   const Eigen::Vector3d s = sensor.cast<double>();
   VoxelGridConfig thin;
   thin.leaf_m = c.leaf_m;
@@ -99,24 +217,12 @@ void track_on_surfaces(const PointCloud& newest, const Segments& targets, const 
   const PointCloud points = voxel_filter(crop_cylinder(newest, s, c.window_m), thin);
   if (points.size() < static_cast<size_t>(c.min_points))
     return lost(std::to_string(points.size()) + " newest points near the sensor (at least " + std::to_string(c.min_points) + ")");
-  const RegistrationResult reg = register_on_layer(points, *surfaces, config, prior, s);
-  r.registration_refusal = reg.refusal;
-  r.registration_reason = reg.reason;
-  r.refine_fitness = reg.fitness;
-  r.refine_rmse_m = reg.rmse_m;
-  r.T_map_query = reg.T_map_query;
-  if (!reg.accepted()) return lost(reg.reason);
-  if (!well_supported(targets, centroids, classifier, config, reg.T_map_query, c.min_matched_segments, r))
-    return lost(r.registration_reason);
-  const ShiftedSupport shifted = best_shifted_support(r.query, centroids, config, reg);
-  if (static_cast<float>(shifted.support) >= c.max_shifted_support * static_cast<float>(r.support)) {
-    r.registration_refusal = RegistrationRefusal::kAmbiguous;
-    char why[200];
-    std::snprintf(why, sizeof(why), "the pose %.1f m away (%s the weakest axis) has %zu supporting segments, the registered one %zu: "
-                  "the scans fit the surfaces, the objects fit elsewhere", shifted.offset_m, shifted.along ? "along" : "across",
-                  shifted.support, r.support);
-    return lost(why);
-  }
+  RegistrationResult reg;
+  const bool tracked = prior.radius_m > config.registration.max_prior_radius_m
+                           ? track_over_wide_prior(points, targets, centroids, classifier, *surfaces, config, prior, s, r, reg)
+                           : track_from(points, targets, centroids, classifier, *surfaces, config, prior, s,
+                                        config.track.ambiguity_range_m, r, reg);
+  if (!tracked) return lost(r.registration_reason);
   r.window_points = points.size();
   localized_by(reg, r, LocalizationMethod::kSurfaces);
 }

@@ -209,6 +209,9 @@ int main(int argc, char** argv) {
   loc->add_option("--first", lc.replay.first, "first scan");
   loc->add_option("--last", lc.replay.last, "last scan");
   loc->add_option("--stride", lc.replay.stride, "use every n-th scan");
+  loc->add_flag("--single-scan", lc.replay.single_scan,
+                "cold start: every query is one raw scan alone, as a vehicle that has just woken up has (no accumulation, "
+                "no warm-up; its newest scans are that scan)");
   loc->add_option("--mapped-radius-m", lc.thresholds.mapped_radius_m, "a street is mapped within this of the map trajectory");
   loc->add_flag("!--quiet", lc.print_each, "no line per query");
   loc->add_flag("--track", lc.track,

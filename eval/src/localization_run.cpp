@@ -111,7 +111,7 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
                                                     : c.reference_path;
   }
   QueryPriors priors(c, truth.T_map_sensor);
-  const double max_track_radius_m = parameters.localizer.registration.max_prior_radius_m;
+  const double max_track_radius_m = max_tracked_radius_m(parameters.localizer);
   PriorComparison comparison;
   run.title = map.metadata().name + ": " + (c.sim_dataset.empty() ? c.query_folder : c.sim_dataset + " (01)");
   std::map<std::string, std::vector<double>> timings;
@@ -188,7 +188,9 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
 void print_summary(const LocalizationRun& run) {
   const Summary& s = run.summary;
   std::printf("\n== %s\n", run.title.c_str());
-  if (run.cloud_poses == io::CloudPoses::kOdometry)
+  if (run.replay.single_scan)
+    std::printf("queries: single raw scans (no accumulation), one every %.1f m\n", run.replay.every_m);
+  else if (run.cloud_poses == io::CloudPoses::kOdometry)
     std::printf("local clouds: the vehicle's odometry (%s); the reference (%s) only scores\n", run.cloud_poses_file.c_str(),
                 run.reference_file.c_str());
   else
@@ -259,7 +261,7 @@ void write_localization_report(const LocalizationRun& run, const std::string& ou
   nlohmann::json j;
   j["title"] = run.title;
   j["replay"] = {{"every_m", run.replay.every_m}, {"warmup_m", run.replay.warmup_m}, {"first", run.replay.first},
-                 {"last", run.replay.last}, {"stride", run.replay.stride}};
+                 {"last", run.replay.last}, {"stride", run.replay.stride}, {"single_scan", run.replay.single_scan}};
   j["local_clouds"] = {{"poses", io::to_string(run.cloud_poses)}, {"file", run.cloud_poses_file}};
   j["reference"] = run.reference_file;
   j["queries"] = s.queries;

@@ -151,6 +151,7 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("ambiguity_range_m", l.track.ambiguity_range_m);
   v("max_shifted_support", l.track.max_shifted_support);
   v("min_matched_segments", l.track.min_matched_segments);
+  v("min_matched_segments_near_prior", l.track.min_matched_segments_near_prior);
   v("fine_first_m", l.track.fine_first_m);
   v("fine_first_max_radius_m", l.track.fine_first_max_radius_m);
   v.section("localizer");

@@ -25,6 +25,22 @@ void ReplayConfig::validate() const {
 
 namespace {
 
+PointCloud transformed(const PointCloud& scan_sensor, const Pose3d& T_odom_sensor) {
+  PointCloud odom = scan_sensor;
+  for (Point& p : odom) {
+    const Eigen::Vector3d q = T_odom_sensor * Eigen::Vector3d(p.x, p.y, p.z);
+    p.x = static_cast<float>(q.x()), p.y = static_cast<float>(q.y()), p.z = static_cast<float>(q.z());
+  }
+  return odom;
+}
+
+PointCloud thinned(const PointCloud& cloud, float leaf_m) {
+  VoxelGridConfig grid;
+  grid.leaf_m = leaf_m;
+  grid.min_points_per_voxel = 1;
+  return voxel_filter(cloud, grid);
+}
+
 // The scans of the last newest_m of driving, each thinned (odometry frame).
 class NewestScans {
  public:
@@ -34,12 +50,7 @@ class NewestScans {
   }
   void add(const PointCloud& scan_sensor, const Pose3d& T_odom_sensor, double odometer_m) {
     if (config_.newest_m <= 0.0) return;
-    PointCloud odom = voxel_filter(scan_sensor, grid_);
-    for (Point& p : odom) {
-      const Eigen::Vector3d q = T_odom_sensor * Eigen::Vector3d(p.x, p.y, p.z);
-      p.x = static_cast<float>(q.x()), p.y = static_cast<float>(q.y()), p.z = static_cast<float>(q.z());
-    }
-    scans_.push_back({odometer_m, std::move(odom)});
+    scans_.push_back({odometer_m, transformed(voxel_filter(scan_sensor, grid_), T_odom_sensor)});
     while (scans_.size() > kMaxScans || (!scans_.empty() && scans_.front().first < odometer_m - config_.newest_m - 1e-9))
       scans_.pop_front();
   }
@@ -94,7 +105,7 @@ void replay_sequence(const Sequence& sequence, const ReplayConfig& config,
   LocalCloud raw(config.local_cloud);
   VoxelAccumulator voxels(config.local_cloud, config.voxel);
   NewestScans newest(config);
-  double odometer_m = 0.0, next_query_m = std::max(config.warmup_m, 0.0);
+  double odometer_m = 0.0, next_query_m = config.single_scan ? 0.0 : std::max(config.warmup_m, 0.0);
   Eigen::Vector3d previous = sequence.poses()[config.first].translation();
   size_t done = 0;
   for (size_t i = config.first; i <= last; i += config.stride) {
@@ -103,9 +114,13 @@ void replay_sequence(const Sequence& sequence, const ReplayConfig& config,
     previous = T_world_sensor.translation();
     const Pose3d T_odom_sensor = T_odom_world * T_world_sensor;
     const PointCloud scan = sequence.scan(i).points;
-    if (config.voxelize) voxels.add_scan(scan, T_odom_sensor);
-    else raw.add_scan(scan, T_odom_sensor);
-    newest.add(scan, T_odom_sensor, odometer_m);
+    if (config.single_scan) {
+    } else if (config.voxelize) {
+      voxels.add_scan(scan, T_odom_sensor);
+    } else {
+      raw.add_scan(scan, T_odom_sensor);
+    }
+    if (!config.single_scan) newest.add(scan, T_odom_sensor, odometer_m);
     if (progress) progress(++done, total);
     if (odometer_m + 1e-9 < next_query_m) continue;
     next_query_m = odometer_m + config.every_m;
@@ -114,9 +129,14 @@ void replay_sequence(const Sequence& sequence, const ReplayConfig& config,
     q.odometer_m = odometer_m;
     q.T_odom_sensor = T_odom_sensor;
     q.T_world_sensor = T_world_sensor;
-    q.cloud_odom = config.voxelize ? voxels.crop(T_odom_sensor) : raw.crop(T_odom_sensor);
-    q.voxelized = config.voxelize;
-    q.newest_odom = newest.points();
+    if (config.single_scan) {
+      q.cloud_odom = transformed(scan, T_odom_sensor);
+      if (config.newest_m > 0.0) q.newest_odom = thinned(q.cloud_odom, config.newest_leaf_m);
+    } else {
+      q.cloud_odom = config.voxelize ? voxels.crop(T_odom_sensor) : raw.crop(T_odom_sensor);
+      q.voxelized = config.voxelize;
+      q.newest_odom = newest.points();
+    }
     if (!visit(q)) return;
   }
 }

@@ -162,6 +162,28 @@ void warn_far_from_origin(const io::Sequence& seq, const std::vector<size_t>& fr
                farthest / 1e3, step);
 }
 
+// An empty or nearly empty map localizes nothing, and a user finds out only when the fleet
+// queries it: refuse it here, naming what the profile measured and what it chose. The floor
+// (50 per km) is 30-70 times below every map the project builds from real or simulated drives
+// (README, measurements).
+void check_segment_count(const MapBuilder& b, const io::PipelineConfig& config, double min_per_km) {
+  const size_t segments = b.segments().size();
+  const double km = b.distance_driven_m() / 1000.0;
+  const double floor = std::max(1.0, std::floor(min_per_km * km));
+  if (static_cast<double>(segments) >= floor) return;
+  const std::string sensor = config.measured ? "sensor class " + config.measured->sensor_class()
+                                             : "preset " + config.preset + " (the input not measured)";
+  const std::string profile = io::describe_profile(config);
+  const std::string chose = profile.substr(profile.rfind("chose"));
+  char what[256];
+  std::snprintf(what, sizeof what, "the segmentation kept %zu segments (from %zu extracted views) over %.3f km driven, at least %.0f expected",
+                segments, b.extracted_segments(), km, floor);
+  throw TooFewSegments(std::string(what) + "; no map written. " + sensor + ", " + chose +
+                       ". Sparse scans need smaller clusters or fewer points per voxel: try another --preset, or "
+                       "--print-config, edit voxel and segmenter, and pass the file with --config" +
+                       (segments > 0 ? " (--min-segments-per-km 0 writes this sparse map anyway)" : ""));
+}
+
 }  // namespace
 
 int build_map(const BuildOptions& o, const volatile std::sig_atomic_t* stop_signal) {
@@ -213,6 +235,7 @@ int build_map(const BuildOptions& o, const volatile std::sig_atomic_t* stop_sign
     return true;
   };
   if (interrupted()) return 128 + *stop_signal;
+  check_segment_count(builder, config, o.min_segments_per_km);
   writer.add_segments(builder.segments(), builder.keyframe_of_segment());
   writer.set_trajectory(trajectory);
   if (classifier) writer.set_classifier(*classifier);

@@ -33,6 +33,15 @@ struct BuildOptions {
   std::string odometry_path;    // poses to use instead of the sequence's poses.txt (empty: those)
   bool close_loops = false;     // detect loops and optimise the poses first (loop_poses.h)
   bool scan_edges = false;      // ... with LiDAR registration edges too (posegraph/scan_edges.h)
+  // A map with no segments, or fewer than this many per km driven, is refused (nothing is
+  // written): the profile's parameters emptied it. 0 refuses only an empty map.
+  double min_segments_per_km = 50.0;
+};
+
+// Thrown when the segmentation kept too few segments to make a map (exit code 1, nothing written).
+class TooFewSegments : public std::runtime_error {
+ public:
+  explicit TooFewSegments(const std::string& message) : std::runtime_error(message) {}
 };
 
 // Builds the map. Returns the process exit code: 0 written, 128 + signal when *stop_signal

@@ -66,6 +66,11 @@ int main(int argc, char** argv) {
   app.add_flag("--scan-edges", o.scan_edges,
                "with --close-loops: also register each scan onto the previous ones (ICP), for odometry that errs "
                "in scale or yaw rate (wheels), which loops cannot correct");
+  app.add_option("--min-segments-per-km", o.min_segments_per_km,
+                 "refuse (write nothing) when the map would hold fewer segments per km driven; a map with no "
+                 "segments is always refused")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   cli::add_version_flag(app, "segmatch-mapbuilder");
   SEGMATCH_CLI_PARSE(app, argc, argv);
   if (!o.print_config && o.output.empty()) {

@@ -80,7 +80,11 @@ TEST(SurfaceTracking, RefusesByNameWhatItCannotAnswer) {
   };
   const Localizer no_layer(s.config, s.map_segments());
   lost(no_layer.track(s.query_segments(), s.newest(), sensor, s.prior(0.3, 0.0)), "no surface layer", "map without a layer");
-  lost(layered.track(s.query_segments(), s.newest(), sensor, s.prior(0.3, 0.0, 20.0)), "wider than", "a GNSS-wide prior");
+  lost(layered.track(s.query_segments(), s.newest(), sensor, s.prior(0.3, 0.0, 60.0)), "wider than", "a prior beyond the search's 40 m");
+  Street no_search = s;
+  no_search.config.search.enabled = false;
+  lost(no_search.layered().track(s.query_segments(), s.newest(), sensor, s.prior(0.3, 0.0, 20.0)), "wider than",
+       "a GNSS-wide prior with the correlative search off");
   const PointCloud all = s.newest();
   lost(layered.track(s.query_segments(), PointCloud(all.begin(), all.begin() + 50), sensor, s.prior(0.3, 0.0)),
        "newest points near the sensor", "too few newest points");
@@ -104,6 +108,60 @@ TEST(SurfaceTracking, AWrongPriorNeverBecomesAFix) {
     EXPECT_FALSE(r.localized() && s.error_m(r) > 1.0) << shift_m << " m: a false fix " << s.error_m(r) << " m off";
     EXPECT_FALSE(r.localized()) << shift_m << " m: the truth is outside the prior's 3 m";
   }
+}
+
+// A GNSS-wide prior (wider than registration takes): the correlative search over the layer finds
+// the peaks, tracking from them answers at the truth; the truth outside such a disc never does.
+TEST(SurfaceTracking, WidePriorsAreSearchedThenRegistered) {
+  const Street s;
+  const Localizer localizer = s.layered();
+  const Eigen::Vector3f sensor = s.sensor_query().cast<float>();
+  ASSERT_GT(20.0, s.config.registration.max_prior_radius_m) << "the test is about priors registration alone does not take";
+  for (const auto& [shift_m, turn_deg] : {std::pair{12.0, 0.0}, {-15.0, 4.0}}) {
+    const LocalizationResult r = localizer.track(s.query_segments(), s.newest(), sensor, s.prior(shift_m, turn_deg, 20.0));
+    ASSERT_TRUE(r.localized()) << shift_m << " m: " << r.reason;
+    EXPECT_EQ(r.method, LocalizationMethod::kSurfaces);
+    EXPECT_LT(s.error_m(r), 0.05) << shift_m << " m";
+    EXPECT_LT(Eigen::AngleAxisd((r.T_map_query * s.T_query).linear()).angle() / kDeg, 0.1);
+  }
+  for (double shift_m : {30.0, -28.0}) {
+    const LocalizationResult r = localizer.track(s.query_segments(), s.newest(), sensor, s.prior(shift_m, 0.0, 15.0));
+    EXPECT_FALSE(r.localized()) << shift_m << " m: the truth is outside the prior's 15 m, " << s.error_m(r) << " m off";
+    EXPECT_EQ(r.refusal, Refusal::kTrackingLost);
+  }
+}
+
+// Repeated structure (two identical blocks 45 m apart): a wide prior whose disc holds only the
+// look-alike finds the look-alike by search and registration, and every gate passes there. The
+// truth, outside the disc, fits as well: the shifted support over the prior's diameter refuses.
+TEST(SurfaceTracking, ALookAlikeInAWidePriorIsRefusedNotAnswered) {
+  Street s;
+  const PointCloud block = s.map_cloud;
+  PointCloud twin = transformed(block, Pose3d(Eigen::Translation3d(0.0, 45.0, 0.0)));
+  s.map_cloud.insert(s.map_cloud.end(), twin.begin(), twin.end());
+  PointCloud layer = test::with_ground(s.map_cloud);
+  const PointCloud twin_ground = transformed(test::with_ground({}), Pose3d(Eigen::Translation3d(0.0, 45.0, 0.0)));
+  layer.insert(layer.end(), twin_ground.begin(), twin_ground.end());
+  const Localizer localizer(s.config, s.map_segments(), nullptr, nullptr, std::make_shared<test::InMemorySurfaces>(layer));
+  // The vehicle sees its own block: the query is the original block alone.
+  Segments query = extract_segments(transformed(block, s.T_query), s.sensor_query().cast<float>(), s.config.segmentation);
+  for (Segment& g : query) g.points.clear();
+  const PointCloud newest = transformed(test::with_ground(block), s.T_query);
+  PosePrior prior = s.prior(0.0, 0.0, 25.0);  // 25 m around a centre 32 m from the truth, 13 m from the twin
+  prior.T_map_query = Pose3d(Eigen::Translation3d(0.0, 32.0, 0.0)) * prior.T_map_query;
+  ASSERT_LE(prior.radius_m, max_tracked_radius_m(s.config));
+  const LocalizationResult r = localizer.track(query, newest, s.sensor_query().cast<float>(), prior);
+  EXPECT_FALSE(r.localized()) << "answered " << s.error_m(r) << " m off";
+  EXPECT_EQ(r.refusal, Refusal::kTrackingLost) << r.reason;
+  EXPECT_NE(r.reason.find("fit elsewhere"), std::string::npos) << r.reason;
+  // A prior whose diameter (30 m) does not reach the twin from the truth answers at the truth:
+  // the refusal is the twin's. (With 25 m around the truth the twin, 45 m away, is within the
+  // diameter and the answer is refused too: the objects alone cannot tell the blocks apart.)
+  PosePrior fair = s.prior(0.0, 0.0, 15.0);
+  fair.T_map_query = Pose3d(Eigen::Translation3d(0.0, -5.0, 0.0)) * fair.T_map_query;
+  const LocalizationResult t = localizer.track(query, newest, s.sensor_query().cast<float>(), fair);
+  ASSERT_TRUE(t.localized()) << t.reason;
+  EXPECT_LT(s.error_m(t), 0.05);
 }
 
 // Scans that fit the surfaces at the pose while the objects fit better elsewhere along the

@@ -175,7 +175,8 @@ TEST(Deploy, QueryLocalizeExitsByStatus) {
   EXPECT_EQ(found.output.rfind("localized ", 0), 0u) << found.output;
   const CommandResult refused = run_command(query + dir + "/nothing.bin");
   EXPECT_EQ(refused.code, 3) << refused.output;
-  const CommandResult coded = run_command(query + dir + "/nothing.bin --refusal-code");
+  EXPECT_NE(refused.output.find("TOO_FEW_SEGMENTS: "), std::string::npos) << "the typed reason by default: " << refused.output;
+  const CommandResult coded = run_command(query + dir + "/nothing.bin --refusal-code");  // the old spelling
   EXPECT_EQ(coded.code, 3) << coded.output;
   EXPECT_NE(coded.output.find("TOO_FEW_SEGMENTS: "), std::string::npos) << coded.output;
 }

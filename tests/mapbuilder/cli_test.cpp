@@ -9,6 +9,7 @@
 #include "segmatch/io/pipeline_config.h"
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include "support/fixture_cache.h"
 #include "support/run_command.h"
@@ -174,6 +175,39 @@ TEST_F(MapBuilderCli, PrintConfigWritesTheChosenProfileAsAReusableConfig) {
   EXPECT_EQ(printed.measured->sensor_class(), "dense-spinning");
   const storage::MapReader map = storage::MapReader::open(map_path().string());
   EXPECT_EQ(io::to_json(printed), io::to_json(io::parse_pipeline_config(map.metadata().parameters_json, "map")));
+}
+
+// A profile whose parameters keep nothing must not leave a map that localizes nothing: the
+// builder refuses, names the sensor class and the parameters, writes nothing and keeps an
+// existing map; a sparse map is refused by the per-km floor, which 0 lifts.
+TEST_F(MapBuilderCli, AMapWithNoOrTooFewSegmentsIsRefusedNamingTheProfile) {
+  const Result printed = run(builder() + " --print-config 2>/dev/null");
+  ASSERT_EQ(printed.code, 0) << printed.output;
+  nlohmann::json config = nlohmann::json::parse(printed.output.substr(printed.output.find('{')));
+  config["voxel"]["min_points_per_voxel"] = 1000;
+  write_all(dir_ / "empty.json", config.dump());
+  const fs::path out = dir_ / "empty.sqlite";
+  Result r = run(builder() + " --config " + (dir_ / "empty.json").string() + " --output " + out.string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("kept 0 segments"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("sensor class dense-spinning"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("voxels 0.10 m with >= 1000 points"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("--min-segments-per-km 0"), std::string::npos) << "no way around an empty map: " << r.output;
+  EXPECT_FALSE(fs::exists(out));
+
+  const fs::path kept = dir_ / "kept.sqlite";
+  fs::copy_file(map_path(), kept);
+  const std::string before = read_all(kept);
+  r = run(builder() + " --no-classifier --min-segments-per-km 1e7 --force --output " + kept.string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("expected; no map written"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("--min-segments-per-km 0 writes this sparse map anyway"), std::string::npos) << r.output;
+  EXPECT_EQ(read_all(kept), before);
+  for (const std::string& name : folder_entries(dir_))
+    EXPECT_TRUE(name.rfind("kept.sqlite", 0) != 0 || name == "kept.sqlite") << "left behind: " << name;
+  r = run(builder() + " --no-classifier --min-segments-per-km 0 --force --output " + kept.string());
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(read_all(kept), before);
 }
 
 // Points are 32-bit floats: poses 2000 km from the origin (UTM-like) would quantise them to

@@ -298,10 +298,10 @@ TEST(ServerSegments, TrackingRequestsAnswerFromTheSurfaceLayerOrSayTrackingLost)
     off.T_map_local_prior.translation() += Eigen::Vector3d(6.0, 0.0, 0.0);
     EXPECT_NE(server::localize_segments_request(*map, off).status, api::LocalizeStatus::kLocalized) << q.frame;
     // With its segments' points the request does not stop at TRACKING_LOST: a prior too wide for
-    // tracking goes on to the full path and gets its answer.
+    // tracking (beyond the correlative search's 40 m) goes on to the full path and gets its answer.
     api::LocalizeSegmentsRequest wide = full, plain = full;
     wide.flags |= api::kSegmentsFlagTrack;
-    wide.prior_radius_m = plain.prior_radius_m = 25.0;
+    wide.prior_radius_m = plain.prior_radius_m = 60.0;
     const api::LocalizeReply a = server::localize_segments_request(*map, wide), b = server::localize_segments_request(*map, plain);
     EXPECT_EQ(a.status, b.status) << q.frame;
     EXPECT_NE(a.refusal, api::RefusalCode::kTrackingLost) << q.frame;
@@ -332,7 +332,9 @@ TEST(ServerSegments, TrackingRequestsAnswerFromTheSurfaceLayerOrSayTrackingLost)
     const auto here = v.localize_tracking_first(full, in_process(*map));
     EXPECT_TRUE(here.tracking);
     EXPECT_EQ(here.lost, r.status != api::LocalizeStatus::kLocalized) << q.frame;
-    EXPECT_FALSE(v.can_track(plain)) << "a 25 m prior is not tracked";
+    EXPECT_FALSE(v.can_track(plain)) << "a 60 m prior is not tracked";
+    plain.prior_radius_m = 25.0;
+    EXPECT_TRUE(v.can_track(plain)) << "a 25 m prior (GNSS) is tracked: searched, then registered";
   }
   std::filesystem::remove(path);
   std::sort(bytes.begin(), bytes.end());

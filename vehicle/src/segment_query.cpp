@@ -68,7 +68,7 @@ api::LocalizeSegmentsRequest SegmentQuery::make_request(const api::LocalizeReque
 
 bool SegmentQuery::can_track(const api::LocalizeSegmentsRequest& full) const {
   return api::can_track(full.flags & api::kSegmentsFlagHasPrior, full.flags & api::kSegmentsFlagNewestScans,
-                        full.prior_radius_m, parameters_.localizer.registration.max_prior_radius_m);
+                        full.prior_radius_m, max_tracked_radius_m(parameters_.localizer));
 }
 
 api::LocalizeSegmentsRequest SegmentQuery::tracking_request(const api::LocalizeSegmentsRequest& full) const {

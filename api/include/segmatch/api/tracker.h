@@ -53,7 +53,9 @@ const char* to_string(TrackUpdate update);
 
 // Whether a request with a prior of radius_m and the newest scans may ask the server to track on
 // the surface layer first (revision 11: LOCALIZE bit 6, LOCALIZE_SEGMENTS bit 5): the prior is
-// given and no wider than the map's registration.max_prior_radius_m (wider ones are not tracked).
+// given and no wider than the map's max_tracked_radius_m (core/localizer.h: the correlative
+// search's max_radius_m when it is on, else registration.max_prior_radius_m); wider ones are not
+// tracked.
 inline bool can_track(bool has_prior, bool has_newest_scans, double radius_m, double max_prior_radius_m) {
   return has_prior && has_newest_scans && radius_m > 0.0 && radius_m <= max_prior_radius_m;
 }

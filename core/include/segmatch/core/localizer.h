@@ -15,6 +15,7 @@
 #include "segmatch/core/support.h"
 #include "segmatch/core/verification.h"
 
+#include <algorithm>
 #include <memory>
 #include <string>
 
@@ -73,6 +74,13 @@ struct LocalizerConfig {
   float min_confidence_with_prior = -1.0f;
   void validate() const;
 };
+
+// The widest prior Localizer::track takes: registration's, or the correlative search's when it
+// is on (the peaks are tracked from, surface_tracking.cpp). Clients ask to track first up to it.
+inline double max_tracked_radius_m(const LocalizerConfig& c) {
+  return c.search.enabled ? std::max<double>(c.search.max_radius_m, c.registration.max_prior_radius_m)
+                          : c.registration.max_prior_radius_m;
+}
 
 enum class LocalizationStatus { kLocalized, kNotLocalized };
 const char* to_string(LocalizationStatus status);

@@ -137,6 +137,10 @@ struct SurfaceTrackingConfig {
   // true) but also frame 115, back from an unmapped street with a prior 7.8 m wide: 1.06 m off,
   // support 11, 2 matched, fitness 0.84, well constrained (README, 2026-12-06).
   int min_matched_segments = 3;
+  // ... and this many when the fine stage alone answered, moving the prior at most fine_first_m:
+  // the tracker's prediction, an independent witness, then agrees with the scans. Frame 37 above
+  // is such an answer (moved 0.03 m); frame 115 is not (README, 2026-12-06 evening).
+  int min_matched_segments_near_prior = 2;
   void validate() const;      // throws std::invalid_argument naming the field
 };
 

@@ -34,6 +34,9 @@ struct ReplayConfig {
   // pose now (docs/protocol.md 5.4, flag bit 5).
   double newest_m = 10.0;
   float newest_leaf_m = 0.2f;
+  // Cold start: every query is one raw scan alone (no accumulation, no warm-up), as a vehicle
+  // that has just woken up has; its newest scans are that scan, thinned.
+  bool single_scan = false;
   void validate() const;   // throws std::invalid_argument naming the field
 };
 

@@ -40,8 +40,8 @@ class SegmentQuery {
   // throws std::invalid_argument otherwise. A TRACKING_LOST reply means: send `full`.
   api::LocalizeSegmentsRequest tracking_request(const api::LocalizeSegmentsRequest& full) const;
   // Whether `full` may go as a tracking request: it has the newest scans and a prior whose
-  // radius is > 0 and at most the map's registration.max_prior_radius_m (wider ones are not
-  // tracked, so the request would only come back TRACKING_LOST).
+  // radius is > 0 and at most the map's max_tracked_radius_m (core/localizer.h; wider ones are
+  // not tracked, so the request would only come back TRACKING_LOST).
   bool can_track(const api::LocalizeSegmentsRequest& full) const;
 
   // What localize_tracking_first did: the reply that counts, the bytes sent in all, and whether
