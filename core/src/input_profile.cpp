@@ -131,6 +131,50 @@ void check_pose_agreement(const std::vector<ScanPair>& pairs, InputMeasurements&
   }
 }
 
+Rings measure_rings(std::vector<double> e) {
+  Rings r;
+  if (e.size() < 100) return r;
+  std::sort(e.begin(), e.end());
+  const size_t min_points = std::max<size_t>(3, static_cast<size_t>(InputMeasurements::kRingMinShare * double(e.size())));
+  std::vector<double> centres;
+  size_t held = 0;
+  for (size_t begin = 0; begin < e.size();) {
+    size_t end = begin + 1;
+    while (end < e.size() && e[end] - e[end - 1] <= InputMeasurements::kRingGapDeg) ++end;
+    if (end - begin >= min_points && e[end - 1] - e[begin] <= InputMeasurements::kRingMaxWidthDeg) {
+      centres.push_back(e[(begin + end) / 2]);
+      held += end - begin;
+    }
+    begin = end;
+  }
+  r.count = centres.size();
+  r.share = double(held) / double(e.size());
+  if (centres.size() < 2) return r;
+  std::vector<double> steps;
+  for (size_t k = 1; k < centres.size(); ++k) steps.push_back(centres[k] - centres[k - 1]);
+  r.spacing_deg = percentile(steps, 0.5);
+  r.lowest_deg = centres.front(), r.highest_deg = centres.back();
+  r.bottom_step_deg = steps.front(), r.top_step_deg = steps.back();
+  return r;
+}
+
+double Rings::count_between(double lo_deg, double hi_deg) const {
+  if (count < 2) return double(count);
+  const double below = bottom_step_deg > 0 ? std::max(0.0, std::round((lowest_deg - lo_deg) / bottom_step_deg)) : 0.0;
+  const double above = top_step_deg > 0 ? std::max(0.0, std::round((hi_deg - highest_deg) / top_step_deg)) : 0.0;
+  return double(count) + below + above;
+}
+
+std::string InputMeasurements::beam_layout() const {
+  if (!wide_fov) return "narrow-fov";
+  if (downsampled) return "slam keyframes";
+  if (elevation_max_deg - elevation_min_deg >= kWideElevationDeg) return "wide-fov spinning";
+  if (ring_count <= 0) return "spinning, rings not resolved";
+  if (ring_count <= 20) return "16-beam spinning";
+  if (ring_count <= 40) return "32-beam spinning";
+  return "64/128-beam spinning";
+}
+
 std::string InputMeasurements::sensor_class() const {
   if (!wide_fov) return "narrow-fov";
   return downsampled ? "sparse-spinning" : "dense-spinning";
@@ -155,18 +199,19 @@ InputMeasurements measure_input(const std::vector<PointCloud>& scans, const Pose
   config.validate();
   if (scans.empty()) throw std::invalid_argument("measure_input: no scans");
   constexpr double kRadToDeg = 180.0 / M_PI;
-  std::vector<double> points, coverage, el_lo, el_hi, r50, r95, spacing, per_range, steps;
+  std::vector<double> points, coverage, el_lo, el_hi, r50, r95, spacing, per_range, steps, rings, ring_steps, ring_shares;
   for (size_t s = 0; s < scans.size(); ++s) {
     const PointCloud& scan = scans[s];
     if (scan.size() < 10) continue;
     std::vector<bool> bins(360, false);
-    std::vector<double> elevation, range;
+    std::vector<double> elevation, range, far_elevation;
     elevation.reserve(scan.size()), range.reserve(scan.size());
     for (const Point& p : scan) {
       const double r = p.xyz().norm(), rxy = std::hypot(p.x, p.y);
       if (!(r > 0.1) || !std::isfinite(r)) continue;
       range.push_back(r);
       elevation.push_back(std::atan2(p.z, rxy) * kRadToDeg);
+      if (r >= InputMeasurements::kRingMinRangeM) far_elevation.push_back(elevation.back());
       const int bin = static_cast<int>(std::floor(std::atan2(p.y, p.x) * kRadToDeg + 180.0)) % 360;
       bins[static_cast<size_t>(std::max(0, bin))] = true;
     }
@@ -177,6 +222,10 @@ InputMeasurements measure_input(const std::vector<PointCloud>& scans, const Pose
     el_hi.push_back(percentile(elevation, 0.99));
     r50.push_back(percentile(range, 0.5));
     r95.push_back(percentile(range, 0.95));
+    const Rings found = measure_rings(std::move(far_elevation));
+    rings.push_back(found.count_between(percentile(elevation, 0.01), percentile(elevation, 0.99)));
+    ring_steps.push_back(found.spacing_deg);
+    ring_shares.push_back(found.share);
     std::vector<double> ranges;
     const std::vector<double> nn = nearest_neighbour_distances(scan, config.sample_points, &ranges);
     spacing.insert(spacing.end(), nn.begin(), nn.end());
@@ -200,6 +249,12 @@ InputMeasurements measure_input(const std::vector<PointCloud>& scans, const Pose
   m.scan_distance_m = percentile(steps, 0.5);
   m.downsampled = m.spacing_p10_m >= InputMeasurements::kDownsampledSpacingM;
   m.wide_fov = m.azimuth_coverage >= InputMeasurements::kWideFovCoverage;
+  // Rings are a raw scan's (Rings::count_between: the steep ones near the ground count too).
+  if (!m.downsampled && percentile(ring_shares, 0.5) >= InputMeasurements::kRingsResolvedShare &&
+      percentile(rings, 0.5) >= 2) {
+    m.ring_count = percentile(rings, 0.5);
+    m.ring_spacing_deg = percentile(ring_steps, 0.5);
+  }
   return m;
 }
 

@@ -123,6 +123,12 @@ std::string describe_profile(const PipelineConfig& c) {
                   m.range_p50_m, m.range_p95_m, m.spacing_p10_m, m.spacing_p50_m, m.spacing_per_range, m.scan_distance_m);
     out += buf;
     out += "sensor class: " + m.sensor_class() + (m.downsampled ? " (already downsampled)" : " (raw scans)") + "\n";
+    if (m.ring_count > 0)
+      std::snprintf(buf, sizeof buf, "beam layout: %s, %.0f rings %.2f deg apart\n", m.beam_layout().c_str(), m.ring_count,
+                    m.ring_spacing_deg);
+    else
+      std::snprintf(buf, sizeof buf, "beam layout: %s\n", m.beam_layout().c_str());
+    out += buf;
     if (m.pairs_checked > 0) {
       std::snprintf(buf, sizeof buf, "poses against scans: %zu of %zu consecutive pairs checked agree\n",
                     m.pairs_checked - m.pairs_disagreeing, m.pairs_checked);

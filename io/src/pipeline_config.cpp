@@ -267,6 +267,8 @@ void visit_measured(InputMeasurements& m, F&& f) {
   f("scan_distance_m", m.scan_distance_m);
   f("pairs_checked", m.pairs_checked);
   f("pairs_disagreeing", m.pairs_disagreeing);
+  f("ring_count", m.ring_count);
+  f("ring_spacing_deg", m.ring_spacing_deg);
   f("downsampled", m.downsampled);
   f("wide_fov", m.wide_fov);
 }
@@ -277,6 +279,9 @@ InputMeasurements parse_measured(const json& j, const std::string& origin) {
   std::set<std::string> known;
   visit_measured(m, [&](const char* key, auto& value) {
     known.insert(key);
+    // Maps measured before the beam layout have no rings: 0, not resolved.
+    const bool since_rings = std::string(key) == "ring_count" || std::string(key) == "ring_spacing_deg";
+    if (!j.contains(key) && since_rings) return;
     if (!j.contains(key)) throw IoError(origin + ": \"measured." + key + "\" is missing");
     const json& v = j.at(key);
     using T = std::decay_t<decltype(value)>;

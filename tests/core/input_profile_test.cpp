@@ -113,3 +113,66 @@ TEST(InputProfile, PoseAgreementTellsRightFromWrongPoses) {
   EXPECT_EQ(m.pairs_disagreeing, 1u);
   EXPECT_EQ(m.disagreeing_pairs, (std::vector<size_t>{8}));
 }
+
+namespace {
+
+// A spinning scan of `beams` rings evenly from lo_deg to hi_deg (a wall 20 m away, the ground
+// 1.7 m below), each point's elevation jittered by up to jitter_deg.
+PointCloud ring_scan(int beams, double lo_deg, double hi_deg, double jitter_deg = 0.0) {
+  PointCloud out;
+  uint32_t state = 12345;
+  auto jitter = [&] {
+    state = state * 1664525u + 1013904223u;
+    return jitter_deg * (2.0 * (state >> 8) / double(1u << 24) - 1.0);
+  };
+  for (int b = 0; b < beams; ++b)
+    for (int c = 0; c < 1024; ++c) {
+      const double el = (lo_deg + (hi_deg - lo_deg) * b / (beams - 1) + jitter()) * kPi / 180.0;
+      const double az = 2.0 * kPi * c / 1024;
+      double r = 20.0 / std::cos(el);
+      if (el < 0) r = std::min(r, 1.7 / std::sin(-el));
+      const double rxy = r * std::cos(el);
+      out.push_back({static_cast<float>(rxy * std::cos(az)), static_cast<float>(rxy * std::sin(az)),
+                     static_cast<float>(r * std::sin(el)), 0.f});
+    }
+  return out;
+}
+
+}  // namespace
+
+// The beam layout from the elevations alone: the ring count and step of the common sensors
+// (VLP-16, HDL-32E, HDL-64E, OS0-64), with and without a jitter of a few hundredths of a degree.
+TEST(InputProfile, BeamLayoutCountsTheRingsOfASpinningScan) {
+  struct Case {
+    int beams;
+    double lo, hi;
+    const char* layout;
+  };
+  for (const Case& c : {Case{16, -15.0, 15.0, "16-beam spinning"}, Case{32, -30.67, 10.67, "32-beam spinning"},
+                        Case{64, -24.9, 2.0, "64/128-beam spinning"}, Case{64, -45.0, 45.0, "wide-fov spinning"}})
+    for (double jitter : {0.0, 0.03}) {
+      const InputMeasurements m = measure_input({ring_scan(c.beams, c.lo, c.hi, jitter)}, {});
+      // The count spans every point's elevations (1st to 99th percentile): within a ring or two.
+      EXPECT_NEAR(m.ring_count, c.beams, 2.0) << c.beams << " beams, jitter " << jitter;
+      EXPECT_NEAR(m.ring_spacing_deg, (c.hi - c.lo) / (c.beams - 1), 0.05) << c.beams << " beams";
+      EXPECT_EQ(m.beam_layout(), c.layout) << c.beams << " beams, jitter " << jitter;
+      EXPECT_EQ(m.sensor_class(), "dense-spinning") << "the parameters' class is unchanged";
+    }
+}
+
+TEST(InputProfile, KeyframesAndConesHaveNoRings) {
+  VoxelGridConfig grid;
+  grid.leaf_m = 0.25f;
+  grid.min_points_per_voxel = 1;
+  const PointCloud keyframe = voxel_filter(ring_scan(64, -15.0, 15.0), grid);
+  const InputMeasurements k = measure_input({keyframe, keyframe}, straight_line(5, 6.0));
+  EXPECT_EQ(k.ring_count, 0.0);
+  EXPECT_EQ(k.beam_layout(), "slam keyframes");
+  EXPECT_EQ(measure_input({scan_of(35.0, 64, 400, 12.0)}, {}).beam_layout(), "narrow-fov");
+  // Elevations spread evenly (a non-repetitive pattern): no group holds the points.
+  std::vector<double> spread;
+  for (int i = 0; i < 20000; ++i) spread.push_back(-30.0 + 60.0 * i / 20000.0);
+  EXPECT_LT(measure_rings(spread).share, InputMeasurements::kRingsResolvedShare);
+  const Rings rings = measure_rings({});
+  EXPECT_EQ(rings.count, 0u);
+}

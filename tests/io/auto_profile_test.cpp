@@ -5,6 +5,7 @@
 #include "segmatch/io/pipeline_config.h"
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 using namespace segmatch;
 using namespace segmatch::io;
@@ -74,6 +75,34 @@ TEST(AutoProfile, MeasurementsRoundTripThroughJson) {
   EXPECT_DOUBLE_EQ(back.measured->range_p50_m, 10.3);
   EXPECT_EQ(to_json(back), text);
   EXPECT_EQ(back.preset, "auto");
+}
+
+// The beam layout round-trips; maps measured before it (no ring keys) still parse, with no
+// rings, and a missing older key is still refused by name.
+TEST(AutoProfile, RingsRoundTripAndOlderMapsParseWithout) {
+  InputMeasurements m = measured(true, false);
+  m.ring_count = 32;
+  m.ring_spacing_deg = 1.33;
+  PipelineConfig c = auto_pipeline_config(m);
+  const PipelineConfig back = parse_pipeline_config(to_json(c), "map parameters");
+  ASSERT_TRUE(back.measured.has_value());
+  EXPECT_DOUBLE_EQ(back.measured->ring_count, 32.0);
+  EXPECT_DOUBLE_EQ(back.measured->ring_spacing_deg, 1.33);
+  EXPECT_EQ(back.measured->beam_layout(), "32-beam spinning");
+  nlohmann::json older = nlohmann::json::parse(to_json(c));
+  older["measured"].erase("ring_count");
+  older["measured"].erase("ring_spacing_deg");
+  const PipelineConfig old_map = parse_pipeline_config(older.dump(), "schema-4 map");
+  ASSERT_TRUE(old_map.measured.has_value());
+  EXPECT_EQ(old_map.measured->ring_count, 0.0);
+  EXPECT_EQ(old_map.measured->beam_layout(), "spinning, rings not resolved");
+  older["measured"].erase("range_p50_m");
+  try {
+    parse_pipeline_config(older.dump(), "cfg.json");
+    FAIL() << "accepted";
+  } catch (const IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("measured.range_p50_m\" is missing"), std::string::npos) << e.what();
+  }
 }
 
 TEST(AutoProfile, BadMeasurementsAreNamed) {

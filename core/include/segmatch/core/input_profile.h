@@ -33,6 +33,14 @@ struct InputMeasurements {
   size_t pairs_checked = 0;
   size_t pairs_disagreeing = 0;
   std::vector<size_t> disagreeing_pairs;  // index of the earlier scan of each (input order)
+  // The beam layout of a raw spinning scan: its points' elevations (from the sensor, points at
+  // least kRingMinRangeM away) fall into rings, one per laser, split where the sorted elevations
+  // jump by more than kRingGapDeg; rings are the groups holding kRingMinShare of the points
+  // within kRingMaxWidthDeg (a continuous spread of elevations is one wide group, no ring).
+  // Resolved (ring_count > 0) when the rings hold kRingsResolvedShare of the points (median over
+  // scans); keyframes a SLAM front end voxelized and non-repetitive scans (Livox) have no rings.
+  double ring_count = 0;             // 0: not resolved
+  double ring_spacing_deg = 0;       // median elevation step between neighbouring rings
   bool downsampled = false;          // spacing_p10_m >= kDownsampledSpacingM
   bool wide_fov = false;             // azimuth_coverage >= kWideFovCoverage
   // A raw scan has its 10th-percentile neighbour a few centimetres away (hku-loop1 / hku-mb:
@@ -43,8 +51,19 @@ struct InputMeasurements {
   static constexpr double kAgreementRadiusM = 0.75;
   static constexpr double kAgreementMaxDistanceM = 10.0;
   static constexpr double kMinAgreement = 0.5;
-  // "dense-spinning", "sparse-spinning" (keyframes of a 360-degree sensor), "narrow-fov".
+  static constexpr double kRingMinRangeM = 5.0;
+  static constexpr double kRingGapDeg = 0.1;
+  static constexpr double kRingMaxWidthDeg = 0.5;
+  static constexpr double kRingMinShare = 0.002;
+  static constexpr double kRingsResolvedShare = 0.8;
+  static constexpr double kWideElevationDeg = 70.0;  // an OS0 spans 90 degrees, an HDL-64E 27
+  // "dense-spinning", "sparse-spinning" (keyframes of a 360-degree sensor), "narrow-fov": the
+  // class the parameters follow (auto_profile.h).
   std::string sensor_class() const;
+  // The beam layout for a person: "16-beam spinning", "32-beam spinning", "64/128-beam
+  // spinning", "wide-fov spinning" (elevation span >= kWideElevationDeg), "spinning, rings not
+  // resolved", "slam keyframes" (downsampled) or "narrow-fov".
+  std::string beam_layout() const;
 };
 
 struct InputProfileConfig {
@@ -74,6 +93,20 @@ struct ScanPair {
   size_t index_a = 0;
 };
 void check_pose_agreement(const std::vector<ScanPair>& pairs, InputMeasurements& m);
+
+// The rings of one scan's point elevations (degrees, any order; see InputMeasurements): how
+// many, the median step between neighbours, and the share of the points they hold.
+struct Rings {
+  size_t count = 0;
+  double spacing_deg = 0;
+  double share = 0;
+  double lowest_deg = 0, highest_deg = 0;        // the outermost rings' elevations
+  double bottom_step_deg = 0, top_step_deg = 0;  // and the step next to each
+  // The rings from lo_deg to hi_deg: those found plus, beyond the outermost, as many as their
+  // step fits (steep rings meet the ground nearer than kRingMinRangeM and are not measured).
+  double count_between(double lo_deg, double hi_deg) const;
+};
+Rings measure_rings(std::vector<double> elevations_deg);
 
 // Which scans measure_input() looks at when given `count` of them (indices, increasing).
 std::vector<size_t> scans_to_measure(size_t count, const InputProfileConfig& config = {});
