@@ -271,6 +271,7 @@ int main(int argc, char** argv) {
   fun->add_option("--first", fc.replay.first, "first scan");
   fun->add_option("--last", fc.replay.last, "last scan");
   fun->add_option("--stride", fc.replay.stride, "use every n-th scan");
+  fun->add_flag("--single-scan", fc.replay.single_scan, "every query one raw scan alone, as for localize");
   fun->add_option("--odometry", fc.odometry_path, "the vehicle's odometry poses (default: QUERY/odom_poses.txt)");
   std::string funnel_cloud_poses = "odometry";
   fun->add_option("--cloud-poses", funnel_cloud_poses, "odometry (default) or reference, as for localize")

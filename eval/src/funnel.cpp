@@ -32,7 +32,8 @@ std::vector<FunnelQuery> run_funnel(const LocalizationRunConfig& c, const Locali
     f.frame = q.frame;
     f.odometer_m = q.odometer_m;
     const Eigen::Vector3f sensor = q.T_odom_sensor.translation().cast<float>();
-    const Segments query = extract_segments_from_voxels(q.cloud_odom, sensor, lc.segmentation);
+    const Segments query = q.voxelized ? extract_segments_from_voxels(q.cloud_odom, sensor, lc.segmentation)
+                                       : extract_segments(q.cloud_odom, sensor, lc.segmentation);
     f.segments = query.size();
     const Pose3d T_map_odom = truth[q.frame] * q.T_odom_sensor.inverse();
     std::vector<int> counterpart(query.size(), -1);
