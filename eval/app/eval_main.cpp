@@ -265,7 +265,8 @@ int main(int argc, char** argv) {
   eval::LocalizationRunConfig fc;
   auto* fun = app.add_subcommand("funnel", "where true matches are lost: segments, counterparts, retrieved, classified");
   fun->add_option("--map", fc.map_path, "map database")->required();
-  fun->add_option("--query", fc.query_folder, "sequence to replay; its poses are the ground truth in the map frame")->required();
+  fun->add_option("--query", fc.query_folder, "sequence to replay; its poses are the ground truth in the map frame");
+  fun->add_option("--sim", fc.sim_dataset, "segmatch-sim folder: sequences/01 with its exact ground truth");
   fun->add_option("--every-m", fc.replay.every_m, "one query every this many metres");
   fun->add_option("--warmup-m", fc.replay.warmup_m, "no query before this much driving (default 30)");
   fun->add_option("--first", fc.replay.first, "first scan");
@@ -306,6 +307,7 @@ int main(int argc, char** argv) {
       return run_localize(lc, server, token_file, out_dir, segments, lc.track_surfaces, load);
     }
     if (*fun) {
+      if (fc.query_folder.empty() == fc.sim_dataset.empty()) throw std::runtime_error("give exactly one of --query and --sim");
       const auto loaded = server::load_map(fc.map_path);
       fc.replay.local_cloud = loaded->config.local_cloud;
       fc.cloud_poses = io::parse_cloud_poses(funnel_cloud_poses);

@@ -1,4 +1,5 @@
 #include "segmatch/eval/funnel.h"
+#include "segmatch/eval/localization_run.h"
 
 #include "segmatch/core/support.h"
 #include "segmatch/io/pose_io.h"
@@ -14,12 +15,13 @@ namespace eval {
 
 std::vector<FunnelQuery> run_funnel(const LocalizationRunConfig& c, const Localizer& localizer,
                                     const FunnelConfig& funnel) {
-  if (!c.sim_dataset.empty()) throw std::runtime_error("funnel: only --query sequences (poses in the map frame) for now");
-  const Poses truth = io::Sequence::open(c.query_folder).poses();
+  const Truth opened = open_truth(c);
+  const Poses& truth = opened.T_map_sensor;
+  const std::string folder = opened.sequence.folder();
   // The local clouds as a vehicle builds them: from its odometry (or the reference, to compare).
   io::SequenceOptions so;
-  if (c.cloud_poses == io::CloudPoses::kOdometry) so.poses_path = io::odometry_poses_path(c.query_folder, c.odometry_path);
-  const io::Sequence sequence = io::Sequence::open(c.query_folder, so);
+  if (c.cloud_poses == io::CloudPoses::kOdometry) so.poses_path = io::odometry_poses_path(folder, c.odometry_path);
+  const io::Sequence sequence = io::Sequence::open(folder, so);
   std::printf("local clouds: %s\n", c.cloud_poses == io::CloudPoses::kOdometry ? so.poses_path.c_str()
                                                                              : "the REFERENCE poses (a comparison only)");
   const LocalizerConfig& lc = localizer.config();

@@ -26,32 +26,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct Truth {
-  io::Sequence sequence;
-  Poses T_map_sensor;  // per scan of the sequence
-};
-
-Truth open_truth(const LocalizationRunConfig& c) {
-  if (c.sim_dataset.empty()) {
-    io::SequenceOptions so;
-    so.poses_path = c.reference_path;
-    io::Sequence seq = io::Sequence::open(c.query_folder, so);
-    Poses truth = seq.poses();
-    return {std::move(seq), std::move(truth)};
-  }
-  const fs::path dir(c.sim_dataset);
-  io::Sequence seq = io::Sequence::open((dir / "sequences" / "01").string());
-  const Poses world_00 = io::read_kitti_poses((dir / "ground_truth" / "lidar_poses_00.txt").string());
-  const Poses world_01 = io::read_kitti_poses((dir / "ground_truth" / "lidar_poses_01.txt").string());
-  if (world_00.empty() || world_01.size() != seq.size())
-    throw std::runtime_error(c.sim_dataset + ": ground truth poses do not match sequences/01 (" +
-                             std::to_string(world_01.size()) + " poses, " + std::to_string(seq.size()) + " scans)");
-  const Pose3d T_map_world = world_00.front().inverse();
-  Poses truth;
-  for (const Pose3d& T_world_sensor : world_01) truth.push_back(T_map_world * T_world_sensor);
-  return {std::move(seq), std::move(truth)};
-}
-
 double distance_to(const std::vector<Eigen::Vector3d>& path, const Eigen::Vector3d& p) {
   double best = std::numeric_limits<double>::infinity();
   for (const Eigen::Vector3d& q : path) best = std::min(best, (q - p).head<2>().norm());
@@ -82,6 +56,27 @@ void add_timings(std::map<std::string, std::vector<double>>& t, const api::Modul
 }
 
 }  // namespace
+
+Truth open_truth(const LocalizationRunConfig& c) {
+  if (c.sim_dataset.empty()) {
+    io::SequenceOptions so;
+    so.poses_path = c.reference_path;
+    io::Sequence seq = io::Sequence::open(c.query_folder, so);
+    Poses truth = seq.poses();
+    return {std::move(seq), std::move(truth)};
+  }
+  const fs::path dir(c.sim_dataset);
+  io::Sequence seq = io::Sequence::open((dir / "sequences" / "01").string());
+  const Poses world_00 = io::read_kitti_poses((dir / "ground_truth" / "lidar_poses_00.txt").string());
+  const Poses world_01 = io::read_kitti_poses((dir / "ground_truth" / "lidar_poses_01.txt").string());
+  if (world_00.empty() || world_01.size() != seq.size())
+    throw std::runtime_error(c.sim_dataset + ": ground truth poses do not match sequences/01 (" +
+                             std::to_string(world_01.size()) + " poses, " + std::to_string(seq.size()) + " scans)");
+  const Pose3d T_map_world = world_00.front().inverse();
+  Poses truth;
+  for (const Pose3d& T_world_sensor : world_01) truth.push_back(T_map_world * T_world_sensor);
+  return {std::move(seq), std::move(truth)};
+}
 
 LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeFn& localize) {
   const storage::MapReader map = storage::MapReader::open(c.map_path);

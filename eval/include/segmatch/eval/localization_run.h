@@ -6,6 +6,7 @@
 #include <segmatch/api/protocol.h>
 #include <segmatch/eval/metrics.h>
 #include <segmatch/io/replay.h>
+#include <segmatch/io/sequence.h>
 
 #include <functional>
 #include <map>
@@ -81,6 +82,15 @@ struct LocalizationRun {
 
 // Throws io::IoError / storage::StorageError / std::runtime_error naming the bad input.
 LocalizationRun run_localization(const LocalizationRunConfig& config, const LocalizeFn& localize);
+
+// The replayed sequence and the true map pose of each of its scans: --query's poses (or
+// --reference), or a segmatch-sim folder's sequences/01 with its exact ground truth, put in the
+// frame of the map built from 00 (its first pose).
+struct Truth {
+  io::Sequence sequence;
+  Poses T_map_sensor;
+};
+Truth open_truth(const LocalizationRunConfig& config);
 
 // out_dir/localization.json, estimated.tum and reference.tum (localized queries, for evo),
 // trajectory.png, px.png, errors.png; prints the summary.
