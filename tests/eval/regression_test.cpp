@@ -119,7 +119,7 @@ fs::path* RegressionMap::world_ = nullptr;
 
 TEST_F(RegressionMap, TodaysCodeGivesTheGoldenAnswers) {
   const nlohmann::json golden = RegressionMap::golden();
-  const eval::LocalizationRun run = replay(kMapDir + "/map.sqlite", golden);
+  const eval::LocalizationRun run = replay(std::string(SEGMATCH_TINY3_MAP), golden);
 
   const auto& expected = golden.at("per_query");
   ASSERT_EQ(run.outcomes.size(), expected.size()) << "the replay no longer yields the golden queries";
@@ -152,7 +152,7 @@ TEST_F(RegressionMap, TodaysCodeGivesTheGoldenAnswers) {
 // reading points lazily must answer as one holding them all in memory.
 TEST_F(RegressionMap, UpgradedMapGivesIdenticalAnswers) {
   const nlohmann::json golden = RegressionMap::golden();
-  const std::string old_path = kMapDir + "/map.sqlite";
+  const std::string old_path = std::string(SEGMATCH_TINY3_MAP);
   ASSERT_EQ(storage::MapReader::open(old_path).schema_version(), 1);
   const std::string new_path = (fs::path(::testing::TempDir()) / "segmatch-regression-upgraded.sqlite").string();
   ASSERT_EQ(storage::upgrade_map(old_path, new_path, /*overwrite=*/true), 1);

@@ -6,4 +6,4 @@ add_dependencies(test_mapbuilder segmatch-mapbuilder segmatch-mapinfo segmatch-s
 # The default classifier the builder looks for, to know which behaviour to expect.
 target_compile_definitions(test_mapbuilder PRIVATE
   SEGMATCH_DEFAULT_MODEL_FOR_TEST="${PROJECT_SOURCE_DIR}/maps/models/default-rf.yml"
-  SEGMATCH_OLD_MAP_FOR_TEST="${PROJECT_SOURCE_DIR}/maps/tiny-3/map.sqlite")  # schema 1
+  SEGMATCH_OLD_MAP_FOR_TEST="${SEGMATCH_TINY3_MAP}")  # schema 1, unpacked by tests/CMakeLists.txt

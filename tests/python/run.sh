@@ -56,6 +56,7 @@ if [ ! -f "$stamp" ] || [ -n "$(find "$source_dir/python" -newer "$stamp" -print
 fi
 
 export SEGMATCH_SOURCE_DIR=$source_dir SEGMATCH_BIN_DIR=$bin_dir
+export SEGMATCH_TINY3_MAP=$build_dir/maps/tiny-3/map.sqlite  # unpacked from maps/tiny-3/map.sqlite.tar.xz by CMake
 export PYTHONDONTWRITEBYTECODE=1  # no __pycache__ in the source tree
 "$venv/bin/python" -c 'import segmatch, numpy; print("segmatch", segmatch.__version__, "from", segmatch.__file__, "numpy", numpy.__version__)'
 cd "$build_dir"

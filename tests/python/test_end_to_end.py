@@ -13,6 +13,7 @@ drift), so the true T_map_local is known exactly from the simulator's ground tru
 from __future__ import annotations
 
 import math
+import os
 import shutil
 import socket
 import struct
@@ -28,7 +29,8 @@ from _support import BIN_DIR, BIN_DIR_REQUIRED, SOURCE_DIR, ServerProcess, read_
 from segmatch import ConnectionLost, ErrorCode, LocalizeStatus, Prior, ServerError
 from segmatch import protocol as p
 
-MAP = SOURCE_DIR / "maps" / "tiny-3" / "map.sqlite"
+# Stored compressed (maps/tiny-3/map.sqlite.tar.xz); CMake unpacks it into the build tree.
+MAP = Path(os.environ.get("SEGMATCH_TINY3_MAP", SOURCE_DIR / "build" / "maps" / "tiny-3" / "map.sqlite"))
 QUERY_FRAME = 141  # of sequence 01; localized in maps/tiny-3/golden.json
 QUERY_SPAN_M, QUERY_EVERY_M = 40.0, 5.0
 TOKEN = "python-client-test-token"

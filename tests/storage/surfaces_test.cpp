@@ -19,7 +19,7 @@ namespace storage {
 namespace test {
 namespace {
 
-const std::string kSchemaOneMap = SEGMATCH_SOURCE_DIR "/maps/tiny-3/map.sqlite";
+const std::string kSchemaOneMap = SEGMATCH_TINY3_MAP;
 const std::string kSchemaTwoMap = SEGMATCH_SOURCE_DIR "/maps/tiny-3/map-schema2.sqlite";
 
 // The bound of map_writer.h: 5 mm, plus one float rounding of the coordinate.

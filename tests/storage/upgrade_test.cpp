@@ -13,7 +13,7 @@ namespace storage {
 namespace test {
 namespace {
 
-const std::string kOldMap = SEGMATCH_SOURCE_DIR "/maps/tiny-3/map.sqlite";
+const std::string kOldMap = SEGMATCH_TINY3_MAP;  // maps/tiny-3/map.sqlite.tar.xz, unpacked at configure time
 // The same map upgraded to schema 2 by the schema-2 build (2026-12-03): lossless.
 const std::string kSchemaTwoMap = SEGMATCH_SOURCE_DIR "/maps/tiny-3/map-schema2.sqlite";
 
