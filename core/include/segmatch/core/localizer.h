@@ -150,6 +150,12 @@ struct LocalizationResult {
   bool localized() const { return status == LocalizationStatus::kLocalized; }
 };
 
+// A refusal that came after tracking on the surface layer did not answer says why tracking did
+// not either: "<the refusal's reason> (tracking on the surface layer: ...)". Answers are untouched.
+inline void keep_tracking_reason(const LocalizationResult& tracked, LocalizationResult& r) {
+  if (!r.localized() && !tracked.reason.empty()) r.reason += " (" + tracked.reason + ")";
+}
+
 // Voxel grid, ground removal, segmentation and description of one cloud. sensor_position
 // is in the cloud's frame (the height threshold needs it). Labels, if given, mark each
 // segment with its majority ground-truth label.
