@@ -191,6 +191,24 @@ TEST(SurfaceTracking, ObjectsThatFitBetterElsewhereRefuseTheAnswer) {
       << "without the check the same request is answered: the test's scene is what decides";
 }
 
+// When tracking does not answer and the segments path refuses too, the refusal says why each
+// did: the operator sees tracking's reason, not only the fallback's.
+TEST(SurfaceTracking, AFallbackRefusalKeepsTrackingsReason) {
+  const Street s;
+  const Localizer localizer = s.layered();
+  // A prior turned 20 degrees from the truth, with a 5 degree tolerance: neither path may answer.
+  const LocalizationResult r = localizer.localize_tracking_first(transformed(s.map_cloud, s.T_query), s.sensor_query().cast<float>(),
+                                                                 CloudKind::kRaw, s.newest(), s.prior(0.0, 20.0), Deadline{});
+  ASSERT_FALSE(r.localized()) << "answered " << s.error_m(r) << " m off";
+  EXPECT_NE(r.reason.find(" (tracking on the surface layer: "), std::string::npos) << r.reason;
+  LocalizationResult answered;
+  answered.status = LocalizationStatus::kLocalized;
+  LocalizationResult lost;
+  lost.reason = "tracking on the surface layer: why";
+  keep_tracking_reason(lost, answered);
+  EXPECT_TRUE(answered.reason.empty()) << "an answer carries no reason";
+}
+
 TEST(SurfaceTracking, ConfigRefusesBadValuesByName) {
   SurfaceTrackingConfig c;
   EXPECT_NO_THROW(c.validate());
