@@ -57,8 +57,7 @@ int main(int argc, char** argv) {
   CLI::App* localize = app.add_subcommand("localize", "localize one cloud (.bin/.pcd/.ply, local frame)");
   localize->add_option("cloud", cloud_path, "point cloud file")->required();
   localize->add_option("--sensor", sensor, "sensor position x,y,z in the cloud's frame")->capture_default_str();
-  bool refusal_code = false;
-  localize->add_flag("--refusal-code", refusal_code,
+  localize->add_flag("--refusal-code",
                      "ask for the reply's typed refusal code (the default since revision 5; a server older than "
                      "revision 5 is asked again without it)")
       ->group("");

@@ -318,7 +318,7 @@ LocalizationResult Localizer::localize_tracking_first(const PointCloud& cloud, c
   // A refused result keeps its query: the same segments go on, not segmented again.
   LocalizationResult r = localize_segments(std::move(tracked.query), sensor_position, &prior, timings, deadline);
   if (!deadline.passed()) refine_to_newest_scans(newest, sensor_position, r);
-  keep_tracking_reason(tracked, r);
+  keep_tracking_reason(tracked.reason, r);
   return r;
 }
 

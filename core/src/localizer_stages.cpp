@@ -128,6 +128,31 @@ void localized_by(const RegistrationResult& reg, LocalizationResult& r,
   r.confidence = reg.fitness;
 }
 
+bool within_wide_prior(const RegistrationResult& reg, const PosePrior& prior, const Eigen::Vector3d& s,
+                       const CorrelativeSearchConfig& search, RegistrationRefusal& refusal, std::string& reason) {
+  const double moved_m = (reg.T_map_query * s - prior.T_map_query * s).norm();
+  const double turned_deg =
+      Eigen::AngleAxisd(reg.T_map_query.linear() * prior.T_map_query.linear().transpose()).angle() * 180.0 / M_PI;
+  if (moved_m > prior.radius_m || turned_deg > prior.max_rotation_deg) {
+    refusal = RegistrationRefusal::kOutsidePrior;
+    reason = "registered outside the prior";
+    return false;
+  }
+  if (reg.fitness < search.min_fitness) {
+    refusal = RegistrationRefusal::kLowFitness;
+    reason = "registration fitness " + std::to_string(reg.fitness) + " below the wide prior's " + std::to_string(search.min_fitness);
+    return false;
+  }
+  return true;
+}
+
+bool distinct_from(const std::vector<RegistrationResult>& passed, const RegistrationResult& reg, const Eigen::Vector3d& s,
+                   double min_separation_m) {
+  for (const RegistrationResult& p : passed)
+    if ((p.T_map_query * s - reg.T_map_query * s).norm() < min_separation_m) return false;
+  return true;
+}
+
 namespace {
 
 // Over a wide prior the support must also reach the localizer's own floors, with and without a
@@ -168,23 +193,12 @@ void register_over_wide_prior(const Segments& targets, const TargetPoints* sourc
     RegistrationResult reg = register_to_map(query, crop_cylinder(map, at, config.registration.window_m + kWindowMarginM),
                                              peak.T_map_query, s, peak_radius_m, peak_turn_deg, max_rmse_m,
                                              config.registration, config.refine, config.covariance);
-    const Eigen::Vector3d moved = reg.T_map_query * s - centre;
-    const double turned_deg = Eigen::AngleAxisd(reg.T_map_query.linear() * prior.T_map_query.linear().transpose()).angle() * 180.0 / M_PI;
-    if (reg.accepted() && (moved.norm() > prior.radius_m || turned_deg > prior.max_rotation_deg)) {
-      reg.refusal = RegistrationRefusal::kOutsidePrior;
-      reg.reason = "registered outside the prior";
-    } else if (reg.accepted() && reg.fitness < search.min_fitness) {
-      reg.refusal = RegistrationRefusal::kLowFitness;
-      reg.reason = "registration fitness " + std::to_string(reg.fitness) + " below the wide prior's " + std::to_string(search.min_fitness);
-    }
+    if (reg.accepted()) within_wide_prior(reg, prior, s, search, reg.refusal, reg.reason);
     trial.registration_refusal = reg.refusal;
     trial.registration_reason = reg.reason;
     if (reg.accepted() && well_supported(targets, centroids, classifier, config, reg.T_map_query, config.registration.min_matched_segments, trial) &&
         supported_globally(config, trial)) {
-      bool same = false;
-      for (const RegistrationResult& p : passed)
-        same = same || ((p.T_map_query * s - reg.T_map_query * s).norm() < search.min_separation_m);
-      if (!same) passed.push_back(reg);
+      if (distinct_from(passed, reg, s, search.min_separation_m)) passed.push_back(reg);
       if (passed.size() == 1) last = trial;  // keep the first answer's support and inliers
       continue;
     }

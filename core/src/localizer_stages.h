@@ -44,6 +44,16 @@ void refine_recent_window(const WindowPoints& points, const Eigen::Vector3f& sen
 bool well_supported(const Segments& targets, const CentroidIndex& centroids, const RandomForestMatcher* classifier,
                     const LocalizerConfig& config, const Pose3d& T_map_query, int min_matched_segments, LocalizationResult& r);
 
+// A pose registered from a correlative search peak still answers the wide prior it came from:
+// inside its disc and heading tolerance, with the search's fitness floor
+// (CorrelativeSearchConfig::min_fitness). False with the refusal and its reason otherwise.
+bool within_wide_prior(const RegistrationResult& reg, const PosePrior& prior, const Eigen::Vector3d& s,
+                       const CorrelativeSearchConfig& search, RegistrationRefusal& refusal, std::string& reason);
+
+// Whether reg's sensor lies at least min_separation_m from every pose already passed.
+bool distinct_from(const std::vector<RegistrationResult>& passed, const RegistrationResult& reg, const Eigen::Vector3d& s,
+                   double min_separation_m);
+
 // A registration's answer as r's: localized by `method`, its pose, covariance and fitness.
 void localized_by(const RegistrationResult& reg, LocalizationResult& r,
                   LocalizationMethod method = LocalizationMethod::kRegistration);

@@ -26,8 +26,8 @@ struct ShiftedSupport {
 
 // The best support of the query segments under the registered pose shifted horizontally along
 // its weakest axis, and across it, by 1.5 m to range_m (SurfaceTrackingConfig::ambiguity_range_m,
-// or a wide prior's diameter; 0.5 m steps, a half support radius). Walls and ground hold a street's cross-section, not where along
-// it the vehicle is: a scan registered a few metres along a street of look-alike facades fits
+// or a wide prior's diameter; 0.5 m steps, a half support radius). Walls and ground hold a
+// street's cross-section, not where along it the vehicle is: a scan registered a few metres along a street of look-alike facades fits
 // them (fitness 0.89 on the simulated demo city, a prior 6 m off), while the objects fit at the
 // truth, where their support is far higher (README, 2026-12-06).
 ShiftedSupport best_shifted_support(const Segments& query, const CentroidIndex& centroids, const LocalizerConfig& config,
@@ -113,27 +113,6 @@ bool track_from(const PointCloud& points, const Segments& targets, const Centroi
   return true;
 }
 
-// A pose tracked from a search peak still answers the wide prior: inside its disc and heading
-// tolerance, and with the search's own fitness floor; false with the refusal in r otherwise.
-bool within_wide_prior(const RegistrationResult& reg, const PosePrior& prior, const Eigen::Vector3d& s,
-                       const CorrelativeSearchConfig& search, LocalizationResult& r) {
-  const double moved_m = (reg.T_map_query * s - prior.T_map_query * s).norm();
-  const double turned_deg =
-      Eigen::AngleAxisd(reg.T_map_query.linear() * prior.T_map_query.linear().transpose()).angle() * 180.0 / M_PI;
-  if (moved_m > prior.radius_m || turned_deg > prior.max_rotation_deg) {
-    r.registration_refusal = RegistrationRefusal::kOutsidePrior;
-    r.registration_reason = "registered outside the prior";
-    return false;
-  }
-  if (reg.fitness < search.min_fitness) {
-    r.registration_refusal = RegistrationRefusal::kLowFitness;
-    r.registration_reason = "registration fitness " + std::to_string(reg.fitness) + " below the wide prior's " +
-                            std::to_string(search.min_fitness);
-    return false;
-  }
-  return true;
-}
-
 // A prior too wide for registration (a GNSS fix, a tracker long without one): the correlative
 // search (correlative_search.h) of the newest points over the surface layer, both without their
 // ground (it is everywhere, top-down), gives the best distinct peaks; tracking from each, with
@@ -170,14 +149,12 @@ bool track_over_wide_prior(const PointCloud& points, const Segments& targets, co
     LocalizationResult trial = r;
     RegistrationResult reg;
     const bool ok = track_from(points, targets, centroids, classifier, surfaces, config, at, s, ambiguity_range_m, trial, reg) &&
-                    within_wide_prior(reg, prior, s, search, trial);
+                    within_wide_prior(reg, prior, s, search, trial.registration_refusal, trial.registration_reason);
     if (!ok) {
       if (passed.empty()) last = std::move(trial);
       continue;
     }
-    bool same = false;
-    for (const RegistrationResult& p : passed) same = same || (p.T_map_query * s - reg.T_map_query * s).norm() < search.min_separation_m;
-    if (same) continue;
+    if (!distinct_from(passed, reg, s, search.min_separation_m)) continue;
     if (passed.empty()) first = std::move(trial);
     passed.push_back(reg);
   }

@@ -148,6 +148,11 @@ std::string describe_profile(const PipelineConfig& c) {
       out += buf;
     }
   }
+  return out + describe_choice(c);
+}
+
+std::string describe_choice(const PipelineConfig& c) {
+  char buf[1024];
   const SegmentationConfig& s = c.localizer.segmentation;
   const LocalizerConfig& l = c.localizer;
   std::snprintf(buf, sizeof buf,
@@ -161,8 +166,7 @@ std::string describe_profile(const PipelineConfig& c) {
                     : ("random forest >= " + std::to_string(l.matcher.rf_threshold).substr(0, 4) +
                        (l.matcher.use_shapes ? " (eigen+shapes)" : " (eigen)")).c_str(),
                 l.verification.resolution_m, l.min_support, l.min_confidence);
-  out += buf;
-  return out;
+  return buf;
 }
 
 }  // namespace io

@@ -114,13 +114,11 @@ void replay_sequence(const Sequence& sequence, const ReplayConfig& config,
     previous = T_world_sensor.translation();
     const Pose3d T_odom_sensor = T_odom_world * T_world_sensor;
     const PointCloud scan = sequence.scan(i).points;
-    if (config.single_scan) {
-    } else if (config.voxelize) {
-      voxels.add_scan(scan, T_odom_sensor);
-    } else {
-      raw.add_scan(scan, T_odom_sensor);
+    if (!config.single_scan) {  // a single scan is its own query: nothing accumulates
+      if (config.voxelize) voxels.add_scan(scan, T_odom_sensor);
+      else raw.add_scan(scan, T_odom_sensor);
+      newest.add(scan, T_odom_sensor, odometer_m);
     }
-    if (!config.single_scan) newest.add(scan, T_odom_sensor, odometer_m);
     if (progress) progress(++done, total);
     if (odometer_m + 1e-9 < next_query_m) continue;
     next_query_m = odometer_m + config.every_m;

@@ -173,8 +173,7 @@ void check_segment_count(const MapBuilder& b, const io::PipelineConfig& config, 
   if (static_cast<double>(segments) >= floor) return;
   const std::string sensor = config.measured ? "sensor class " + config.measured->sensor_class()
                                              : "preset " + config.preset + " (the input not measured)";
-  const std::string profile = io::describe_profile(config);
-  const std::string chose = profile.substr(profile.rfind("chose"));
+  const std::string chose = io::describe_choice(config);
   char what[256];
   std::snprintf(what, sizeof what, "the segmentation kept %zu segments (from %zu extracted views) over %.3f km driven, at least %.0f expected",
                 segments, b.extracted_segments(), km, floor);

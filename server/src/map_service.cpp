@@ -273,7 +273,7 @@ Outcome serve_localize_segments(const LoadedMap& map, api::LocalizeSegmentsReque
   const Eigen::Vector3f sensor = request.sensor_position_local.cast<float>();
   // Tracking on the surface layer first (revision 11, docs/protocol.md 5.5); the full request's
   // path when it does not answer and the segments carry points, TRACKING_LOST when they do not.
-  std::optional<LocalizationResult> tracking_answer;  // what tracking said, when it did not answer
+  std::string tracking_reason;  // why tracking did not answer, for the full path's refusal
   if (request.flags & api::kSegmentsFlagTrack) {
     const bool has_points = std::any_of(request.segments.begin(), request.segments.end(),
                                         [](const Segment& s) { return !s.points.empty(); });
@@ -285,14 +285,13 @@ Outcome serve_localize_segments(const LoadedMap& map, api::LocalizeSegmentsReque
       tracked.refusal = Refusal::kTrackingLost, tracked.reason = "tracking on the surface layer needs a prior radius > 0";
     }
     if (tracked.localized() || !has_points) return outcome_of(map, tracked, request.request_id, fields, start);
-    tracking_answer.emplace();
-    tracking_answer->reason = std::move(tracked.reason);
+    tracking_reason = std::move(tracked.reason);
   }
   LocalizationResult r =
       map.localizer->localize_segments(std::move(request.segments), sensor, prior ? &*prior : nullptr, {}, deadline);
   if ((request.flags & api::kSegmentsFlagNewestScans) && !deadline.passed())  // revision 10, as LOCALIZE bit 5
     map.localizer->refine_to_newest_scans(request.newest_points, sensor, r);
-  if (tracking_answer) keep_tracking_reason(*tracking_answer, r);
+  keep_tracking_reason(tracking_reason, r);
   return outcome_of(map, r, request.request_id, fields, start);
 }
 

@@ -203,9 +203,7 @@ TEST(SurfaceTracking, AFallbackRefusalKeepsTrackingsReason) {
   EXPECT_NE(r.reason.find(" (tracking on the surface layer: "), std::string::npos) << r.reason;
   LocalizationResult answered;
   answered.status = LocalizationStatus::kLocalized;
-  LocalizationResult lost;
-  lost.reason = "tracking on the surface layer: why";
-  keep_tracking_reason(lost, answered);
+  keep_tracking_reason("tracking on the surface layer: why", answered);
   EXPECT_TRUE(answered.reason.empty()) << "an answer carries no reason";
 }
 

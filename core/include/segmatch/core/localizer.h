@@ -152,8 +152,8 @@ struct LocalizationResult {
 
 // A refusal that came after tracking on the surface layer did not answer says why tracking did
 // not either: "<the refusal's reason> (tracking on the surface layer: ...)". Answers are untouched.
-inline void keep_tracking_reason(const LocalizationResult& tracked, LocalizationResult& r) {
-  if (!r.localized() && !tracked.reason.empty()) r.reason += " (" + tracked.reason + ")";
+inline void keep_tracking_reason(const std::string& tracking_reason, LocalizationResult& r) {
+  if (!r.localized() && !tracking_reason.empty()) r.reason += " (" + tracking_reason + ")";
 }
 
 // Voxel grid, ground removal, segmentation and description of one cloud. sensor_position

@@ -139,7 +139,8 @@ struct SurfaceTrackingConfig {
   int min_matched_segments = 3;
   // ... and this many when the fine stage alone answered, moving the prior at most fine_first_m:
   // the tracker's prediction, an independent witness, then agrees with the scans. Frame 37 above
-  // is such an answer (moved 0.03 m); frame 115 is not (README, 2026-12-06 evening).
+  // is such an answer (moved 0.03 m); frame 115 is not. Held without a false fix on riverside02,
+  // hku-mb and the demo city, tracked and under wrong priors (README, "What we measured").
   int min_matched_segments_near_prior = 2;
   void validate() const;      // throws std::invalid_argument naming the field
 };

@@ -35,6 +35,8 @@ PipelineConfig auto_pipeline_config(const InputMeasurements& measured);
 
 // What was measured and chosen, for a person (several lines, no trailing newline).
 std::string describe_profile(const PipelineConfig& config);
+// Its last line alone: the parameters chosen ("chose (auto): 60 m cylinder, ...").
+std::string describe_choice(const PipelineConfig& config);
 
 }  // namespace io
 }  // namespace segmatch
