@@ -146,6 +146,60 @@ bool within_wide_prior(const RegistrationResult& reg, const PosePrior& prior, co
   return true;
 }
 
+namespace {
+
+struct ShiftedSupport {
+  size_t support = 0;
+  double offset_m = 0.0;
+  bool along = true;
+};
+
+// The best support of the query segments under the pose shifted horizontally along `along` and
+// across it, by 1.5 m to range_m (0.5 m steps, a half support radius).
+ShiftedSupport best_shifted_support(const Segments& query, const CentroidIndex& centroids, const LocalizerConfig& config,
+                                    const Pose3d& T_map_query, Eigen::Vector3d along, double range_m) {
+  along.z() = 0.0;
+  if (along.norm() < 1e-6) along = Eigen::Vector3d::UnitX();
+  along.normalize();
+  const Eigen::Vector3d across(-along.y(), along.x(), 0.0);
+  ShiftedSupport best;
+  for (const Eigen::Vector3d* axis : {static_cast<const Eigen::Vector3d*>(&along), &across})
+    for (double d = 1.5; d <= range_m + 1e-9; d += 0.5)
+      for (double sign : {-1.0, 1.0}) {
+        Pose3d shifted = T_map_query;
+        shifted.translation() += sign * d * *axis;
+        const size_t n = support_of(query, centroids, shifted, config.support_radius_m).count();
+        if (n > best.support) best = {n, sign * d, axis == &along};
+      }
+  return best;
+}
+
+}  // namespace
+
+std::string look_alike_beside(const Pose3d& T_map_query, const Eigen::Vector3d& along, const CentroidIndex& centroids,
+                              const LocalizerConfig& config, double range_m, const LocalizationResult& r) {
+  const ShiftedSupport shifted = best_shifted_support(r.query, centroids, config, T_map_query, along, range_m);
+  if (static_cast<float>(shifted.support) < config.track.max_shifted_support * static_cast<float>(r.support)) return {};
+  char why[200];
+  std::snprintf(why, sizeof(why), "the pose %.1f m away (%s the street) has %zu supporting segments, the chosen one %zu: "
+                "the objects fit elsewhere as well or better", shifted.offset_m, shifted.along ? "along" : "across",
+                shifted.support, r.support);
+  return why;
+}
+
+bool unambiguous_along_street(const RegistrationResult& reg, const CentroidIndex& centroids, const LocalizerConfig& config,
+                              double range_m, LocalizationResult& r) {
+  std::string why = look_alike_beside(reg.T_map_query, reg.weakest_axis, centroids, config, range_m, r);
+  if (why.empty()) return true;
+  r.registration_refusal = RegistrationRefusal::kAmbiguous;
+  r.registration_reason = std::move(why);
+  return false;
+}
+
+double ambiguity_range_m(const LocalizerConfig& config, const PosePrior& prior) {
+  return std::max<double>(config.track.ambiguity_range_m, 2.0 * prior.radius_m);
+}
+
 bool distinct_from(const std::vector<RegistrationResult>& passed, const RegistrationResult& reg, const Eigen::Vector3d& s,
                    double min_separation_m) {
   for (const RegistrationResult& p : passed)
@@ -197,7 +251,7 @@ void register_over_wide_prior(const Segments& targets, const TargetPoints* sourc
     trial.registration_refusal = reg.refusal;
     trial.registration_reason = reg.reason;
     if (reg.accepted() && well_supported(targets, centroids, classifier, config, reg.T_map_query, config.registration.min_matched_segments, trial) &&
-        supported_globally(config, trial)) {
+        supported_globally(config, trial) && unambiguous_along_street(reg, centroids, config, ambiguity_range_m(config, prior), trial)) {
       if (distinct_from(passed, reg, s, search.min_separation_m)) passed.push_back(reg);
       if (passed.size() == 1) last = trial;  // keep the first answer's support and inliers
       continue;
@@ -245,8 +299,9 @@ void register_near_prior(const Segments& targets, const TargetPoints* source, co
   r.registration_reason = reg.reason;
   r.refine_fitness = reg.fitness;
   r.refine_rmse_m = reg.rmse_m;
-  if (!reg.accepted() || !well_supported(targets, centroids, classifier, config, reg.T_map_query,
-                                            config.registration.min_matched_segments, r))
+  if (!reg.accepted() ||
+      !well_supported(targets, centroids, classifier, config, reg.T_map_query, config.registration.min_matched_segments, r) ||
+      !unambiguous_along_street(reg, centroids, config, ambiguity_range_m(config, prior), r))
     return;
   localized_by(reg, r);
 }

@@ -50,6 +50,23 @@ bool well_supported(const Segments& targets, const CentroidIndex& centroids, con
 bool within_wide_prior(const RegistrationResult& reg, const PosePrior& prior, const Eigen::Vector3d& s,
                        const CorrelativeSearchConfig& search, RegistrationRefusal& refusal, std::string& reason);
 
+// Whether the query's objects fit a pose beside the chosen one as well: its support
+// (support.h) under the pose shifted horizontally along `along` (the street) and across it,
+// 1.5 m to range_m. Empty when no shift reaches SurfaceTrackingConfig::max_shifted_support times
+// r.support; otherwise the refusal's reason. Every path that answers within a prior asks it: a
+// prior picks one of a street's look-alikes but cannot tell whether it is the right one.
+std::string look_alike_beside(const Pose3d& T_map_query, const Eigen::Vector3d& along, const CentroidIndex& centroids,
+                              const LocalizerConfig& config, double range_m, const LocalizationResult& r);
+// look_alike_beside for a registered pose, along its weakest axis: walls and ground hold a
+// street's cross-section, not where along it the vehicle is (a scan registered a few metres
+// along a street of look-alike facades fits them: fitness 0.89 on the simulated demo city, a
+// prior 6 m off), while the objects fit at the truth, where their support is far higher. False,
+// with r's registration refusal (kAmbiguous) and reason, when a look-alike is beside it.
+bool unambiguous_along_street(const RegistrationResult& reg, const CentroidIndex& centroids, const LocalizerConfig& config,
+                              double range_m, LocalizationResult& r);
+// How far from an answer look-alikes are sought: SurfaceTrackingConfig::ambiguity_range_m, or
+// the prior's diameter when wider (every pose the prior allows, and the truth just beyond it).
+double ambiguity_range_m(const LocalizerConfig& config, const PosePrior& prior);
 // Whether reg's sensor lies at least min_separation_m from every pose already passed.
 bool distinct_from(const std::vector<RegistrationResult>& passed, const RegistrationResult& reg, const Eigen::Vector3d& s,
                    double min_separation_m);
@@ -70,7 +87,7 @@ void register_near_prior(const Segments& targets, const TargetPoints* source, co
 // Tracking on the surface layer (Localizer::track, SurfaceTrackingConfig; surface_tracking.cpp):
 // localized by the newest scans' registration around the prior, or refused with
 // Refusal::kTrackingLost.
-void track_on_surfaces(const PointCloud& newest, const Segments& targets, const TargetPoints* source, const CentroidIndex& centroids,
+void track_on_surfaces(const PointCloud& newest, const Segments& targets, const CentroidIndex& centroids,
                        const RandomForestMatcher* classifier, const MapSurfaces* surfaces, const LocalizerConfig& config,
                        const PosePrior& prior, const Eigen::Vector3f& sensor, LocalizationResult& r);
 

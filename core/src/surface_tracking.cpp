@@ -18,36 +18,6 @@ namespace detail {
 
 namespace {
 
-struct ShiftedSupport {
-  size_t support = 0;
-  double offset_m = 0.0;
-  bool along = true;
-};
-
-// The best support of the query segments under the registered pose shifted horizontally along
-// its weakest axis, and across it, by 1.5 m to range_m (SurfaceTrackingConfig::ambiguity_range_m,
-// or a wide prior's diameter; 0.5 m steps, a half support radius). Walls and ground hold a
-// street's cross-section, not where along it the vehicle is: a scan registered a few metres along a street of look-alike facades fits
-// them (fitness 0.89 on the simulated demo city, a prior 6 m off), while the objects fit at the
-// truth, where their support is far higher (README, 2026-12-06).
-ShiftedSupport best_shifted_support(const Segments& query, const CentroidIndex& centroids, const LocalizerConfig& config,
-                                    const RegistrationResult& reg, double range_m) {
-  Eigen::Vector3d along(reg.weakest_axis.x(), reg.weakest_axis.y(), 0.0);
-  if (along.norm() < 1e-6) along = Eigen::Vector3d::UnitX();
-  along.normalize();
-  const Eigen::Vector3d across(-along.y(), along.x(), 0.0);
-  ShiftedSupport best;
-  for (const Eigen::Vector3d* axis : {static_cast<const Eigen::Vector3d*>(&along), &across})
-    for (double d = 1.5; d <= range_m + 1e-9; d += 0.5)
-      for (double sign : {-1.0, 1.0}) {
-        Pose3d shifted = reg.T_map_query;
-        shifted.translation() += sign * d * *axis;
-        const size_t n = support_of(query, centroids, shifted, config.support_radius_m).count();
-        if (n > best.support) best = {n, sign * d, axis == &along};
-      }
-  return best;
-}
-
 // The newest points registered onto the surface layer around the prior
 // (SurfaceTrackingConfig): the fine stage alone from the prior, onto the layer within the reach
 // of a pose that moves at most fine_first_m; both stages onto the wider disc a prior of this
@@ -100,17 +70,7 @@ bool track_from(const PointCloud& points, const Segments& targets, const Centroi
   if (!reg.accepted()) return false;
   const int min_matched = near_prior ? c.min_matched_segments_near_prior : c.min_matched_segments;
   if (!well_supported(targets, centroids, classifier, config, reg.T_map_query, min_matched, r)) return false;
-  const ShiftedSupport shifted = best_shifted_support(r.query, centroids, config, reg, ambiguity_range_m);
-  if (static_cast<float>(shifted.support) >= c.max_shifted_support * static_cast<float>(r.support)) {
-    r.registration_refusal = RegistrationRefusal::kAmbiguous;
-    char why[200];
-    std::snprintf(why, sizeof(why), "the pose %.1f m away (%s the weakest axis) has %zu supporting segments, the registered one %zu: "
-                  "the scans fit the surfaces, the objects fit elsewhere", shifted.offset_m, shifted.along ? "along" : "across",
-                  shifted.support, r.support);
-    r.registration_reason = why;
-    return false;
-  }
-  return true;
+  return unambiguous_along_street(reg, centroids, config, ambiguity_range_m, r);
 }
 
 // A prior too wide for registration (a GNSS fix, a tracker long without one): the correlative
@@ -137,7 +97,6 @@ bool track_over_wide_prior(const PointCloud& points, const Segments& targets, co
   // A look-alike anywhere in the disc may be where the scans fit: every pose the prior allows,
   // and the truth just beyond it, is tested for a better support (a wrong 20 m prior on the
   // simulated city was otherwise answered 30.5 m off, 3 matched, support 17).
-  const double ambiguity_range_m = std::max<double>(config.track.ambiguity_range_m, 2.0 * prior.radius_m);
   std::vector<RegistrationResult> passed;
   LocalizationResult first = r, last = r;
   for (const SearchCandidate& peak : peaks) {
@@ -148,7 +107,7 @@ bool track_over_wide_prior(const PointCloud& points, const Segments& targets, co
     const PosePrior at{peak.T_map_query, config.registration.max_prior_radius_m, prior.max_rotation_deg};
     LocalizationResult trial = r;
     RegistrationResult reg;
-    const bool ok = track_from(points, targets, centroids, classifier, surfaces, config, at, s, ambiguity_range_m, trial, reg) &&
+    const bool ok = track_from(points, targets, centroids, classifier, surfaces, config, at, s, ambiguity_range_m(config, prior), trial, reg) &&
                     within_wide_prior(reg, prior, s, search, trial.registration_refusal, trial.registration_reason);
     if (!ok) {
       if (passed.empty()) last = std::move(trial);
@@ -175,7 +134,7 @@ bool track_over_wide_prior(const PointCloud& points, const Segments& targets, co
 
 }  // namespace
 
-void track_on_surfaces(const PointCloud& newest, const Segments& targets, const TargetPoints* /*source*/, const CentroidIndex& centroids,
+void track_on_surfaces(const PointCloud& newest, const Segments& targets, const CentroidIndex& centroids,
                        const RandomForestMatcher* classifier, const MapSurfaces* surfaces, const LocalizerConfig& config,
                        const PosePrior& prior, const Eigen::Vector3f& sensor, LocalizationResult& r) {
   const SurfaceTrackingConfig& c = config.track;
@@ -198,7 +157,7 @@ void track_on_surfaces(const PointCloud& newest, const Segments& targets, const 
   const bool tracked = prior.radius_m > config.registration.max_prior_radius_m
                            ? track_over_wide_prior(points, targets, centroids, classifier, *surfaces, config, prior, s, r, reg)
                            : track_from(points, targets, centroids, classifier, *surfaces, config, prior, s,
-                                        config.track.ambiguity_range_m, r, reg);
+                                        ambiguity_range_m(config, prior), r, reg);
   if (!tracked) return lost(r.registration_reason);
   r.window_points = points.size();
   localized_by(reg, r, LocalizationMethod::kSurfaces);

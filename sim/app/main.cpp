@@ -114,7 +114,7 @@ int main(int argc, char** argv) {
   app.add_option("--seed", seed, "world seed: same seed, same bytes");
   cli::add_output_option(app, out, "output folder (default: out/sim-<preset>-<seed>)");
   app.add_option("--sensor", sensor,
-                 "hdl64e (default), vlp16, os1-64 or livox-avia (rosette scan in a 70.4 x 77.2 deg forward cone, "
+                 "hdl64e (default), hdl32e, vlp16, os1-64, os0-64 (+-45 deg, carried at 1.5 m) or livox-avia (rosette scan in a 70.4 x 77.2 deg forward cone, "
                  "24000 points per 0.1 s frame, never repeating; carried at 1.0 m)");
   app.add_option("--speed-mps", speed_mps, "cruise speed of both traversals (default 10; e.g. 1.5 for walking)")
       ->check(CLI::Range(0.3, 40.0));

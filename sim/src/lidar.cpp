@@ -271,6 +271,34 @@ LidarModel os1_64() {
   return m;
 }
 
+LidarModel hdl32e() {
+  LidarModel m;
+  m.name = "hdl32e";
+  m.elevations_deg = linspace_deg(10.67, -30.67, 32);  // 1.33 deg apart
+  m.columns = static_cast<int>(std::lround(360.0 / 0.16));  // 2250 at 10 Hz
+  m.min_range_m = 1.0f;
+  m.max_range_m = 100.0f;
+  m.range_noise_sigma_m = 0.02f;
+  m.dropout_probability = 0.02f;
+  m.rate_hz = 10.0f;
+  m.mount_height_m = 1.73f;
+  return m;
+}
+
+LidarModel os0_64() {
+  LidarModel m;
+  m.name = "os0-64";
+  m.elevations_deg = linspace_deg(45.0, -45.0, 64);  // 1.43 deg apart
+  m.columns = 1024;
+  m.min_range_m = 0.5f;
+  m.max_range_m = 50.0f;  // data sheet: 50 m at 80 % reflectivity, 35 m at 10 %
+  m.range_noise_sigma_m = 0.03f;
+  m.dropout_probability = 0.02f;
+  m.rate_hz = 10.0f;
+  m.mount_height_m = 1.5f;  // carried by hand or on a backpack
+  return m;
+}
+
 LidarModel livox_avia() {
   LidarModel m;
   m.name = "livox-avia";
@@ -299,9 +327,11 @@ LidarModel lidar_model_by_name(const std::string& name) {
   if (key == "hdl64e") return hdl64e();
   if (key == "vlp16") return vlp16();
   if (key == "os1-64" || key == "os1_64") return os1_64();
+  if (key == "hdl32e") return hdl32e();
+  if (key == "os0-64" || key == "os0_64") return os0_64();
   if (key == "livox-avia" || key == "livox_avia" || key == "avia") return livox_avia();
   throw std::invalid_argument("unknown LiDAR model '" + name +
-                              "'; valid names: hdl64e, vlp16, os1-64, livox-avia");
+                              "'; valid names: hdl64e, hdl32e, vlp16, os1-64, os0-64, livox-avia");
 }
 
 SimulatedScan simulate_scan(const RayCaster& caster, const LidarModel& model,

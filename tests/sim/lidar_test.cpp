@@ -102,6 +102,18 @@ TEST(LidarModel, Vlp16AndOs1Layouts) {
   for (size_t i = 1; i < 64; ++i) {
     EXPECT_NEAR(o.elevations_deg[i - 1] - o.elevations_deg[i], 33.2f / 63.0f, 1e-4f);
   }
+  const LidarModel h = hdl32e();
+  ASSERT_EQ(h.elevations_deg.size(), 32u);
+  EXPECT_EQ(h.columns, 2250);
+  EXPECT_NEAR(h.elevations_deg.front(), 10.67f, 1e-5f);
+  EXPECT_NEAR(h.elevations_deg.back(), -30.67f, 1e-5f);
+  EXPECT_NEAR(h.elevations_deg[0] - h.elevations_deg[1], 41.34f / 31.0f, 1e-4f);
+  const LidarModel w = os0_64();
+  ASSERT_EQ(w.elevations_deg.size(), 64u);
+  EXPECT_NEAR(w.elevations_deg.front(), 45.0f, 1e-5f);
+  EXPECT_NEAR(w.elevations_deg.back(), -45.0f, 1e-5f);
+  EXPECT_FLOAT_EQ(w.mount_height_m, 1.5f);
+  EXPECT_FLOAT_EQ(w.max_range_m, 50.0f);
 }
 
 TEST(LidarModel, LookupByName) {
@@ -109,6 +121,8 @@ TEST(LidarModel, LookupByName) {
   EXPECT_EQ(lidar_model_by_name("vlp16").columns, 1800);
   EXPECT_EQ(lidar_model_by_name("os1-64").columns, 1024);
   EXPECT_EQ(lidar_model_by_name("os1_64").columns, 1024);
+  EXPECT_EQ(lidar_model_by_name("hdl32e").elevations_deg.size(), 32u);
+  EXPECT_EQ(lidar_model_by_name("os0-64").elevations_deg.size(), 64u);
   try {
     lidar_model_by_name("hdl32");
     FAIL() << "expected std::invalid_argument";
@@ -346,7 +360,7 @@ TEST(LidarScan, EmptyModelsAndScenesGiveEmptyScans) {
 
 TEST(LidarScan, AllModelsRunOnTheGround) {
   const RayCaster caster(ground_scene());
-  for (const char* name : {"hdl64e", "vlp16", "os1-64"}) {
+  for (const char* name : {"hdl64e", "hdl32e", "vlp16", "os1-64", "os0-64"}) {
     const LidarModel m = lidar_model_by_name(name);
     const SimulatedScan s = simulate_scan(caster, m, pose(0, 0, m.mount_height_m), 4);
     EXPECT_GT(s.points.size(), m.rays_per_scan() / 4) << name;

@@ -52,12 +52,18 @@ LidarModel hdl64e();
 LidarModel vlp16();
 // Ouster OS1-64: 64 beams, +-16.6 deg, 1024 columns at 10 Hz, 120 m.
 LidarModel os1_64();
+// Velodyne HDL-32E: 32 beams, -30.67..+10.67 deg (1.33 deg apart), 0.16 deg azimuth at 10 Hz,
+// 100 m.
+LidarModel hdl32e();
+// Ouster OS0-64: 64 beams, +-45 deg (wide field of view), 1024 columns at 10 Hz, 50 m, carried
+// at 1.5 m (by hand or on a backpack).
+LidarModel os0_64();
 // Livox Avia: rosette in a 70.4 x 77.2 deg forward cone (+x), 240k points/s (24000 per
 // 0.1 s frame), 100 m (the scene limits it; ~190 m at 10 % reflectivity in the data sheet),
 // handheld at 1.0 m. The Avia's six lasers (40k points/s each) are modelled as one beam
 // whose prisms turn six times faster, which puts as many petals into a frame.
 LidarModel livox_avia();
-// Looks a model up by name ("hdl64e", "vlp16", "os1-64", "livox-avia"); throws
+// Looks a model up by name ("hdl64e", "hdl32e", "vlp16", "os1-64", "os0-64", "livox-avia"); throws
 // std::invalid_argument.
 LidarModel lidar_model_by_name(const std::string& name);
 
