@@ -51,6 +51,8 @@ void SurfaceTrackingConfig::validate() const {
   if (min_matched_segments < 0) throw std::invalid_argument("SurfaceTrackingConfig.min_matched_segments must be >= 0");
   if (min_matched_segments_near_prior < 0)
     throw std::invalid_argument("SurfaceTrackingConfig.min_matched_segments_near_prior must be >= 0");
+  if (min_support_for_fewer_matched < 0)
+    throw std::invalid_argument("SurfaceTrackingConfig.min_support_for_fewer_matched must be >= 0 (0: off)");
   detail::require_non_negative(fine_first_m, "SurfaceTrackingConfig", "fine_first_m", "(0: off)");
   detail::require_non_negative(fine_first_max_radius_m, "SurfaceTrackingConfig", "fine_first_max_radius_m");
   positive(max_shifted_support, "max_shifted_support");

@@ -68,8 +68,19 @@ bool track_from(const PointCloud& points, const Segments& targets, const Centroi
   r.refine_rmse_m = reg.rmse_m;
   r.T_map_query = reg.T_map_query;
   if (!reg.accepted()) return false;
-  const int min_matched = near_prior ? c.min_matched_segments_near_prior : c.min_matched_segments;
-  if (!well_supported(targets, centroids, classifier, config, reg.T_map_query, min_matched, r)) return false;
+  // The fewer matched pairs of a pose the prediction or a dense layout of objects witnesses
+  // (SurfaceTrackingConfig::min_matched_segments_near_prior) first; the full count otherwise.
+  const int fewer = std::min(c.min_matched_segments_near_prior, c.min_matched_segments);
+  if (!well_supported(targets, centroids, classifier, config, reg.T_map_query, fewer, r)) return false;
+  const bool dense = c.min_support_for_fewer_matched > 0 && r.support >= static_cast<size_t>(c.min_support_for_fewer_matched);
+  if (!near_prior && !dense && r.inliers.size() < static_cast<size_t>(c.min_matched_segments)) {
+    r.registration_refusal = RegistrationRefusal::kLowSupport;
+    r.registration_reason = std::to_string(r.support) + " query segments land on map segments under the registered pose, " +
+                            std::to_string(r.inliers.size()) + " of them matched (at least " + std::to_string(c.min_matched_segments) +
+                            " matched, or " + std::to_string(fewer) + " from " + std::to_string(c.min_support_for_fewer_matched) +
+                            " landing)";
+    return false;
+  }
   return unambiguous_along_street(reg, centroids, config, ambiguity_range_m, r);
 }
 

@@ -152,6 +152,7 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("max_shifted_support", l.track.max_shifted_support);
   v("min_matched_segments", l.track.min_matched_segments);
   v("min_matched_segments_near_prior", l.track.min_matched_segments_near_prior);
+  v("min_support_for_fewer_matched", l.track.min_support_for_fewer_matched);
   v("fine_first_m", l.track.fine_first_m);
   v("fine_first_max_radius_m", l.track.fine_first_max_radius_m);
   v.section("localizer");

@@ -191,6 +191,30 @@ TEST(SurfaceTracking, ObjectsThatFitBetterElsewhereRefuseTheAnswer) {
       << "without the check the same request is answered: the test's scene is what decides";
 }
 
+// Away from a narrow prior a pose needs track.min_matched_segments matched pairs, or only
+// min_matched_segments_near_prior when at least min_support_for_fewer_matched segments land on
+// map segments under it. Here no pose can reach the full count: the support decides.
+TEST(SurfaceTracking, ADenseLayoutOfObjectsNeedsFewerMatchedPairs) {
+  Street s;
+  s.config.track.min_matched_segments = 1000;
+  const PosePrior prior = s.prior(1.0, 0.0, 5.0);  // wider than track.fine_first_max_radius_m
+  ASSERT_GT(prior.radius_m, s.config.track.fine_first_max_radius_m);
+  const Segments query = s.query_segments();
+  s.config.track.min_support_for_fewer_matched = 0;  // off
+  const LocalizationResult off = s.layered().track(query, s.newest(), s.sensor_query().cast<float>(), prior);
+  EXPECT_FALSE(off.localized());
+  EXPECT_EQ(off.registration_refusal, RegistrationRefusal::kLowSupport) << off.reason;
+  ASSERT_GE(off.support, 10u) << "the scene gives enough support for the rule to matter";
+  s.config.track.min_support_for_fewer_matched = static_cast<int>(off.support);
+  const LocalizationResult dense = s.layered().track(query, s.newest(), s.sensor_query().cast<float>(), prior);
+  ASSERT_TRUE(dense.localized()) << dense.reason;
+  EXPECT_LT(s.error_m(dense), 0.05);
+  s.config.track.min_support_for_fewer_matched = static_cast<int>(off.support) + 1;
+  const LocalizationResult sparse = s.layered().track(query, s.newest(), s.sensor_query().cast<float>(), prior);
+  EXPECT_FALSE(sparse.localized());
+  EXPECT_NE(sparse.reason.find("landing"), std::string::npos) << sparse.reason;
+}
+
 // When tracking does not answer and the segments path refuses too, the refusal says why each
 // did: the operator sees tracking's reason, not only the fallback's.
 TEST(SurfaceTracking, AFallbackRefusalKeepsTrackingsReason) {
