@@ -56,9 +56,9 @@ set(CPACK_DEBIAN_RUNTIME_PACKAGE_SHLIBDEPS ON)  # the shared libraries the tools
 set(CPACK_DEBIAN_DEV_PACKAGE_NAME segmatch-dev)
 set(CPACK_DEBIAN_DEV_PACKAGE_SECTION libdevel)
 # Headers need Eigen; the static libraries also link what they use privately (OpenCV's random
-# forest, FLANN, SQLite, zstd), so a consumer's link finds them.
+# forest, FLANN, SQLite, zstd, lz4), so a consumer's link finds them.
 set(CPACK_DEBIAN_DEV_PACKAGE_DEPENDS
-    "segmatch (= ${PROJECT_VERSION}), libeigen3-dev, libopencv-dev, libflann-dev, libsqlite3-dev, libzstd-dev, nlohmann-json3-dev")
+    "segmatch (= ${PROJECT_VERSION}), libeigen3-dev, libopencv-dev, libflann-dev, libsqlite3-dev, libzstd-dev, liblz4-dev, pkg-config, nlohmann-json3-dev")
 set(CPACK_COMPONENT_RUNTIME_DESCRIPTION "segmatch tools: map builder, localization server, client, evaluation")
 set(CPACK_COMPONENT_DEV_DESCRIPTION "segmatch C++ libraries, headers and CMake package")
 include(CPack)

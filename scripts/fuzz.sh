@@ -8,7 +8,7 @@
 # The last line is `fuzz: N targets, E executions, C crashes`; the exit status is 1 if C > 0.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-targets_all=(frame pcd ply kitti poses config map)
+targets_all=(frame pcd ply kitti poses config map bag)
 usage() { echo "usage: scripts/fuzz.sh TARGET|all SECONDS | --seeds   (targets: ${targets_all[*]})" >&2; exit 2; }
 
 [ $# -ge 1 ] || usage

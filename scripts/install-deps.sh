@@ -8,7 +8,7 @@ PACKAGES=(
   libeigen3-dev libpcl-dev libopencv-dev libflann-dev libsqlite3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev
-  libceres-dev libzstd-dev
+  libceres-dev libzstd-dev liblz4-dev
   prometheus-cpp-dev curl
   file dpkg-dev  # cpack -G DEB (tests/install): ELF detection and dpkg-shlibdeps
   python3-venv python3-numpy python3-setuptools python3-wheel python3-pytest  # python/ and tests/python

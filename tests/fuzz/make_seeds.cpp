@@ -2,6 +2,7 @@
 // own writers: small valid inputs of every format and encoding, so that mutations start inside
 // each format. Run by scripts/fuzz.sh --seeds; the outputs are committed.
 #include <segmatch/api/protocol.h>
+#include <segmatch/io/bag.h>
 #include <segmatch/io/cloud_io.h>
 #include <segmatch/io/pipeline_config.h>
 #include <segmatch/io/pose_io.h>
@@ -155,6 +156,36 @@ void map_seed() {
   writer.commit();
 }
 
+// Small MCAP bags as segmatch-sim --bag writes them: a 3-point cloud, one odometry and one tf
+// message, zstd-chunked (the rosbag2 default); lz4 and unchunked variants reach the other paths.
+void bag_seeds() {
+  struct Variant {
+    const char* name;
+    io::McapWriterOptions options;
+  };
+  const Variant variants[] = {{"zstd.mcap", {true, io::McapCompression::kZstd, 4096}},
+                              {"lz4.mcap", {true, io::McapCompression::kLz4, 4096}},
+                              {"unchunked.mcap", {false, io::McapCompression::kNone, 4096}}};
+  for (const Variant& v : variants) {
+    io::McapWriter writer(seed("bag", v.name), v.options);
+    const uint16_t points = writer.add_channel("/points", "sensor_msgs/msg/PointCloud2");
+    const uint16_t odom = writer.add_channel("/odom", "nav_msgs/msg/Odometry");
+    const uint16_t tf = writer.add_channel("/tf", "tf2_msgs/msg/TFMessage");
+    io::RosHeader header;
+    header.stamp_sec = 1;
+    header.frame_id = "velodyne";
+    writer.write(points, 1000000000, io::encode_point_cloud2(header, small_cloud(3)));
+    io::StampedPose pose;
+    pose.header = header;
+    pose.header.frame_id = "odom";
+    pose.child_frame_id = "base_link";
+    pose.T_parent_child.translation() = Eigen::Vector3d(1.0, 2.0, 0.5);
+    writer.write(odom, 1000000001, io::encode_odometry(pose));
+    writer.write(tf, 1000000002, io::encode_tf_message({pose}));
+    writer.close();
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -168,5 +199,6 @@ int main(int argc, char** argv) {
   config_seeds();
   frame_seeds();
   map_seed();
+  bag_seeds();
   return 0;
 }
