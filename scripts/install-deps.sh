@@ -19,6 +19,11 @@ if [ "${1:-}" = "fuzz" ]; then PACKAGES+=(clang libclang-rt-14-dev); fi
 # `install-deps.sh cross`: also the aarch64 cross compiler (scripts/cross-aarch64.sh).
 if [ "${1:-}" = "cross" ]; then PACKAGES+=(g++-aarch64-linux-gnu); fi
 
+# Node.js runs the independent ROS 2 bag writer of the tests (tests/tools/bagwriter). A node and
+# npm already on the PATH (e.g. from NodeSource) are used as they are: Debian's npm package would
+# conflict with them.
+if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then PACKAGES+=(nodejs npm); fi
+
 missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -26,5 +26,11 @@ if [ "${1:-}" = "--sanitize" ]; then
   exit 0
 fi
 bash "$root/scripts/build.sh"
+# The independent ROS 2 bag writer of the interoperability tests (tests/tools/bagwriter, pinned
+# by its package-lock.json); without it those tests skip and say why.
+if command -v npm >/dev/null 2>&1; then
+  (cd "$root/tests/tools/bagwriter" && npm ci --no-audit --no-fund --loglevel=error >/dev/null) ||
+    echo "[test] npm ci in tests/tools/bagwriter failed: the bag interoperability tests will skip"
+fi
 cd "$root/build"
 ctest --output-on-failure -j "$jobs" "$@"

@@ -2,13 +2,15 @@
 #pragma once
 
 #include <segmatch/api/client.h>
+#include <segmatch/io/sequence.h>
 
 #include <string>
 
 namespace segmatch::query {
 
 struct ReplayOptions {
-  std::string folder;
+  std::string folder;        // a sequence folder or a ROS 2 bag
+  io::BagOptions bag;        // which topics of a bag
   double every_m = 10.0;     // one query each time the vehicle drove this far
   size_t first = 0;          // first scan index
   size_t last = SIZE_MAX;    // last scan index (inclusive)

@@ -62,7 +62,9 @@ int main(int argc, char** argv) {
                      "revision 5 is asked again without it)")
       ->group("");
   CLI::App* rep = app.add_subcommand("replay", "replay a sequence folder like a vehicle");
-  rep->add_option("sequence", replay.folder, "KITTI sequence folder or PCD keyframe folder")->required();
+  rep->add_option("sequence", replay.folder, "KITTI sequence folder, PCD keyframe folder, or a ROS 2 bag (.mcap, .db3, folder)")
+      ->required();
+  cli::add_bag_options(*rep, replay.bag.points_topic, replay.bag.pose_topic, replay.bag.map_frame, replay.bag.sensor_frame);
   rep->add_option("--every-m", replay.every_m, "query every this many metres")->capture_default_str()->check(CLI::PositiveNumber);
   rep->add_option("--first", replay.first, "first scan index");
   rep->add_option("--last", replay.last, "last scan index (inclusive)");

@@ -71,11 +71,14 @@ int replay(api::Client& client, const ReplayOptions& options) {
   // A vehicle has only its odometry: the sequence's odom_poses.txt when it has one.
   io::SequenceOptions so;
   so.poses_path = options.odometry;
-  if (so.poses_path.empty() && std::filesystem::is_regular_file(std::filesystem::path(options.folder) / "odom_poses.txt"))
+  so.bag = options.bag;
+  const bool bag = io::BagReader::is_bag(options.folder);
+  if (!bag && so.poses_path.empty() && std::filesystem::is_regular_file(std::filesystem::path(options.folder) / "odom_poses.txt"))
     so.poses_path = (std::filesystem::path(options.folder) / "odom_poses.txt").string();
-  std::printf("local clouds from %s\n", so.poses_path.empty() ? "the sequence's poses.txt (it has no odom_poses.txt)"
-                                                              : so.poses_path.c_str());
   const io::Sequence seq = io::Sequence::open(options.folder, so);
+  std::printf("local clouds from %s\n", bag                    ? seq.source_note().c_str()
+                                        : so.poses_path.empty() ? "the sequence's poses.txt (it has no odom_poses.txt)"
+                                                                : so.poses_path.c_str());
   io::ReplayConfig config;
   config.every_m = options.every_m;
   config.first = options.first;

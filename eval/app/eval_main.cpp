@@ -202,6 +202,7 @@ int main(int argc, char** argv) {
   loc->add_option("--map", lc.map_path, "map database")->required();
   loc->add_option("--query", lc.query_folder, "sequence to replay; its poses are the ground truth in the map frame");
   loc->add_option("--sim", lc.sim_dataset, "segmatch-sim folder: replay sequences/01 with its exact ground truth");
+  cli::add_bag_options(*loc, lc.bag.points_topic, lc.bag.pose_topic, lc.bag.map_frame, lc.bag.sensor_frame);
   loc->add_option("--server", server, "HOST:PORT of segmatch-server (default: localize in-process)");
   loc->add_option("--token-file", token_file, "file holding the server's shared secret");
   loc->add_option("--every-m", lc.replay.every_m, "one query every this many metres");

@@ -61,6 +61,8 @@ Truth open_truth(const LocalizationRunConfig& c) {
   if (c.sim_dataset.empty()) {
     io::SequenceOptions so;
     so.poses_path = c.reference_path;
+    so.bag = c.bag;
+    if (!c.reference_path.empty()) so.bag.pose_topic = so.bag.map_frame = so.bag.sensor_frame = "";
     io::Sequence seq = io::Sequence::open(c.query_folder, so);
     Poses truth = seq.poses();
     return {std::move(seq), std::move(truth)};
@@ -92,10 +94,20 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
   const Truth truth = open_truth(c);
   run.reference_file = !c.sim_dataset.empty()        ? "ground_truth/lidar_poses_01.txt"
                        : !c.reference_path.empty() ? c.reference_path
+                       : truth.sequence.layout() == io::SequenceLayout::kBag ? truth.sequence.source_note()
                                                    : (fs::path(c.query_folder) / "poses.txt").string();
   std::optional<io::Sequence> odometry;  // the replayed sequence, its scans placed by the vehicle's odometry
   run.cloud_poses = c.cloud_poses;
-  if (c.cloud_poses == io::CloudPoses::kOdometry) {
+  const bool bag = truth.sequence.layout() == io::SequenceLayout::kBag;
+  if (bag && c.cloud_poses == io::CloudPoses::kOdometry && c.odometry_path.empty()) {
+    run.cloud_poses_file = truth.sequence.source_note();  // the bag's poses are the vehicle's
+  } else if (bag && c.cloud_poses == io::CloudPoses::kOdometry) {
+    io::SequenceOptions so;
+    so.poses_path = c.odometry_path;
+    so.bag.points_topic = c.bag.points_topic;
+    run.cloud_poses_file = c.odometry_path;
+    odometry = io::Sequence::open(truth.sequence.folder(), so);
+  } else if (c.cloud_poses == io::CloudPoses::kOdometry) {
     io::SequenceOptions so;
     so.poses_path = io::odometry_poses_path(truth.sequence.folder(), c.odometry_path);
     run.cloud_poses_file = so.poses_path;

@@ -105,7 +105,9 @@ void Db3Reader::read_topics() {
 void Db3Reader::read_messages() {
   Statement q;
   // Ties in time keep the order of insertion (the row id), as the recorder received them.
-  prepare("SELECT id, topic_id, timestamp FROM messages ORDER BY timestamp, id", &q.stmt, "messages");
+  const std::string sql =
+      "SELECT id, topic_id, timestamp, substr(data, 1, " + std::to_string(kBagHeadBytes) + ") FROM messages ORDER BY timestamp, id";
+  prepare(sql.c_str(), &q.stmt, "messages");
   int rc;
   while ((rc = sqlite3_step(q.stmt)) == SQLITE_ROW) {
     const int64_t row = sqlite3_column_int64(q.stmt, 0);
@@ -118,7 +120,10 @@ void Db3Reader::read_messages() {
       throw IoError(where + ": timestamp '" + text(q.stmt, 2) + "' is not a non-negative integer (ns)");
     }
     const uint64_t time = static_cast<uint64_t>(sqlite3_column_int64(q.stmt, 2));
-    messages_[topic->second.name].push_back(BagMessageRef{time, static_cast<uint64_t>(row), 0, 0});
+    BagMessageRef ref{time, static_cast<uint64_t>(row), 0, 0, {}};
+    if (const void* head = sqlite3_column_blob(q.stmt, 3))
+      ref.head.assign(static_cast<const char*>(head), static_cast<size_t>(sqlite3_column_bytes(q.stmt, 3)));
+    messages_[topic->second.name].push_back(std::move(ref));
   }
   if (rc != SQLITE_DONE) fail("table messages");
   for (BagTopic& t : topics_) t.messages = messages_[t.name].size();

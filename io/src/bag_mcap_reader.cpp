@@ -58,7 +58,9 @@ class McapReader final : public BagReader {
   void scan_chunk(uint64_t chunk, std::string_view body);
   void index(uint8_t opcode, std::string_view body, uint64_t base, const std::string& where,
              BagMessageRef ref);
-  std::string chunk_records(std::string_view body, uint64_t chunk) const;
+  // The chunk's records, decompressed; their CRC checked when check_crc (opening checks every
+  // chunk once: data() does not again).
+  std::string chunk_records(std::string_view body, uint64_t chunk, bool check_crc = true) const;
   const std::string& cached_chunk(uint64_t chunk) const;
   std::string payload(std::string_view body, uint64_t base, const std::string& where) const;
 
@@ -115,8 +117,8 @@ void McapReader::scan() {
     if (opcode == kChunk) {
       scan_chunk(pos, file_.read(body_at, length, where(opcode, pos)));
     } else if (opcode == kMessage) {  // only the fixed fields: the payload is read by data()
-      const std::string head = file_.read(body_at, std::min<uint64_t>(length, kMessagePrefix), where(opcode, pos));
-      index(opcode, head, body_at, where(opcode, pos), BagMessageRef{0, pos, 0, 0});
+      const std::string head = file_.read(body_at, std::min<uint64_t>(length, kMessagePrefix + kBagHeadBytes), where(opcode, pos));
+      index(opcode, head, body_at, where(opcode, pos), BagMessageRef{0, pos, 0, 0, {}});
     } else if (opcode == kSchema || opcode == kChannel) {
       index(opcode, file_.read(body_at, length, where(opcode, pos)), body_at, where(opcode, pos), {});
     }
@@ -124,7 +126,7 @@ void McapReader::scan() {
   }
 }
 
-std::string McapReader::chunk_records(std::string_view body, uint64_t chunk) const {
+std::string McapReader::chunk_records(std::string_view body, uint64_t chunk, bool check_crc) const {
   const std::string at = where(kChunk, chunk);
   FieldReader f(body, chunk + kRecordPrefix, at);
   f.u64("message_start_time");
@@ -134,7 +136,7 @@ std::string McapReader::chunk_records(std::string_view body, uint64_t chunk) con
   const std::string_view compression = f.string("compression");
   const size_t length_at = f.position();
   const std::string_view records = f.bytes_at("records", f.u64("records length"), length_at);
-  return decompress(compression, records, uncompressed_size, crc, at);
+  return decompress(compression, records, uncompressed_size, check_crc ? crc : 0, at);
 }
 
 void McapReader::scan_chunk(uint64_t chunk, std::string_view body) {
@@ -151,7 +153,7 @@ void McapReader::scan_chunk(uint64_t chunk, std::string_view body) {
     }
     const std::string_view inner = std::string_view(records).substr(pos + kRecordPrefix, length);
     index(opcode, inner, pos + kRecordPrefix, where_in_chunk(opcode, pos, chunk),
-          BagMessageRef{0, chunk, pos + 1, 0});
+          BagMessageRef{0, chunk, pos + 1, 0, {}});
     pos += kRecordPrefix + length;
   }
 }
@@ -182,6 +184,7 @@ void McapReader::index(uint8_t opcode, std::string_view body, uint64_t base, con
     f.u32("sequence");
     ref.log_time_ns = f.u64("log_time");
     f.u64("publish_time");
+    ref.head = std::string(body.substr(std::min(body.size(), kMessagePrefix), kBagHeadBytes));
     const auto it = channels_.find(channel);
     if (it == channels_.end()) {
       f.fail("channel " + std::to_string(channel) + " has no Channel record before it");
@@ -199,7 +202,7 @@ const std::string& McapReader::cached_chunk(uint64_t chunk) const {
   }
   const std::string body = file_.read(chunk + kRecordPrefix, le64(std::string_view(prefix).substr(1)),
                                       where(kChunk, chunk));
-  cached_records_ = chunk_records(body, chunk);
+  cached_records_ = chunk_records(body, chunk, false);
   cached_offset_ = chunk;
   return cached_records_;
 }

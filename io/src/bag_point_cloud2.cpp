@@ -141,6 +141,11 @@ void decode_points(std::string_view data, uint32_t height, uint32_t width, uint3
 
 }  // namespace
 
+RosHeader decode_header(std::string_view cdr, const char* message) {
+  CdrReader in(cdr, message);
+  return detail::read_ros_header(in);
+}
+
 PointCloud2Message decode_point_cloud2(std::string_view cdr) {
   CdrReader in(cdr, "PointCloud2");
   PointCloud2Message out;

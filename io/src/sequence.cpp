@@ -69,6 +69,9 @@ bool poses_in_camera_frame(SequenceLayout layout, PoseFrame frame) {
 Sequence Sequence::open(const std::string& folder, const SequenceOptions& options) {
   std::error_code ec;
   if (!fs::exists(folder, ec)) throw IoError("missing folder: " + folder);
+  if (BagReader::is_bag(folder)) return open_bag(folder, options);
+  if (options.bag.any())
+    detail::fail(folder, "is a folder of scans, not a ROS 2 bag: --points-topic, --pose-topic, --map-frame and --sensor-frame are for bags");
   if (!fs::is_directory(folder, ec)) detail::fail(folder, "is not a folder");
   const fs::path root(folder);
 
@@ -122,14 +125,24 @@ Sequence Sequence::open(const std::string& folder, const SequenceOptions& option
 }
 
 std::string Sequence::scan_path(size_t i) const {
-  if (i >= scan_paths_.size()) {
+  if (layout_ == SequenceLayout::kBag && i < bag_scans_.size()) return folder_ + "#" + std::to_string(i);
+  if (i >= size()) {
     throw std::out_of_range("Sequence: scan index " + std::to_string(i) + " out of range (" +
-                            std::to_string(scan_paths_.size()) + " scans in " + folder_ + ")");
+                            std::to_string(size()) + " scans in " + folder_ + ")");
   }
   return scan_paths_[i];
 }
 
 CloudData Sequence::scan(size_t i) const {
+  if (layout_ == SequenceLayout::kBag) {
+    if (i >= bag_scans_.size()) (void)scan_path(i);  // the out_of_range of a folder
+    std::string bytes;
+    {
+      const std::lock_guard<std::mutex> lock(*bag_mutex_);
+      bytes = bag_->data(bag_scans_[i]);
+    }
+    return decode_point_cloud2(bytes).cloud;
+  }
   const std::string path = scan_path(i);
   if (layout_ == SequenceLayout::kPcdKeyframes) return read_pcd(path);
   if (label_paths_.empty()) return read_kitti_bin(path);

@@ -188,12 +188,14 @@ void check_segment_count(const MapBuilder& b, const io::PipelineConfig& config, 
 int build_map(const BuildOptions& o, const volatile std::sig_atomic_t* stop_signal) {
   const auto start = std::chrono::steady_clock::now();
   if (!o.print_config) check_output(o);
-  if (!fs::is_directory(o.input)) throw UsageError("input folder " + o.input + " does not exist");
+  if (!fs::exists(o.input)) throw UsageError("input " + o.input + " does not exist");
   if (!o.odometry_path.empty() && !fs::is_regular_file(o.odometry_path))
     throw UsageError("--odometry " + o.odometry_path + " is not a file");
   io::SequenceOptions so;
   so.poses_path = o.odometry_path;
+  so.bag = o.bag;
   const io::Sequence seq = io::Sequence::open(o.input, so);
+  if (!seq.source_note().empty()) std::fprintf(stderr, "%s\n", seq.source_note().c_str());
   const ScanRange range = scan_range(o, seq);
   // Read before the recording is measured (seconds): a wrong model file fails at once.
   const std::optional<storage::ClassifierBlob> classifier =

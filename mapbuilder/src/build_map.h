@@ -2,6 +2,8 @@
 // segment map with core's MapBuilder and writes it atomically with storage's MapWriter.
 #pragma once
 
+#include <segmatch/io/sequence.h>
+
 #include <csignal>
 #include <cstddef>
 #include <optional>
@@ -18,7 +20,8 @@ class UsageError : public std::runtime_error {
 };
 
 struct BuildOptions {
-  std::string input;            // sequence folder (KITTI or PCD keyframes)
+  std::string input;            // sequence folder (KITTI or PCD keyframes) or a ROS 2 bag
+  io::BagOptions bag;           // which topics of a bag (io/sequence.h)
   std::string output;           // map file
   std::string config_path;      // pipeline config JSON (empty: preset)
   std::string preset;           // pipeline preset (empty or "auto": measured from the input)

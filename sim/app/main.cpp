@@ -4,6 +4,9 @@
 #include "segmatch/cli/progress.h"
 #include "segmatch/sim/dataset.h"
 
+#include <segmatch/io/bag.h>
+#include <segmatch/io/sequence.h>
+
 #include <segmatch/cli/tool.h>
 
 #include <CLI/CLI.hpp>
@@ -99,6 +102,15 @@ void print_summary(const sim::DatasetConfig& config, const sim::DatasetSummary& 
   if (config.write_images) std::printf("pictures:   %s/world.png, %s/scan.png\n", out.c_str(), out.c_str());
 }
 
+// Sequence 00 as a ROS 2 bag (io::write_sequence_bag), with progress.
+void write_bag(const std::string& out, const std::string& bag_path) {
+  const io::Sequence seq = io::Sequence::open(out + "/sequences/00");
+  cli::Progress progress("bag", seq.size(), "scans");
+  io::write_sequence_bag(seq, bag_path, {}, [&](size_t done, size_t) { progress.update(done); });
+  progress.finish();
+  std::printf("bag:        %s (%zu scans; /points, /odom, /tf)\n", bag_path.c_str(), seq.size());
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -109,6 +121,7 @@ int main(int argc, char** argv) {
   KeyframeOptions keyframes;
   int threads = 0;
   bool force = false, no_labels = false, no_images = false;
+  std::string bag_path;
   app.add_option("--preset", preset, "tiny (seconds, tests), demo (~2 km), city (10+ km of streets)")
       ->check(CLI::IsMember(sim::dataset_preset_names()));
   app.add_option("--seed", seed, "world seed: same seed, same bytes");
@@ -129,6 +142,9 @@ int main(int argc, char** argv) {
   app.add_flag("--force", force, "replace an existing dataset in the output folder");
   app.add_flag("--no-labels", no_labels, "do not write per-point labels");
   app.add_flag("--no-images", no_images, "do not draw world.png and scan.png");
+  app.add_option("--bag", bag_path,
+                 "also write sequence 00 (the mapping drive) as a ROS 2 bag, MCAP with zstd chunks: /points "
+                 "(sensor_msgs/msg/PointCloud2), /odom (nav_msgs/msg/Odometry) and /tf, frames map and lidar");
   cli::add_version_flag(app, "segmatch-sim");
   SEGMATCH_CLI_PARSE(app, argc, argv);
 
@@ -152,6 +168,7 @@ int main(int argc, char** argv) {
     StageProgress progress;
     const sim::DatasetSummary s = sim::generate_dataset(config, out, std::ref(progress));
     print_summary(config, s, out);
+    if (!bag_path.empty()) write_bag(out, bag_path);
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "segmatch-sim: error: %s\n", e.what());

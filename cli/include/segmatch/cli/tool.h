@@ -22,6 +22,11 @@ CLI::Option* add_output_option(CLI::App& app, std::string& path, const std::stri
 // After the parse: 2 and a message when a required output is missing, -1 otherwise.
 int require_output(const std::string& tool, const std::string& path);
 
+// The options of a ROS 2 bag given where a sequence folder is (io::BagOptions, in its fields'
+// order): --points-topic, --pose-topic, --map-frame, --sensor-frame, in their own help group.
+void add_bag_options(CLI::App& app, std::string& points_topic, std::string& pose_topic, std::string& map_frame,
+                     std::string& sensor_frame);
+
 // A server as every tool names it: --server HOST:PORT. Throws std::invalid_argument naming the
 // text when it is not HOST:PORT with a port in 1..65535.
 struct HostPort {

@@ -20,7 +20,8 @@ using LocalizeFn = std::function<api::LocalizeReply(const api::LocalizeRequest&)
 
 struct LocalizationRunConfig {
   std::string map_path;     // the map (its trajectory decides which streets are mapped)
-  std::string query_folder; // sequence to replay
+  std::string query_folder; // sequence to replay: a folder or a ROS 2 bag
+  io::BagOptions bag;       // which topics of a bag (io/sequence.h); its poses are the truth
   // Ground truth T_map_sensor of every query scan: by default the query sequence's own poses
   // are in the map frame (same recording, e.g. riverside02 even / odd keyframes). With
   // sim_dataset, a segmatch-sim folder: queries = sequences/01, truth from ground_truth/
@@ -33,7 +34,8 @@ struct LocalizationRunConfig {
   // (LOCALIZE bit 6, protocol revision 11); --track-surfaces off clears it.
   bool track_surfaces = true;
   // The local clouds are accumulated with the vehicle's odometry, as on a car: odometry_path,
-  // or the replayed sequence's odom_poses.txt when empty (io::odometry_poses_path). The
+  // or the replayed sequence's odom_poses.txt when empty (io::odometry_poses_path; a bag: its
+  // own poses, which a bag records from the vehicle's odometry, or a TUM file matched by time). The
   // sequence's poses only score. kReference builds them from the reference poses instead (a
   // comparison: it flatters every figure), and the report says so.
   io::CloudPoses cloud_poses = io::CloudPoses::kOdometry;

@@ -19,6 +19,7 @@
 #include <segmatch/io/error.h>
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <string_view>
@@ -29,6 +30,8 @@ namespace io {
 
 // ---------------------------------------------------------------------------------------
 // Reading a bag
+
+inline constexpr size_t kBagHeadBytes = 128;
 
 struct BagTopic {
   std::string name;   // "/points"
@@ -42,6 +45,9 @@ struct BagTopic {
 struct BagMessageRef {
   uint64_t log_time_ns = 0;  // the recorder's receive time
   uint64_t a = 0, b = 0, c = 0;
+  // The payload's first kBagHeadBytes bytes (fewer when it is shorter), kept when indexing: a
+  // stamped message's header (decode_header) without reading the message again.
+  std::string head;
 };
 
 // Opening indexes every message: an MCAP file by one scan of its data section (chunks are
@@ -91,6 +97,9 @@ struct PointCloud2Message {
 // cloud.dropped_non_finite). IoError when x, y or z is missing, a field reaches past
 // point_step, row_step * height differs from the data's size, or row_step < width * point_step.
 PointCloud2Message decode_point_cloud2(std::string_view cdr);
+// The std_msgs/Header every stamped message starts with, alone (a cloud's stamp and frame without
+// decoding its points); `message` names the type in errors.
+RosHeader decode_header(std::string_view cdr, const char* message);
 
 // A pose of child_frame_id in header.frame_id: T_parent_child. The quaternion is normalised; a
 // zero or non-finite quaternion, or a non-finite position, is an IoError.
@@ -138,6 +147,25 @@ class McapWriter {
 std::string encode_point_cloud2(const RosHeader& header, const PointCloud& cloud);  // x y z intensity float32
 std::string encode_odometry(const StampedPose& pose);
 std::string encode_tf_message(const std::vector<StampedPose>& transforms);
+
+// ---------------------------------------------------------------------------------------
+// A recorded sequence as a bag
+
+class Sequence;
+
+// How write_sequence_bag lays a drive out, as a ROS 2 LiDAR drive records it: per scan, at its
+// time, a PointCloud2 on points_topic in sensor_frame, an Odometry on odom_topic (sensor_frame in
+// map_frame, the sequence's pose) and the same transform on /tf.
+struct SequenceBagOptions {
+  std::string points_topic = "/points";
+  std::string odom_topic = "/odom";
+  std::string map_frame = "map";
+  std::string sensor_frame = "lidar";
+  McapWriterOptions mcap;
+};
+// progress(done, total) after each scan when given. IoError on a write failure.
+void write_sequence_bag(const Sequence& sequence, const std::string& path, const SequenceBagOptions& options = {},
+                        const std::function<void(size_t, size_t)>& progress = {});
 
 }  // namespace io
 }  // namespace segmatch
