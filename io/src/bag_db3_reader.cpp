@@ -24,7 +24,7 @@ struct Topic {
   std::string name, type, format;
 };
 
-class Db3Reader final : public BagReader {
+class Db3Reader final : public IndexedBag {
  public:
   explicit Db3Reader(const std::string& path);
   ~Db3Reader() override {
@@ -32,12 +32,6 @@ class Db3Reader final : public BagReader {
     sqlite3_close(db_);
   }
 
-  const std::string& path() const override { return path_; }
-  const std::vector<BagTopic>& topics() const override { return topics_; }
-  std::vector<BagMessageRef> messages(const std::string& topic) const override {
-    const auto it = messages_.find(topic);
-    return it == messages_.end() ? std::vector<BagMessageRef>{} : it->second;
-  }
   std::string data(const BagMessageRef& ref) const override;
 
  private:
@@ -52,15 +46,12 @@ class Db3Reader final : public BagReader {
   void read_topics();
   void read_messages();
 
-  std::string path_;
   sqlite3* db_ = nullptr;
   sqlite3_stmt* data_query_ = nullptr;  // reused by data(): not thread-safe
   std::map<int64_t, Topic> topic_by_id_;
-  std::vector<BagTopic> topics_;
-  std::map<std::string, std::vector<BagMessageRef>> messages_;
 };
 
-Db3Reader::Db3Reader(const std::string& path) : path_(path) {
+Db3Reader::Db3Reader(const std::string& path) : IndexedBag(path) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) throw IoError(path + ": missing file (or not a file)");
   // Read-only: a bag being played must not be touched (no journal, no WAL checkpoint).

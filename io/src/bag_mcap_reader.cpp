@@ -26,9 +26,9 @@ uint64_t le64(std::string_view bytes) {
   return v;
 }
 
-class McapReader final : public BagReader {
+class McapReader final : public IndexedBag {
  public:
-  explicit McapReader(const std::string& path) : path_(path), file_(path) {
+  explicit McapReader(const std::string& path) : IndexedBag(path), file_(path) {
     check_magic();
     scan();
     for (BagTopic& topic : topics_) {
@@ -38,12 +38,6 @@ class McapReader final : public BagReader {
     }
   }
 
-  const std::string& path() const override { return path_; }
-  const std::vector<BagTopic>& topics() const override { return topics_; }
-  std::vector<BagMessageRef> messages(const std::string& topic) const override {
-    const auto it = messages_.find(topic);
-    return it == messages_.end() ? std::vector<BagMessageRef>{} : it->second;
-  }
   std::string data(const BagMessageRef& ref) const override;
 
  private:
@@ -64,12 +58,10 @@ class McapReader final : public BagReader {
   const std::string& cached_chunk(uint64_t chunk) const;
   std::string payload(std::string_view body, uint64_t base, const std::string& where) const;
 
-  std::string path_;
   RandomAccessFile file_;
   std::map<uint16_t, std::string> schema_names_;
   std::map<uint16_t, Channel> channels_;
-  std::vector<BagTopic> topics_;  // in the order their first channel appears
-  std::map<std::string, std::vector<BagMessageRef>> messages_;
+  // topics_ in the order their first channel appears.
   // Not thread-safe: data() keeps the last decompressed chunk, so reading a topic in order
   // decompresses each chunk once.
   mutable uint64_t cached_offset_ = UINT64_MAX;
