@@ -1,6 +1,7 @@
 #include "segmatch/io/auto_profile.h"
 
 #include <algorithm>
+#include <map>
 #include <cmath>
 #include <cstdio>
 
@@ -27,6 +28,37 @@ void fit_segmentation_to_spacing(PipelineConfig& c, const InputMeasurements& m) 
   c.localizer.min_confidence = 0.0f;  // kitti-hdl64's 0.8 was chosen on dense simulated clouds
 }
 
+// A ring field (a ROS 2 PointCloud2's "ring") names each point's beam: the ring count and
+// spacing come from it instead of the elevation histogram, which noise or a tilted mount can
+// blur. Per scan, each ring's median elevation; the scan with the most rings decides.
+void rings_from_field(const std::vector<PointCloud>& scans, const std::vector<std::vector<uint16_t>>& rings, InputMeasurements& m) {
+  size_t best = 0;
+  double spacing_deg = 0.0;
+  for (size_t s = 0; s < scans.size(); ++s) {
+    if (rings[s].size() != scans[s].size() || scans[s].empty()) continue;
+    std::map<uint16_t, std::vector<double>> by_ring;
+    for (size_t i = 0; i < scans[s].size(); ++i) {
+      const Point& p = scans[s][i];
+      by_ring[rings[s][i]].push_back(std::atan2(p.z, std::hypot(p.x, p.y)) * 180.0 / M_PI);
+    }
+    std::vector<double> centres;
+    for (auto& [ring, e] : by_ring) {
+      std::nth_element(e.begin(), e.begin() + e.size() / 2, e.end());
+      centres.push_back(e[e.size() / 2]);
+    }
+    std::sort(centres.begin(), centres.end());
+    if (centres.size() <= best) continue;
+    best = centres.size();
+    std::vector<double> steps;
+    for (size_t k = 1; k < centres.size(); ++k) steps.push_back(centres[k] - centres[k - 1]);
+    std::nth_element(steps.begin(), steps.begin() + steps.size() / 2, steps.end());
+    spacing_deg = steps.empty() ? 0.0 : steps[steps.size() / 2];
+  }
+  if (best < 2) return;
+  m.ring_count = static_cast<double>(best);
+  m.ring_spacing_deg = spacing_deg;
+}
+
 }  // namespace
 
 InputMeasurements measure_sequence(const Sequence& sequence, size_t first, size_t last, size_t stride,
@@ -40,8 +72,14 @@ InputMeasurements measure_sequence(const Sequence& sequence, size_t first, size_
   Poses poses;
   for (size_t i : used) poses.push_back(sequence.poses()[i]);
   std::vector<PointCloud> scans;
-  for (size_t k : scans_to_measure(used.size(), config)) scans.push_back(sequence.scan(used[k]).points);
+  std::vector<std::vector<uint16_t>> rings;
+  for (size_t k : scans_to_measure(used.size(), config)) {
+    CloudData scan = sequence.scan(used[k]);
+    scans.push_back(std::move(scan.points));
+    rings.push_back(std::move(scan.rings));
+  }
   InputMeasurements m = measure_input(scans, poses, config);
+  rings_from_field(scans, rings, m);
   // Pose agreement is a property of the recording: consecutive scans of the sequence over the
   // range, up to kMaxPairs of them spread evenly.
   constexpr size_t kMaxPairs = 100;

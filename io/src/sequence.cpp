@@ -141,7 +141,9 @@ CloudData Sequence::scan(size_t i) const {
       const std::lock_guard<std::mutex> lock(*bag_mutex_);
       bytes = bag_->data(bag_scans_[i]);
     }
-    return decode_point_cloud2(bytes).cloud;
+    PointCloud2Message m = decode_point_cloud2(bytes);
+    m.cloud.rings = std::move(m.rings);
+    return std::move(m.cloud);
   }
   const std::string path = scan_path(i);
   if (layout_ == SequenceLayout::kPcdKeyframes) return read_pcd(path);

@@ -20,6 +20,7 @@ struct CloudData {
   PointCloud points;              // finite points only
   std::vector<uint32_t> labels;   // one per point when the source has labels, else empty
   bool has_intensity = false;     // false => intensity filled with 0
+  std::vector<uint16_t> rings;    // one per point when the source has a ring field (a ROS 2 PointCloud2's), else empty
   size_t dropped_non_finite = 0;  // points dropped because x, y or z was NaN/Inf
 };
 
