@@ -1,11 +1,15 @@
-// MCAP bags: one linear scan of the data section at open indexes every Message record, whether
-// it sits in a chunk or not; data() then reads one record (decompressing its chunk, the last one
-// cached). The summary section is not needed for that and is not read, so a file whose summary
-// is missing or damaged still opens.
+// MCAP bags. Opening indexes every Message record from the summary section when it accounts for
+// all of them (its ChunkIndex records and the MessageIndex records they point to, checked
+// against the Statistics record's message count): no chunk is decompressed. Otherwise (no
+// summary, messages outside chunks, anything in it that does not parse) one linear scan of the
+// data section indexes them, whether they sit in a chunk or not, so a file whose summary is
+// missing or damaged still opens. data() then reads one record (decompressing its chunk, the
+// last one cached).
 #include "bag_internal.h"
 #include "mcap.h"
 
 #include <map>
+#include <set>
 
 namespace segmatch {
 namespace io {
@@ -30,7 +34,11 @@ class McapReader final : public IndexedBag {
  public:
   explicit McapReader(const std::string& path) : IndexedBag(path), file_(path) {
     check_magic();
-    scan();
+    if (!from_summary()) {
+      schema_names_.clear(), channels_.clear(), topics_.clear(), messages_.clear();
+      crc_at_read_ = false;
+      scan();
+    }
     for (BagTopic& topic : topics_) {
       std::vector<BagMessageRef>& refs = messages_[topic.name];
       sort_by_log_time(&refs);
@@ -48,6 +56,8 @@ class McapReader final : public IndexedBag {
     return where(opcode, offset) + " in the chunk at offset " + std::to_string(chunk);
   }
   void check_magic() const;
+  bool from_summary();
+  bool index_chunk_messages(uint64_t chunk, uint64_t message_index_at, uint64_t* found);
   void scan();
   void scan_chunk(uint64_t chunk, std::string_view body);
   void index(uint8_t opcode, std::string_view body, uint64_t base, const std::string& where,
@@ -64,6 +74,8 @@ class McapReader final : public IndexedBag {
   // topics_ in the order their first channel appears.
   // Not thread-safe: data() keeps the last decompressed chunk, so reading a topic in order
   // decompresses each chunk once.
+  bool crc_at_read_ = false;  // indexed from the summary: data() checks a chunk's CRC, once
+  mutable std::set<uint64_t> crc_checked_;
   mutable uint64_t cached_offset_ = UINT64_MAX;
   mutable std::string cached_records_;
 };
@@ -81,6 +93,67 @@ void McapReader::check_magic() const {
     throw IoError(path_ + ": no closing magic at offset " + std::to_string(size - kMagic.size()) +
                   ": the file is truncated (a recording that was not closed?)");
   }
+}
+
+bool McapReader::from_summary() try {
+  constexpr uint64_t kFooterBody = 8 + 8 + 4;  // summary_start, summary_offset_start, summary_crc
+  const uint64_t size = file_.size();
+  if (size < 2 * kMagic.size() + kRecordPrefix + kFooterBody) return false;
+  const uint64_t footer_at = size - kMagic.size() - kRecordPrefix - kFooterBody;
+  const std::string footer = file_.read(footer_at, kRecordPrefix + kFooterBody, path_);
+  if (static_cast<uint8_t>(footer[0]) != kFooter || le64(std::string_view(footer).substr(1)) != kFooterBody) return false;
+  FieldReader f(std::string_view(footer).substr(kRecordPrefix), footer_at + kRecordPrefix, where(kFooter, footer_at));
+  const uint64_t start = f.u64("summary_start"), offsets = f.u64("summary_offset_start");
+  const uint64_t end = offsets != 0 ? offsets : footer_at;
+  if (start < kMagic.size() || start >= end || end > footer_at) return false;
+  const std::string summary = file_.read(start, end - start, where(kFooter, footer_at));
+  uint64_t expected = UINT64_MAX, found = 0;
+  std::vector<std::pair<uint64_t, uint64_t>> indexes;  // (chunk, its MessageIndex record)
+  for (size_t pos = 0; pos < summary.size();) {
+    if (summary.size() - pos < kRecordPrefix) return false;
+    const uint8_t opcode = static_cast<uint8_t>(summary[pos]);
+    const uint64_t length = le64(std::string_view(summary).substr(pos + 1));
+    if (length > summary.size() - pos - kRecordPrefix) return false;
+    const std::string_view body = std::string_view(summary).substr(pos + kRecordPrefix, length);
+    const uint64_t at = start + pos;
+    FieldReader r(body, at + kRecordPrefix, where(opcode, at));
+    if (opcode == kSchema || opcode == kChannel) {
+      index(opcode, body, at + kRecordPrefix, where(opcode, at), {});
+    } else if (opcode == kStatistics) {
+      expected = r.u64("message_count");
+    } else if (opcode == kChunkIndex) {
+      r.u64("message_start_time"), r.u64("message_end_time");
+      const uint64_t chunk = r.u64("chunk_start_offset");
+      r.u64("chunk_length");
+      const std::string_view map = r.bytes("message_index_offsets", r.u32("message_index_offsets length"));
+      for (size_t k = 0; k + 10 <= map.size(); k += 10) indexes.emplace_back(chunk, le64(map.substr(k + 2)));
+    }
+    pos += kRecordPrefix + length;
+  }
+  if (expected == UINT64_MAX) return false;
+  for (const auto& [chunk, message_index] : indexes)
+    if (!index_chunk_messages(chunk, message_index, &found)) return false;
+  crc_at_read_ = true;
+  return found == expected;  // fewer: some messages lie outside chunks, which only a scan finds
+} catch (const IoError&) {
+  return false;  // a damaged summary: the scan decides
+}
+
+// One MessageIndex record: a chunk's messages on one channel, (log time, offset of the Message
+// record in the chunk's decompressed records), indexed as scan_chunk() indexes them.
+bool McapReader::index_chunk_messages(uint64_t chunk, uint64_t message_index, uint64_t* found) {
+  const std::string at = where(kMessageIndex, message_index);
+  const std::string prefix = file_.read(message_index, kRecordPrefix, at);
+  if (static_cast<uint8_t>(prefix[0]) != kMessageIndex) return false;
+  const std::string body = file_.read(message_index + kRecordPrefix, le64(std::string_view(prefix).substr(1)), at);
+  FieldReader r(body, message_index + kRecordPrefix, at);
+  const auto channel = channels_.find(r.u16("channel_id"));
+  if (channel == channels_.end()) return false;
+  const std::string_view entries = r.bytes("records", r.u32("records length"));
+  std::vector<BagMessageRef>& refs = messages_[channel->second.topic];
+  for (size_t k = 0; k + 16 <= entries.size(); k += 16, ++*found)
+    refs.push_back(BagMessageRef{le64(entries.substr(k)), chunk, le64(entries.substr(k + 8)) + 1, 0, {}});
+  return true;
 }
 
 void McapReader::scan() {
@@ -194,7 +267,8 @@ const std::string& McapReader::cached_chunk(uint64_t chunk) const {
   }
   const std::string body = file_.read(chunk + kRecordPrefix, le64(std::string_view(prefix).substr(1)),
                                       where(kChunk, chunk));
-  cached_records_ = chunk_records(body, chunk, false);
+  cached_records_ = chunk_records(body, chunk, crc_at_read_ && !crc_checked_.count(chunk));
+  if (crc_at_read_) crc_checked_.insert(chunk);
   cached_offset_ = chunk;
   return cached_records_;
 }

@@ -102,7 +102,8 @@ TEST(BagErrors, ChunksThatCannotBeDecompressed) {
 }
 
 // A damaged uncompressed_size within what zstd could expand to: the frame's own content size
-// disagrees, and that is found before the chunk's buffer is allocated.
+// disagrees, and that is found before the chunk's buffer is allocated: when the chunk is first
+// read (its bag opened from the summary's indexes decompresses nothing).
 TEST(BagErrors, UncompressedSizeDisagreeingWithTheZstdFrame) {
   test::TempDir dir;
   std::string bytes = small_recording(dir, McapCompression::kZstd);
@@ -111,8 +112,12 @@ TEST(BagErrors, UncompressedSizeDisagreeingWithTheZstdFrame) {
   const uint64_t size = le64(bytes, at + 9 + 16);
   bytes.replace(at + 9 + 16, 8, McapBytes::u64(size * 2));
   test::write_bytes(dir.file("d.mcap"), bytes);
-  EXPECT_TRUE(ThrowsIoError([&] { BagReader::open(dir.file("d.mcap")); },
-                            {"Chunk record at offset " + std::to_string(at), "the zstd frame holds " +
+  const auto read_all = [&] {
+    const std::unique_ptr<BagReader> bag = BagReader::open(dir.file("d.mcap"));
+    for (const BagTopic& t : bag->topics())
+      for (const BagMessageRef& ref : bag->messages(t.name)) bag->data(ref);
+  };
+  EXPECT_TRUE(ThrowsIoError(read_all, {"Chunk record at offset " + std::to_string(at), "the zstd frame holds " +
                              std::to_string(size) + " bytes, uncompressed_size says " + std::to_string(size * 2)}));
 }
 
@@ -169,6 +174,47 @@ TEST(BagErrors, RandomByteDamageGivesOnlyIoErrors) {
       EXPECT_TRUE(test::SucceedsOrThrowsIoError([&] { read_everything(path); })) << trial;
     }
   }
+}
+
+// Every message indexed from the summary (no chunk decompressed at open) is the one a scan of
+// the data section finds: the same file with its footer's summary_start zeroed, or with a
+// Statistics message count the indexes do not reach (as when messages lie outside chunks), is
+// scanned and gives the same topics, times and bytes.
+TEST(BagErrors, TheSummaryIndexesWhatAScanFinds) {
+  test::TempDir dir;
+  const std::string bytes = small_recording(dir, McapCompression::kZstd);
+  const size_t footer = bytes.size() - 8 - 29;  // closing magic; footer record: 9 + 8 + 8 + 4
+  ASSERT_EQ(bytes[footer], '\x02');
+  std::string scanned = bytes;
+  scanned.replace(footer + 9, 8, McapBytes::u64(0));
+  std::string miscounted = bytes;
+  size_t statistics = static_cast<size_t>(le64(bytes, footer + 9));  // summary_start
+  while (statistics < footer && bytes[statistics] != 0x0B) statistics += 9 + static_cast<size_t>(le64(bytes, statistics + 1));
+  ASSERT_LT(statistics, footer) << "the writer puts a Statistics record in the summary";
+  miscounted.replace(statistics + 9, 8, McapBytes::u64(le64(bytes, statistics + 9) + 1));
+  const auto listing = [](const std::string& path) {
+    const std::unique_ptr<BagReader> bag = BagReader::open(path);
+    std::string out;
+    for (const BagTopic& t : bag->topics())
+      for (const BagMessageRef& ref : bag->messages(t.name)) out += t.name + std::to_string(ref.log_time_ns) + bag->data(ref);
+    return out;
+  };
+  test::write_bytes(dir.file("summary.mcap"), bytes);
+  test::write_bytes(dir.file("scanned.mcap"), scanned);
+  test::write_bytes(dir.file("miscounted.mcap"), miscounted);
+  const std::string indexed = listing(dir.file("summary.mcap"));
+  EXPECT_GT(indexed.size(), 1000u);
+  EXPECT_EQ(indexed, listing(dir.file("scanned.mcap")));
+  EXPECT_EQ(indexed, listing(dir.file("miscounted.mcap")));
+  // A bag whose chunk is damaged opens from its summary and refuses the damaged read; scanned,
+  // it refuses to open.
+  std::string damaged = bytes;
+  size_t chunk = 8;
+  while (damaged[chunk] != 0x06) chunk += 9 + static_cast<size_t>(le64(damaged, chunk + 1));
+  damaged[chunk + 9 + 8 + 8 + 8 + 4 + 4 + 4 + 8 + 10] ^= 0x5a;  // inside the compressed records
+  test::write_bytes(dir.file("damaged.mcap"), damaged);
+  EXPECT_NO_THROW(BagReader::open(dir.file("damaged.mcap")));
+  EXPECT_THROW(listing(dir.file("damaged.mcap")), IoError);
 }
 
 }  // namespace
