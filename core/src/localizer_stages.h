@@ -67,6 +67,26 @@ bool unambiguous_along_street(const RegistrationResult& reg, const CentroidIndex
 // How far from an answer look-alikes are sought: SurfaceTrackingConfig::ambiguity_range_m, or
 // the prior's diameter when wider (every pose the prior allows, and the truth just beyond it).
 double ambiguity_range_m(const LocalizerConfig& config, const PosePrior& prior);
+// The verified hypotheses (prior_hypotheses.cpp). The one with the most support, and the
+// runner-up's support:
+struct Ranked {
+  size_t best = 0;
+  Support support;
+  size_t runner_up = 0;
+};
+Ranked rank_by_support(const std::vector<PoseHypothesis>& hypotheses, const Segments& query, const CentroidIndex& map,
+                       float radius_m);
+// Those that put the sensor within the prior's radius and turn it by at most its
+// max_rotation_deg (all of them without a prior).
+std::vector<PoseHypothesis> within_prior(std::vector<PoseHypothesis> hypotheses, const Eigen::Vector3f& sensor,
+                                         const PosePrior* prior);
+// The direction the query's segments spread along under a pose, horizontally (the street's, for
+// a local cloud driven along one): the principal axis of their centroids.
+Eigen::Vector3d spread_axis(const Segments& query, const Pose3d& T_map_query);
+// Per query segment, the map segments lying where the prior, within its tolerances, puts it.
+std::vector<std::vector<int>> targets_near_prior(const Segments& query, const Segments& targets, const Eigen::Vector3f& sensor,
+                                                 const PosePrior& prior);
+
 // Whether reg's sensor lies at least min_separation_m from every pose already passed.
 bool distinct_from(const std::vector<RegistrationResult>& passed, const RegistrationResult& reg, const Eigen::Vector3d& s,
                    double min_separation_m);
