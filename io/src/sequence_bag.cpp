@@ -139,10 +139,14 @@ std::vector<Cloud> clouds_of(const BagReader& bag, const std::string& topic) {
   std::vector<Cloud> clouds;
   for (const BagMessageRef& ref : bag.messages(topic)) {
     RosHeader h;
-    try {
-      h = decode_header(ref.head, "PointCloud2");  // a frame_id longer than the head: read it all
-    } catch (const IoError&) {
-      h = decode_header(bag.data(ref), "PointCloud2");
+    if (ref.head.empty()) {
+      h = decode_header(bag.data(ref), "PointCloud2");  // indexed from an MCAP summary
+    } else {
+      try {
+        h = decode_header(ref.head, "PointCloud2");
+      } catch (const IoError&) {
+        h = decode_header(bag.data(ref), "PointCloud2");  // a frame_id longer than the head
+      }
     }
     const double stamp = h.stamp_sec != 0 || h.stamp_nanosec != 0 ? h.stamp_s() : 1e-9 * ref.log_time_ns;
     clouds.push_back({ref, stamp, h.frame_id});
@@ -168,16 +172,22 @@ PoseAt poses_from_topic(const BagReader& bag, const std::string& name, const TfT
   }
   track->sort();
   *note = "poses from " + name + " (" + topic.type + (child.empty() ? "" : ", of frame " + child) + ")";
-  return [track, child, statics, path = bag.path(), name](const Cloud& c) -> std::optional<Pose3d> {
+  // The clouds in another frame than the poses: the static transform between them, found once
+  // per cloud frame.
+  auto T_child_frame = std::make_shared<std::map<std::string, Pose3d>>();
+  return [track, child, statics, T_child_frame, path = bag.path(), name](const Cloud& c) -> std::optional<Pose3d> {
     const std::optional<Pose3d> T_map_child = track->at(c.stamp);
     if (!T_map_child || child.empty() || c.frame_id.empty() || child == c.frame_id) return T_map_child;
-    // The clouds are in another frame than the poses: the static transform between them.
-    std::string root_child, root_sensor;
-    const std::optional<Pose3d> a = to_root(statics, child, 0.0, &root_child), b = to_root(statics, c.frame_id, 0.0, &root_sensor);
-    if (!a || !b || root_child != root_sensor)
-      throw IoError(path + ": " + name + " gives poses of frame '" + child + "' and the clouds are in '" + c.frame_id +
-                    "', with no static transform between them in /tf_static");
-    return *T_map_child * a->inverse() * *b;
+    auto known = T_child_frame->find(c.frame_id);
+    if (known == T_child_frame->end()) {
+      std::string root_child, root_sensor;
+      const std::optional<Pose3d> a = to_root(statics, child, 0.0, &root_child), b = to_root(statics, c.frame_id, 0.0, &root_sensor);
+      if (!a || !b || root_child != root_sensor)
+        throw IoError(path + ": " + name + " gives poses of frame '" + child + "' and the clouds are in '" + c.frame_id +
+                      "', with no static transform between them in /tf_static");
+      known = T_child_frame->emplace(c.frame_id, a->inverse() * *b).first;
+    }
+    return *T_map_child * known->second;
   };
 }
 

@@ -45,13 +45,15 @@ struct BagTopic {
 struct BagMessageRef {
   uint64_t log_time_ns = 0;  // the recorder's receive time
   uint64_t a = 0, b = 0, c = 0;
-  // The payload's first kBagHeadBytes bytes (fewer when it is shorter), kept when indexing: a
-  // stamped message's header (decode_header) without reading the message again.
+  // The payload's first kBagHeadBytes bytes (fewer when it is shorter), kept when indexing read
+  // the message anyway (a .db3, or an MCAP scan; empty when an MCAP summary indexed it): a stamped
+  // message's header (decode_header) without reading the message again.
   std::string head;
 };
 
-// Opening indexes every message: an MCAP file by one scan of its data section (chunks are
-// decompressed once for that; the summary section is not needed), a .db3 file by one query.
+// Opening indexes every message: an MCAP file from its summary section when that accounts for
+// every message (no chunk decompressed), else by one scan of its data section (each chunk
+// decompressed once); a .db3 file by one query.
 // Not thread-safe: data() keeps the last decompressed chunk (reading a topic in order then
 // decompresses each chunk once) and reuses one SQLite statement. Use one reader per thread.
 class BagReader {
