@@ -68,6 +68,7 @@ const char* to_string(ReplyMethod method) {
     case ReplyMethod::kSegments: return "segments";
     case ReplyMethod::kRegistration: return "registration";
     case ReplyMethod::kSurfaces: return "surfaces";
+    case ReplyMethod::kPlaces: return "places";
   }
   return "unknown";
 }

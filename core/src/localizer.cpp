@@ -101,6 +101,7 @@ const char* to_string(LocalizationMethod method) {
   switch (method) {
     case LocalizationMethod::kRegistration: return "registration";
     case LocalizationMethod::kSurfaces: return "surfaces";
+    case LocalizationMethod::kPlaces: return "places";
     case LocalizationMethod::kSegments: break;
   }
   return "segments";
@@ -143,6 +144,7 @@ void LocalizerConfig::validate() const {
   newest.validate();
   search.validate();
   track.validate();
+  places.validate();
   if (!(min_refine_fitness >= 0.0f && min_refine_fitness <= 1.0f))
     throw std::invalid_argument("min_refine_fitness must be in 0..1");
   if (!(max_refine_rmse_voxels >= 0.0f) || !std::isfinite(max_refine_rmse_voxels))
@@ -199,12 +201,13 @@ Segments extract_segments_from_voxels(const PointCloud& voxels, const Eigen::Vec
 
 Localizer::Localizer(const LocalizerConfig& config, Segments targets,
                      std::shared_ptr<const RandomForestMatcher> classifier, std::shared_ptr<const TargetPoints> points,
-                     std::shared_ptr<const MapSurfaces> surfaces)
+                     std::shared_ptr<const MapSurfaces> surfaces, std::shared_ptr<const PlaceIndex> places)
     : config_(config),
       targets_(std::move(targets)),
       classifier_(std::move(classifier)),
       points_(std::move(points)),
-      surfaces_(std::move(surfaces)) {
+      surfaces_(std::move(surfaces)),
+      places_(std::move(places)) {
   config_.validate();
   centroids_ = CentroidIndex(targets_, config_.support_radius_m);
   if (config_.matcher.type == MatcherType::kRandomForest && !(classifier_ && classifier_->trained()))

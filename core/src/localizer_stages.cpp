@@ -178,6 +178,7 @@ ShiftedSupport best_shifted_support(const Segments& query, const CentroidIndex& 
 
 std::string look_alike_beside(const Pose3d& T_map_query, const Eigen::Vector3d& along, const CentroidIndex& centroids,
                               const LocalizerConfig& config, double range_m, const LocalizationResult& r) {
+  if (!(config.track.max_shifted_support > 0.0f)) return {};  // off (a cold start's gates: PlaceRecognitionConfig)
   const ShiftedSupport shifted = best_shifted_support(r.query, centroids, config, T_map_query, along, range_m);
   if (static_cast<float>(shifted.support) < config.track.max_shifted_support * static_cast<float>(r.support)) return {};
   char why[200];

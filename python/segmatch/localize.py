@@ -203,7 +203,7 @@ class ReplyDetail:
 
     @property
     def method_name(self) -> str:
-        return {None: "unknown", 0: "segments", 1: "registration", 2: "surfaces"}.get(self.method, "unknown")
+        return {None: "unknown", 0: "segments", 1: "registration", 2: "surfaces", 3: "places"}.get(self.method, "unknown")
 
     @property
     def covariance(self) -> Optional[np.ndarray]:

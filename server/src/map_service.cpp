@@ -36,6 +36,17 @@ void fit_extent(LoadedMap& map, const Segments& segments) {
   }
 }
 
+// The map's places for a cold start (place_recognition.h), described from its surface layer
+// along its trajectory when it is loaded: none without a layer (schema < 4) or when off.
+std::shared_ptr<const PlaceIndex> places_of(const storage::MapReader& reader, const MapSurfaces* surfaces,
+                                            const PlaceRecognitionConfig& config) {
+  if (!surfaces || !config.enabled) return nullptr;
+  std::vector<Pose3d> trajectory;
+  for (const storage::Keyframe& k : reader.trajectory()) trajectory.push_back(k.T_map_sensor);
+  return std::make_shared<const PlaceIndex>(build_place_index(
+      trajectory, [surfaces](const Eigen::Vector3d& c, double r) { return crop_cylinder(surfaces->near(c, r), c, r); }, config));
+}
+
 }  // namespace
 
 std::shared_ptr<const LoadedMap> load_map(const std::string& path, const MapLoadOptions& options) {
@@ -82,8 +93,9 @@ std::shared_ptr<const LoadedMap> load_map(const std::string& path, const MapLoad
   // a query reads one disc of it. Maps without one register the newest scans onto segment points.
   map->surfaces = storage::make_lazy_surfaces(shared_reader, options.cache_points);
   try {
+    map->places = places_of(reader, map->surfaces.get(), map->config.localizer.places);
     map->localizer = std::make_unique<const Localizer>(map->config.localizer, std::move(segments), classifier,
-                                                       map->lazy_points, map->surfaces);
+                                                       map->lazy_points, map->surfaces, map->places);
   } catch (const std::invalid_argument& e) {
     throw std::runtime_error(path + ": cannot build the localizer: " + e.what());
   }
@@ -203,6 +215,7 @@ api::LocalizeReply reply_of(const LoadedMap& map, const LocalizationResult& r, u
     api::ReplyDetail::Estimate e;  // revision 7
     e.method = static_cast<uint8_t>(r.method == LocalizationMethod::kRegistration ? api::ReplyMethod::kRegistration
                                     : r.method == LocalizationMethod::kSurfaces   ? api::ReplyMethod::kSurfaces
+                                    : r.method == LocalizationMethod::kPlaces     ? api::ReplyMethod::kPlaces
                                                                                   : api::ReplyMethod::kSegments);
     if (reply.status == api::LocalizeStatus::kLocalized) e.covariance_upper = api::covariance_upper(r.covariance);
     reply.detail->estimate = e;
@@ -228,6 +241,8 @@ LocalizationResult localize_cloud(const LoadedMap& map, const api::LocalizeReque
   LocalizationResult r = map.localizer->localize(cloud, sensor, kind, prior ? &*prior : nullptr, deadline);
   if ((request.flags & api::kFlagNewestScans) && !deadline.passed())
     map.localizer->refine_to_newest_scans(request.newest_points, sensor, r);
+  if (!prior && !r.localized() && r.refusal != Refusal::kDeadlinePassed && !deadline.passed())  // a cold start
+    r = map.localizer->recognize_place(std::move(r), cloud, request.newest_points, sensor);
   return r;
 }
 
@@ -291,6 +306,9 @@ Outcome serve_localize_segments(const LoadedMap& map, api::LocalizeSegmentsReque
       map.localizer->localize_segments(std::move(request.segments), sensor, prior ? &*prior : nullptr, {}, deadline);
   if ((request.flags & api::kSegmentsFlagNewestScans) && !deadline.passed())  // revision 10, as LOCALIZE bit 5
     map.localizer->refine_to_newest_scans(request.newest_points, sensor, r);
+  if (!prior && !r.localized() && r.refusal != Refusal::kDeadlinePassed && !deadline.passed() &&
+      !request.newest_points.empty())  // a cold start, from the newest scans alone
+    r = map.localizer->recognize_place(std::move(r), {}, request.newest_points, sensor);
   keep_tracking_reason(tracking_reason, r);
   return outcome_of(map, r, request.request_id, fields, start);
 }

@@ -24,7 +24,7 @@ constexpr std::array<uint8_t, 4> kMagic = {'S', 'G', 'M', 'Q'};
 constexpr uint16_t kProtocolVersion = 1;
 // The protocol document's revision (docs/protocol.md, History): messages, flag bits and error
 // codes added compatibly since version 1. The frame header still says kProtocolVersion.
-constexpr int kProtocolRevision = 11;
+constexpr int kProtocolRevision = 12;
 constexpr size_t kHeaderBytes = 12;
 
 enum class MessageType : uint16_t {
@@ -252,7 +252,8 @@ struct ReplyDetail {
 };
 constexpr size_t kReplyDetailBytes = 12;           // revision 6's fields
 constexpr size_t kReplyDetailEstimateBytes = 100;  // with revision 7's
-enum class ReplyMethod : uint8_t { kSegments = 0, kRegistration = 1, kSurfaces = 2 };  // 2: revision 11
+// 2: revision 11; 3: revision 12 (a cold start: the surface layer around a recognised place)
+enum class ReplyMethod : uint8_t { kSegments = 0, kRegistration = 1, kSurfaces = 2, kPlaces = 3 };
 const char* to_string(ReplyMethod method);
 // The covariance as a matrix, and back (the upper triangle; the matrix is symmetric).
 Eigen::Matrix<double, 6, 6> covariance_matrix(const std::array<float, 21>& upper);

@@ -5,6 +5,7 @@
 #pragma once
 
 #include "segmatch/core/correlative_search.h"
+#include "segmatch/core/place_recognition.h"
 #include "segmatch/core/descriptors.h"
 #include "segmatch/core/matcher.h"
 #include "segmatch/core/preprocess.h"
@@ -43,6 +44,7 @@ struct LocalizerConfig {
   NewestScansConfig newest;     // the sensor's pose now, when the query has its newest scans
   CorrelativeSearchConfig search;  // registration over priors too wide for ICP alone
   SurfaceTrackingConfig track;     // the newest scans onto the surface layer (Localizer::track)
+  PlaceRecognitionConfig places;   // cold start: which place a scan shows (Localizer::recognize_place)
   // Beyond the paper: each verified hypothesis is ranked by its support (support.h), the
   // number of query segments that land within support_radius_m of a map segment under it.
   // The best must have at least min_support, and no other distinct hypothesis may reach
@@ -87,8 +89,9 @@ const char* to_string(LocalizationStatus status);
 
 // What answered: segment matching (the paper's pipeline, and the global path), the
 // registration to the map around a prior (registration.h), or the newest scans registered onto
-// the surface layer around a prior (Localizer::track).
-enum class LocalizationMethod { kSegments, kRegistration, kSurfaces };
+// the surface layer around a prior (Localizer::track), or around a place the query's scan
+// resembles (Localizer::recognize_place: a cold start without a prior).
+enum class LocalizationMethod { kSegments, kRegistration, kSurfaces, kPlaces };
 const char* to_string(LocalizationMethod method);
 
 // Why a query was not localized, stage by stage (LocalizationResult::reason says it in words).
@@ -241,7 +244,8 @@ class Localizer {
   Localizer(const LocalizerConfig& config, Segments targets,
             std::shared_ptr<const RandomForestMatcher> classifier = nullptr,
             std::shared_ptr<const TargetPoints> points = nullptr,
-            std::shared_ptr<const MapSurfaces> surfaces = nullptr);
+            std::shared_ptr<const MapSurfaces> surfaces = nullptr,
+            std::shared_ptr<const PlaceIndex> places = nullptr);
 
   // cloud: local cloud in the query (vehicle odometry) frame; sensor_position: the sensor in
   // that frame. Thread-safe: many queries may run at once.
@@ -283,11 +287,21 @@ class Localizer {
   LocalizationResult track(Segments query, const PointCloud& newest, const Eigen::Vector3f& sensor_position,
                            const PosePrior& prior) const;
 
+  // Cold start (place_recognition.h): a query without a prior that segment matching refused
+  // (`refused`, whose query segments are kept for the checks) is described around the sensor
+  // from `cloud` (query frame); the map's places most like it are priors for tracking `newest`
+  // on the surface layer (track(), every gate). One place passing answers, with
+  // LocalizationMethod::kPlaces; two at distinct places are an ambiguity. `refused` comes back
+  // as it was, its reason extended, when no place answers or the map has no places.
+  LocalizationResult recognize_place(LocalizationResult refused, const PointCloud& cloud, const PointCloud& newest,
+                                     const Eigen::Vector3f& sensor_position) const;
+
   const Segments& targets() const { return targets_; }
   const LocalizerConfig& config() const { return config_; }
   const FeatureIndex& feature_index() const { return index_; }
   const RandomForestMatcher* classifier() const { return classifier_.get(); }
   const MapSurfaces* surfaces() const { return surfaces_.get(); }
+  const PlaceIndex* places() const { return places_.get(); }
 
  private:
   // Voxel grid (unless kVoxelized), ground removal, segmentation and description of a query
@@ -302,6 +316,7 @@ class Localizer {
   std::shared_ptr<const RandomForestMatcher> classifier_;
   std::shared_ptr<const TargetPoints> points_;
   std::shared_ptr<const MapSurfaces> surfaces_;
+  std::shared_ptr<const PlaceIndex> places_;
 };
 
 }  // namespace segmatch

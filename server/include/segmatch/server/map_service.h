@@ -39,6 +39,7 @@ struct LoadedMap {
   std::vector<std::string> warnings;
   std::shared_ptr<const storage::LazyPoints> lazy_points;  // kLazy: the localizer's point source
   std::shared_ptr<const MapSurfaces> surfaces;  // the map's surface layer, read lazily (null: none)
+  std::shared_ptr<const PlaceIndex> places;     // described from it at load, for cold starts (null: none)
   int schema_version = 0;  // of the map file as read (an old one is served as it is)
   size_t segment_count() const { return localizer ? localizer->targets().size() : 0; }
 };

@@ -1,0 +1,172 @@
+// Cold start (place_recognition.h, Localizer::recognize_place): Scan Context descriptors of a
+// generated street, the places of a map along its trajectory, and a query without a prior
+// localized by the place it resembles, or refused.
+#include "segmatch/core/localizer.h"
+#include "segmatch/core/place_recognition.h"
+#include "support/street_scene.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+#include <stdexcept>
+
+namespace segmatch {
+namespace {
+
+using test::transformed;
+
+constexpr double kDeg = M_PI / 180.0;
+
+Pose3d yaw_about(double yaw_rad, const Eigen::Vector3d& centre) {
+  Pose3d T = Pose3d::Identity();
+  T.linear() = Eigen::AngleAxisd(yaw_rad, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  T.translation() = centre - T.linear() * centre;
+  return T;
+}
+
+// The map: the street with its ground, driven along y = 0 heading +x, the sensor 2 m up.
+struct MappedStreet {
+  PointCloud layer = test::with_ground(test::street_with_platforms());
+  std::shared_ptr<const MapSurfaces> surfaces = std::make_shared<test::InMemorySurfaces>(layer);
+  std::vector<Pose3d> trajectory = [] {
+    std::vector<Pose3d> t;
+    for (double x = 0.0; x <= 55.0; x += 1.0) {
+      Pose3d T = Pose3d::Identity();
+      T.translation() = Eigen::Vector3d(x, 0.0, 2.0);
+      t.push_back(T);
+    }
+    return t;
+  }();
+  PlaceIndex places(const PlaceRecognitionConfig& config = {}) const {
+    return build_place_index(trajectory, [this](const Eigen::Vector3d& c, double r) { return surfaces->near(c, r); }, config);
+  }
+  // The vehicle's odometry frame: map points into it.
+  Pose3d T_query = [] {
+    Pose3d T = Pose3d::Identity();
+    T.linear() = Eigen::AngleAxisd(0.7, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    T.translation() = Eigen::Vector3d(-12.0, 30.0, 0.5);
+    return T;
+  }();
+};
+
+// The street's localizer, its ground removed: the wide-prior search compares what stands on it.
+LocalizerConfig config_with_ground() {
+  LocalizerConfig c = test::street_localizer_config();
+  c.segmentation.ground = GroundConfig{};
+  return c;
+}
+
+TEST(PlaceRecognition, TheDescriptorTurnsWithTheCloudBySectors) {
+  const MappedStreet m;
+  const PlaceRecognitionConfig c;
+  const Eigen::Vector3d centre(25.0, 0.0, 2.0);
+  const PlaceDescriptor place = describe_place(m.layer, centre, 0.0, c);
+  ASSERT_GT(place.occupied(), 50u);
+  for (int k : {0, 5, 17, 42}) {
+    // The cloud turned by k sectors about the centre: its bins move by k, nothing else changes.
+    const double turn = k * 2.0 * M_PI / c.sectors + 0.5 * kDeg;  // half a degree into the sector, off its edge
+    const PlaceDescriptor turned = describe_place(transformed(m.layer, yaw_about(turn, centre)), centre, 0.0, c);
+    const PlaceDistance d = place_distance(turned, place);
+    EXPECT_LT(d.distance, 0.05) << "k " << k;
+    EXPECT_EQ(d.shift_sectors, (c.sectors - k) % c.sectors) << "k " << k;
+  }
+  PlaceDescriptor other = place;
+  other.sectors = 30;
+  EXPECT_THROW(place_distance(place, other), std::invalid_argument);
+}
+
+TEST(PlaceRecognition, TheIndexFindsThePlaceAndTheHeadingOfAQueryFromAnotherLane) {
+  const MappedStreet m;
+  const PlaceIndex index = m.places();
+  // Five places a stop (the trajectory's and two lanes either side), a stop every 2 m of the 55.
+  EXPECT_EQ(index.size(), 28u * 5u);
+  const Eigen::Vector3d truth_map(31.4, 1.3, 2.0);
+  const Eigen::Vector3d sensor_query = m.T_query * truth_map;
+  const PointCloud scan = crop_cylinder(transformed(m.layer, m.T_query), sensor_query, 40.0);
+  const std::vector<PlaceCandidate> found = index.query(describe_place(scan, sensor_query, 0.0, index.config()), sensor_query);
+  ASSERT_FALSE(found.empty());
+  const PlaceCandidate& best = found.front();
+  EXPECT_LT((best.T_map_query * sensor_query - truth_map).head<2>().norm(), 1.5);
+  const double heading_error_deg =
+      std::abs(std::remainder(yaw_of(best.T_map_query) - yaw_of(m.T_query.inverse()), 2.0 * M_PI)) / kDeg;
+  EXPECT_LT(heading_error_deg, 6.1);  // a sector
+  EXPECT_NEAR((best.T_map_query * sensor_query).z(), truth_map.z(), 0.2);  // ground on ground
+  for (size_t i = 1; i < found.size(); ++i) EXPECT_GE(found[i].distance, found[i - 1].distance);
+}
+
+TEST(PlaceRecognition, ColdStartLocalizesAScanWithoutAPriorByThePlaceItShows) {
+  const MappedStreet m;
+  const LocalizerConfig config = config_with_ground();
+  const Segments targets = extract_segments(m.layer, Eigen::Vector3f(25.f, 0.f, 2.f), config.segmentation);
+  const Localizer localizer(config, targets, nullptr, nullptr, m.surfaces, std::make_shared<const PlaceIndex>(m.places(config.places)));
+  const Eigen::Vector3d truth_map(22.6, -0.8, 2.0);
+  const Eigen::Vector3d s = m.T_query * truth_map;
+  const PointCloud scan = crop_cylinder(transformed(m.layer, m.T_query), s, 35.0);
+  LocalizationResult refused;  // as segment matching leaves it: refused, its query segments kept
+  refused.refusal = Refusal::kNoConsistentMatches;
+  refused.reason = "segment matching refused it";
+  refused.query = extract_segments(scan, s.cast<float>(), config.segmentation);
+  const LocalizationResult r = localizer.recognize_place(refused, scan, scan, s.cast<float>());
+  ASSERT_TRUE(r.localized()) << r.reason;
+  EXPECT_EQ(r.method, LocalizationMethod::kPlaces);
+  EXPECT_LT((r.T_map_query * s - truth_map).norm(), 0.1);
+  EXPECT_GE(r.refine_fitness, config.places.min_fitness);
+  EXPECT_TRUE(r.covariance.allFinite());
+  EXPECT_GT(r.covariance.trace(), 0.0);
+}
+
+TEST(PlaceRecognition, AScanOfAnUnmappedStreetIsRefusedWithTheReason) {
+  const MappedStreet m;
+  const LocalizerConfig config = config_with_ground();
+  const Segments targets = extract_segments(m.layer, Eigen::Vector3f(25.f, 0.f, 2.f), config.segmentation);
+  const Localizer localizer(config, targets, nullptr, nullptr, m.surfaces, std::make_shared<const PlaceIndex>(m.places(config.places)));
+  // Another street: the poles on the other side, other objects, its own ground.
+  PointCloud elsewhere;
+  for (int i = 0; i < 10; ++i) test::add_cylinder(elsewhere, 5.f * i + 2.f, -5.f, 0.2f, 6.f);
+  test::add_box(elsewhere, 10.f, 6.f, 12.f, 3.f, 3.f);
+  test::add_box(elsewhere, 30.f, -12.f, 3.f, 8.f, 2.f);
+  elsewhere = test::with_ground(elsewhere);
+  const Eigen::Vector3d s(25.0, 0.0, 2.0);
+  LocalizationResult refused;
+  refused.refusal = Refusal::kNoConsistentMatches;
+  refused.reason = "segment matching refused it";
+  const LocalizationResult r = localizer.recognize_place(refused, elsewhere, elsewhere, s.cast<float>());
+  EXPECT_FALSE(r.localized());
+  EXPECT_NE(r.reason.find("place recognition"), std::string::npos) << r.reason;
+  // Without places (an old map, or places.enabled off) the refusal comes back as it was.
+  const Localizer without(config, targets, nullptr, nullptr, m.surfaces);
+  const LocalizationResult same = without.recognize_place(refused, elsewhere, elsewhere, s.cast<float>());
+  EXPECT_EQ(same.refusal, Refusal::kNoConsistentMatches);
+  EXPECT_EQ(same.reason, refused.reason);
+}
+
+TEST(PlaceRecognition, ConfigRefusesBadValuesByName) {
+  auto refused_with = [](PlaceRecognitionConfig c, const char* field) {
+    try {
+      c.validate();
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what()).find(field) != std::string::npos;
+    }
+    return false;
+  };
+  PlaceRecognitionConfig c;
+  EXPECT_NO_THROW(c.validate());
+  c.rings = 1;
+  EXPECT_TRUE(refused_with(c, "PlaceRecognitionConfig.rings"));
+  c = {};
+  c.candidates = c.shortlist + 1;
+  EXPECT_TRUE(refused_with(c, "PlaceRecognitionConfig.candidates"));
+  c = {};
+  c.max_height_m = c.min_height_m;
+  EXPECT_TRUE(refused_with(c, "PlaceRecognitionConfig.max_height_m"));
+  c = {};
+  c.min_fitness = 1.5f;
+  EXPECT_TRUE(refused_with(c, "PlaceRecognitionConfig.min_fitness"));
+  c = {};
+  c.lateral_steps = -1;
+  EXPECT_TRUE(refused_with(c, "PlaceRecognitionConfig.lateral_steps"));
+}
+
+}  // namespace
+}  // namespace segmatch
