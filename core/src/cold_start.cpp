@@ -22,11 +22,12 @@ LocalizationResult Localizer::recognize_place(LocalizationResult refused, const 
     refused.timings.total_ms += spent_ms();
     return refused;
   };
-  if (!c.enabled || !places_ || places_->size() == 0 || !surfaces_) return refused;
+  const PlaceIndex* places = c.enabled && surfaces_ ? this->places() : nullptr;
+  if (!places || places->size() == 0) return refused;
   const Eigen::Vector3d s = sensor_position.cast<double>();
   const PointCloud& scans = newest.empty() ? cloud : newest;
   const PlaceDescriptor query = describe_place(cloud.empty() ? newest : cloud, s, 0.0, c);
-  const std::vector<PlaceCandidate> candidates = places_->query(query, s);
+  const std::vector<PlaceCandidate> candidates = places->query(query, s);
   if (candidates.empty()) return unchanged("no place of the map resembles the scan");
   // The tracker's gates, with a cold start's segment floors and fitness (PlaceRecognitionConfig).
   LocalizerConfig gates = config_;

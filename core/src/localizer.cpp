@@ -201,7 +201,7 @@ Segments extract_segments_from_voxels(const PointCloud& voxels, const Eigen::Vec
 
 Localizer::Localizer(const LocalizerConfig& config, Segments targets,
                      std::shared_ptr<const RandomForestMatcher> classifier, std::shared_ptr<const TargetPoints> points,
-                     std::shared_ptr<const MapSurfaces> surfaces, std::shared_ptr<const PlaceIndex> places)
+                     std::shared_ptr<const MapSurfaces> surfaces, PlacesFuture places)
     : config_(config),
       targets_(std::move(targets)),
       classifier_(std::move(classifier)),

@@ -200,11 +200,12 @@ std::vector<PlaceCandidate> PlaceIndex::query(const PlaceDescriptor& descriptor,
 
 PlaceIndex build_place_index(const std::vector<Pose3d>& trajectory,
                              const std::function<PointCloud(const Eigen::Vector3d&, double)>& points_near,
-                             const PlaceRecognitionConfig& config) {
+                             const PlaceRecognitionConfig& config, const std::atomic<bool>* cancel) {
   PlaceIndex index(config);
   bool first = true;
   Eigen::Vector3d last = Eigen::Vector3d::Zero();
   for (const Pose3d& T : trajectory) {
+    if (cancel && cancel->load(std::memory_order_relaxed)) break;
     const Eigen::Vector3d p = T.translation();
     if (!first && (p - last).head<2>().norm() < config.place_spacing_m) continue;
     first = false;
@@ -222,6 +223,12 @@ PlaceIndex build_place_index(const std::vector<Pose3d>& trajectory,
     }
   }
   return index;
+}
+
+PlacesFuture ready_places(std::shared_ptr<const PlaceIndex> places) {
+  std::promise<std::shared_ptr<const PlaceIndex>> ready;
+  ready.set_value(std::move(places));
+  return ready.get_future().share();
 }
 
 }  // namespace segmatch

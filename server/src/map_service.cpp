@@ -37,14 +37,22 @@ void fit_extent(LoadedMap& map, const Segments& segments) {
 }
 
 // The map's places for a cold start (place_recognition.h), described from its surface layer
-// along its trajectory when it is loaded: none without a layer (schema < 4) or when off.
-std::shared_ptr<const PlaceIndex> places_of(const storage::MapReader& reader, const MapSurfaces* surfaces,
-                                            const PlaceRecognitionConfig& config) {
-  if (!surfaces || !config.enabled) return nullptr;
+// along its trajectory in the background (a city's take seconds; the server answers meanwhile):
+// none without a layer (schema < 4) or when off. A layer that cannot be read leaves none.
+PlacesFuture places_of(const storage::MapReader& reader, std::shared_ptr<const MapSurfaces> surfaces,
+                       const PlaceRecognitionConfig& config, std::shared_ptr<std::atomic<bool>> stop) {
+  if (!surfaces || !config.enabled) return {};
   std::vector<Pose3d> trajectory;
   for (const storage::Keyframe& k : reader.trajectory()) trajectory.push_back(k.T_map_sensor);
-  return std::make_shared<const PlaceIndex>(build_place_index(
-      trajectory, [surfaces](const Eigen::Vector3d& c, double r) { return crop_cylinder(surfaces->near(c, r), c, r); }, config));
+  return std::async(std::launch::async, [trajectory = std::move(trajectory), surfaces, config, stop]() -> std::shared_ptr<const PlaceIndex> {
+           try {
+             return std::make_shared<const PlaceIndex>(build_place_index(
+                 trajectory, [&surfaces](const Eigen::Vector3d& c, double r) { return crop_cylinder(surfaces->near(c, r), c, r); },
+                 config, stop.get()));
+           } catch (const std::exception&) {
+             return nullptr;
+           }
+         }).share();
 }
 
 }  // namespace
@@ -93,7 +101,7 @@ std::shared_ptr<const LoadedMap> load_map(const std::string& path, const MapLoad
   // a query reads one disc of it. Maps without one register the newest scans onto segment points.
   map->surfaces = storage::make_lazy_surfaces(shared_reader, options.cache_points);
   try {
-    map->places = places_of(reader, map->surfaces.get(), map->config.localizer.places);
+    map->places = places_of(reader, map->surfaces, map->config.localizer.places, map->stop_places);
     map->localizer = std::make_unique<const Localizer>(map->config.localizer, std::move(segments), classifier,
                                                        map->lazy_points, map->surfaces, map->places);
   } catch (const std::invalid_argument& e) {

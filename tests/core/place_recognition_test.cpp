@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cmath>
 #include <memory>
 #include <stdexcept>
@@ -99,7 +100,7 @@ TEST(PlaceRecognition, ColdStartLocalizesAScanWithoutAPriorByThePlaceItShows) {
   const MappedStreet m;
   const LocalizerConfig config = config_with_ground();
   const Segments targets = extract_segments(m.layer, Eigen::Vector3f(25.f, 0.f, 2.f), config.segmentation);
-  const Localizer localizer(config, targets, nullptr, nullptr, m.surfaces, std::make_shared<const PlaceIndex>(m.places(config.places)));
+  const Localizer localizer(config, targets, nullptr, nullptr, m.surfaces, ready_places(std::make_shared<const PlaceIndex>(m.places(config.places))));
   const Eigen::Vector3d truth_map(22.6, -0.8, 2.0);
   const Eigen::Vector3d s = m.T_query * truth_map;
   const PointCloud scan = crop_cylinder(transformed(m.layer, m.T_query), s, 35.0);
@@ -120,7 +121,7 @@ TEST(PlaceRecognition, AScanOfAnUnmappedStreetIsRefusedWithTheReason) {
   const MappedStreet m;
   const LocalizerConfig config = config_with_ground();
   const Segments targets = extract_segments(m.layer, Eigen::Vector3f(25.f, 0.f, 2.f), config.segmentation);
-  const Localizer localizer(config, targets, nullptr, nullptr, m.surfaces, std::make_shared<const PlaceIndex>(m.places(config.places)));
+  const Localizer localizer(config, targets, nullptr, nullptr, m.surfaces, ready_places(std::make_shared<const PlaceIndex>(m.places(config.places))));
   // Another street: the poles on the other side, other objects, its own ground.
   PointCloud elsewhere;
   for (int i = 0; i < 10; ++i) test::add_cylinder(elsewhere, 5.f * i + 2.f, -5.f, 0.2f, 6.f);
@@ -139,6 +140,19 @@ TEST(PlaceRecognition, AScanOfAnUnmappedStreetIsRefusedWithTheReason) {
   const LocalizationResult same = without.recognize_place(refused, elsewhere, elsewhere, s.cast<float>());
   EXPECT_EQ(same.refusal, Refusal::kNoConsistentMatches);
   EXPECT_EQ(same.reason, refused.reason);
+}
+
+TEST(PlaceRecognition, ABuildStopsWhenCancelledAndAReadyFutureHoldsTheIndex) {
+  const MappedStreet m;
+  std::atomic<bool> stop{true};
+  const PlaceIndex none = build_place_index(m.trajectory, [&m](const Eigen::Vector3d& c, double r) { return m.surfaces->near(c, r); },
+                                            PlaceRecognitionConfig{}, &stop);
+  EXPECT_EQ(none.size(), 0u);
+  const PlacesFuture ready = ready_places(std::make_shared<const PlaceIndex>(m.places()));
+  ASSERT_TRUE(ready.valid());
+  EXPECT_EQ(ready.get()->size(), 28u * 5u);
+  const Localizer without(test::street_localizer_config(), {}, nullptr, nullptr, m.surfaces);
+  EXPECT_EQ(without.places(), nullptr);
 }
 
 TEST(PlaceRecognition, ConfigRefusesBadValuesByName) {

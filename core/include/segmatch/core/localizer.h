@@ -245,7 +245,7 @@ class Localizer {
             std::shared_ptr<const RandomForestMatcher> classifier = nullptr,
             std::shared_ptr<const TargetPoints> points = nullptr,
             std::shared_ptr<const MapSurfaces> surfaces = nullptr,
-            std::shared_ptr<const PlaceIndex> places = nullptr);
+            PlacesFuture places = {});
 
   // cloud: local cloud in the query (vehicle odometry) frame; sensor_position: the sensor in
   // that frame. Thread-safe: many queries may run at once.
@@ -301,7 +301,8 @@ class Localizer {
   const FeatureIndex& feature_index() const { return index_; }
   const RandomForestMatcher* classifier() const { return classifier_.get(); }
   const MapSurfaces* surfaces() const { return surfaces_.get(); }
-  const PlaceIndex* places() const { return places_.get(); }
+  // The map's places (waits while they are being described); null without.
+  const PlaceIndex* places() const { return places_.valid() ? places_.get().get() : nullptr; }
 
  private:
   // Voxel grid (unless kVoxelized), ground removal, segmentation and description of a query
@@ -316,7 +317,7 @@ class Localizer {
   std::shared_ptr<const RandomForestMatcher> classifier_;
   std::shared_ptr<const TargetPoints> points_;
   std::shared_ptr<const MapSurfaces> surfaces_;
-  std::shared_ptr<const PlaceIndex> places_;
+  PlacesFuture places_;
 };
 
 }  // namespace segmatch

@@ -14,7 +14,10 @@
 
 #include <Eigen/Core>
 
+#include <atomic>
 #include <functional>
+#include <future>
+#include <memory>
 #include <vector>
 
 namespace segmatch {
@@ -102,10 +105,17 @@ class PlaceIndex {
 };
 
 // The places of a map: along `trajectory` (T_map_sensor), one at least place_spacing_m from the
-// previous, each described from `points_near(centre, radius_m)` (the surface layer).
+// previous, each described from `points_near(centre, radius_m)` (the surface layer). Stops early,
+// with the places so far, once `cancel` (if given) is set.
 PlaceIndex build_place_index(const std::vector<Pose3d>& trajectory,
                              const std::function<PointCloud(const Eigen::Vector3d&, double)>& points_near,
-                             const PlaceRecognitionConfig& config);
+                             const PlaceRecognitionConfig& config, const std::atomic<bool>* cancel = nullptr);
+
+// A map's places as a server gets them: described in the background while it already answers
+// (a city's take seconds), waited for by the first cold start that needs them. An invalid
+// future, or a null index, is a map without places.
+using PlacesFuture = std::shared_future<std::shared_ptr<const PlaceIndex>>;
+PlacesFuture ready_places(std::shared_ptr<const PlaceIndex> places);
 
 // The yaw (about +z) of a pose's x axis.
 double yaw_of(const Pose3d& T);

@@ -39,7 +39,14 @@ struct LoadedMap {
   std::vector<std::string> warnings;
   std::shared_ptr<const storage::LazyPoints> lazy_points;  // kLazy: the localizer's point source
   std::shared_ptr<const MapSurfaces> surfaces;  // the map's surface layer, read lazily (null: none)
-  std::shared_ptr<const PlaceIndex> places;     // described from it at load, for cold starts (null: none)
+  // The map's places for cold starts, described from the layer in the background from load on
+  // (invalid: none); set `stop_places` to stop that early.
+  PlacesFuture places;
+  std::shared_ptr<std::atomic<bool>> stop_places = std::make_shared<std::atomic<bool>>(false);
+  LoadedMap() = default;
+  LoadedMap(const LoadedMap&) = delete;
+  LoadedMap& operator=(const LoadedMap&) = delete;
+  ~LoadedMap() { stop_places->store(true); }  // a map dropped at once does not wait for its places
   int schema_version = 0;  // of the map file as read (an old one is served as it is)
   size_t segment_count() const { return localizer ? localizer->targets().size() : 0; }
 };
