@@ -97,7 +97,8 @@ const std::set<std::string> kFiles = {
     "localize_reply_localized.bin", "localize_reply_not_localized.bin", "localize_reply_outside_prior.bin",
     "localize_refusal_code.bin", "localize_reply_refused.bin", "localize_detail.bin", "localize_reply_detail.bin",
     "localize_reply_estimate.bin", "localize_newest.bin", "localize_segments_newest.bin", "localize_reply_off_map.bin", "error.bin",
-    "localize_segments_track.bin", "localize_reply_tracking_lost.bin", "localize_reply_surfaces.bin", "localize_track.bin"};
+    "localize_segments_track.bin", "localize_reply_tracking_lost.bin", "localize_reply_surfaces.bin", "localize_track.bin",
+    "localize_reply_places.bin"};
 
 }  // namespace
 
@@ -408,6 +409,15 @@ TEST(ProtocolData, LocalizeSegmentsTrack) {
     ASSERT_TRUE(m.detail && m.detail->estimate);
     EXPECT_EQ(m.detail->estimate->method, 2u);
     EXPECT_STREQ(to_string(static_cast<ReplyMethod>(m.detail->estimate->method)), "surfaces");
+  });
+  // Revision 12: method 3, a cold start answered by place recognition; the block is a revision-7
+  // block byte for byte but for the value, which revision-7 decoders read as a method they cannot name.
+  LocalizeReply cold = localized_reply(17);
+  cold.detail = detail_with_estimate(0.f, 0.f, 5200, ReplyMethod::kPlaces, 3, 8192.0f);
+  check_file<LocalizeReply>("localize_reply_places.bin", cold, [](const LocalizeReply& m) {
+    ASSERT_TRUE(m.detail && m.detail->estimate);
+    EXPECT_EQ(m.detail->estimate->method, 3u);
+    EXPECT_STREQ(to_string(static_cast<ReplyMethod>(m.detail->estimate->method)), "places");
   });
 }
 
