@@ -85,6 +85,8 @@ EXPECTED = {
         Pose(), 0, 0.0, 0, [], TIMINGS, refusal=p.RefusalCode.TRACKING_LOST),
     "localize_reply_surfaces.bin": localized_reply(request_id=16, detail=p.ReplyDetail(
         0.0, 0.0, 3100, method=2, covariance_upper=[(k + 2) / 8192.0 for k in range(21)])),
+    "localize_reply_places.bin": localized_reply(request_id=17, detail=p.ReplyDetail(  # revision 12: a cold start
+        0.0, 0.0, 5200, method=3, covariance_upper=[(k + 3) / 8192.0 for k in range(21)])),
     "error.bin": p.Error(ErrorCode.NON_FINITE, "NaN or Inf value"),
 }
 
