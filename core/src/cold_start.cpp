@@ -15,11 +15,15 @@ LocalizationResult Localizer::recognize_place(LocalizationResult refused, const 
                                               const Eigen::Vector3f& sensor_position) const {
   const PlaceRecognitionConfig& c = config_.places;
   const auto start = std::chrono::steady_clock::now();
-  auto spent_ms = [&start] { return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count(); };
+  // Its time counts as refinement, as tracking's does.
+  auto add_time = [&start](ModuleTimings& t) {
+    const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    t.refine_ms += ms;
+    t.total_ms += ms;
+  };
   auto unchanged = [&](const std::string& why) {
     refused.reason += " (place recognition: " + why + ")";
-    refused.timings.refine_ms += spent_ms();
-    refused.timings.total_ms += spent_ms();
+    add_time(refused.timings);
     return refused;
   };
   const PlaceIndex* places = c.enabled && surfaces_ ? this->places() : nullptr;
@@ -60,11 +64,11 @@ LocalizationResult Localizer::recognize_place(LocalizationResult refused, const 
                    [](const LocalizationResult& x, const LocalizationResult& y) { return x.refine_fitness > y.refine_fitness; });
   const Eigen::Vector3d best = passed.front().T_map_query * s;
   for (size_t i = 1; i < passed.size(); ++i) {
-    const bool distinct = ((passed[i].T_map_query * s) - best).head<2>().norm() > config_.search.min_separation_m;
-    if (distinct && passed[i].refine_fitness >= passed.front().refine_fitness - c.fitness_margin) {
+    const double apart_m = ((passed[i].T_map_query * s) - best).head<2>().norm();
+    if (apart_m > config_.search.min_separation_m && passed[i].refine_fitness >= passed.front().refine_fitness - c.fitness_margin) {
       char why[160];
-      std::snprintf(why, sizeof(why), "ambiguous: the scan fits places %.1f m apart (fitness %.3f and %.3f)",
-                    ((passed[i].T_map_query * s) - best).head<2>().norm(), passed.front().refine_fitness, passed[i].refine_fitness);
+      std::snprintf(why, sizeof(why), "ambiguous: the scan fits places %.1f m apart (fitness %.3f and %.3f)", apart_m,
+                    passed.front().refine_fitness, passed[i].refine_fitness);
       refused = detail::refuse(std::move(refused), Refusal::kAmbiguous, why);
       return unchanged(std::to_string(passed.size()) + " places pass every gate");
     }
@@ -72,8 +76,7 @@ LocalizationResult Localizer::recognize_place(LocalizationResult refused, const 
   LocalizationResult r = std::move(passed.front());
   r.method = LocalizationMethod::kPlaces;
   r.timings = refused.timings;
-  r.timings.refine_ms += spent_ms();
-  r.timings.total_ms += spent_ms();
+  add_time(r.timings);
   return r;
 }
 
