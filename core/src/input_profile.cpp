@@ -194,6 +194,20 @@ std::vector<size_t> scans_to_measure(size_t count, const InputProfileConfig& con
   return out;
 }
 
+ElevationBand measure_elevations(const PointCloud& cloud, const Eigen::Vector3f& sensor, size_t sample) {
+  const size_t stride = std::max<size_t>(1, cloud.size() / std::max<size_t>(1, sample));
+  std::vector<double> elevation;
+  elevation.reserve(cloud.size() / stride + 1);
+  for (size_t i = 0; i < cloud.size(); i += stride) {
+    const Eigen::Vector3f d = cloud[i].xyz() - sensor;
+    const double r = d.norm();
+    if (!(r > 0.1) || !std::isfinite(r)) continue;
+    elevation.push_back(std::atan2(double(d.z()), std::hypot(double(d.x()), double(d.y()))) * 180.0 / M_PI);
+  }
+  if (elevation.empty()) return {};
+  return {percentile(elevation, 0.01), percentile(elevation, 0.99)};
+}
+
 InputMeasurements measure_input(const std::vector<PointCloud>& scans, const Poses& T_world_sensor,
                                 const InputProfileConfig& config) {
   config.validate();

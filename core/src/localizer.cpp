@@ -93,6 +93,18 @@ PointCloud crop_cylinder(const PointCloud& cloud, const Eigen::Vector3d& center,
   return out;
 }
 
+PointCloud crop_elevation(const PointCloud& cloud, const Eigen::Vector3f& sensor, double min_deg, double max_deg) {
+  // Compared as tangents: elevation e lies in [min, max] iff tan(min) * d <= dz <= tan(max) * d.
+  const double lo = std::tan(std::max(min_deg, -89.9) * M_PI / 180.0), hi = std::tan(std::min(max_deg, 89.9) * M_PI / 180.0);
+  PointCloud out;
+  out.reserve(cloud.size());
+  for (const Point& p : cloud) {
+    const double d = std::hypot(double(p.x) - sensor.x(), double(p.y) - sensor.y()), dz = double(p.z) - sensor.z();
+    if (dz >= lo * d && dz <= hi * d) out.push_back(p);
+  }
+  return out;
+}
+
 const char* to_string(LocalizationStatus status) {
   return status == LocalizationStatus::kLocalized ? "localized" : "not_localized";
 }
@@ -166,25 +178,12 @@ void LocalizerConfig::validate() const {
     throw std::invalid_argument("matcher.use_shapes needs segmentation.descriptors.compute_esf");
 }
 
-Segments extract_segments(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
-                          const SegmentationConfig& config, const std::vector<uint32_t>* labels,
-                          ModuleTimings* timings, const Deadline& deadline) {
-  ModuleTimings local;
-  ModuleTimings& t = timings ? *timings : local;
-  Stopwatch clock;
-  std::vector<uint32_t> voxel_labels;
-  const PointCloud voxels =
-      voxel_filter(cloud, config.voxel, labels, labels ? &voxel_labels : nullptr);
-  t.voxel_ms = clock.lap();
-  if (deadline.passed()) return {};
-  return extract_segments_from_voxels(voxels, sensor_position, config, labels ? &voxel_labels : nullptr, &t, deadline);
-}
+namespace {
 
-Segments extract_segments_from_voxels(const PointCloud& voxels, const Eigen::Vector3f& sensor_position,
-                                      const SegmentationConfig& config, const std::vector<uint32_t>* voxel_labels,
-                                      ModuleTimings* timings, const Deadline& deadline) {
-  ModuleTimings local;
-  ModuleTimings& t = timings ? *timings : local;
+// Segmentation (voxels, ground, clusters), then the description unless `describe` is false: the
+// tracking path describes only the segments it checks (detail::describe_pending).
+Segments segments_of_voxels(const PointCloud& voxels, const Eigen::Vector3f& sensor_position, const SegmentationConfig& config,
+                            const std::vector<uint32_t>* voxel_labels, ModuleTimings& t, const Deadline& deadline, bool describe) {
   Stopwatch clock;
   std::vector<uint32_t> foreground_labels;
   const PointCloud foreground = remove_ground(voxels, config.ground, sensor_position, voxel_labels,
@@ -194,9 +193,35 @@ Segments extract_segments_from_voxels(const PointCloud& voxels, const Eigen::Vec
   Segments segments = segment_cloud(foreground, config.segmenter, voxel_labels ? &foreground_labels : nullptr);
   t.segment_ms = clock.lap();
   if (deadline.passed()) return {};
-  describe_segments(segments, config.descriptors, deadline);
+  if (describe) describe_segments(segments, config.descriptors, deadline);
   t.describe_ms = clock.lap();
   return segments;
+}
+
+Segments segments_of_cloud(const PointCloud& cloud, const Eigen::Vector3f& sensor_position, const SegmentationConfig& config,
+                           const std::vector<uint32_t>* labels, ModuleTimings& t, const Deadline& deadline, bool describe) {
+  Stopwatch clock;
+  std::vector<uint32_t> voxel_labels;
+  const PointCloud voxels = voxel_filter(cloud, config.voxel, labels, labels ? &voxel_labels : nullptr);
+  t.voxel_ms = clock.lap();
+  if (deadline.passed()) return {};
+  return segments_of_voxels(voxels, sensor_position, config, labels ? &voxel_labels : nullptr, t, deadline, describe);
+}
+
+}  // namespace
+
+Segments extract_segments(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
+                          const SegmentationConfig& config, const std::vector<uint32_t>* labels,
+                          ModuleTimings* timings, const Deadline& deadline) {
+  ModuleTimings local;
+  return segments_of_cloud(cloud, sensor_position, config, labels, timings ? *timings : local, deadline, true);
+}
+
+Segments extract_segments_from_voxels(const PointCloud& voxels, const Eigen::Vector3f& sensor_position,
+                                      const SegmentationConfig& config, const std::vector<uint32_t>* voxel_labels,
+                                      ModuleTimings* timings, const Deadline& deadline) {
+  ModuleTimings local;
+  return segments_of_voxels(voxels, sensor_position, config, voxel_labels, timings ? *timings : local, deadline, true);
 }
 
 Localizer::Localizer(const LocalizerConfig& config, Segments targets,
@@ -250,7 +275,12 @@ LocalizationResult Localizer::localize_tracking_first(const PointCloud& cloud, c
   check_prior(&prior);
   if (deadline.passed()) return stopped({}, "before segmentation");
   ModuleTimings timings;
-  Segments query = segment_query(cloud, sensor_position, kind, timings, deadline);
+  // Undescribed: tracking describes the few segments it checks, the fallback the rest.
+  Stopwatch clock;
+  Segments query = kind == CloudKind::kVoxelized
+                       ? segments_of_voxels(cloud, sensor_position, config_.segmentation, nullptr, timings, deadline, false)
+                       : segments_of_cloud(cloud, sensor_position, config_.segmentation, nullptr, timings, deadline, false);
+  timings.total_ms = clock.lap();
   if (deadline.passed()) {
     LocalizationResult r;
     r.timings = timings;
@@ -265,6 +295,16 @@ LocalizationResult Localizer::localize_tracking_first(const PointCloud& cloud, c
     return tracked;
   }
   // A refused result keeps its query: the same segments go on, not segmented again.
+  clock.lap();  // tracking's own time is in tracked.timings
+  detail::describe_pending(tracked.query, nullptr, config_.segmentation.descriptors, deadline);
+  const double describe_ms = clock.lap();
+  timings.describe_ms += describe_ms;
+  timings.total_ms += describe_ms;
+  if (deadline.passed()) {
+    LocalizationResult r;
+    r.timings = timings;
+    return stopped(std::move(r), "during description");
+  }
   LocalizationResult r = localize_segments(std::move(tracked.query), sensor_position, &prior, timings, deadline);
   if (!deadline.passed()) refine_to_newest_scans(newest, sensor_position, r);
   keep_tracking_reason(tracked.reason, r);

@@ -101,10 +101,28 @@ void refine_recent_window(const WindowPoints& points, const Eigen::Vector3f& sen
   r.T_map_query = window.T_target_query;
 }
 
+void describe_pending(Segments& query, const Matches* pairs, const DescriptorConfig& config, const Deadline& deadline) {
+  auto pending = [](const Segment& s) { return !s.has_eigen && !s.has_esf; };
+  auto describe = [&](size_t i) {
+    Segments one(1);
+    one.front() = std::move(query[i]);
+    describe_segments(one, config);
+    query[i] = std::move(one.front());
+  };
+  if (pairs) {
+    for (const Match& m : *pairs)
+      if (m.query >= 0 && static_cast<size_t>(m.query) < query.size() && pending(query[m.query])) describe(m.query);
+    return;
+  }
+  for (size_t i = 0; i < query.size() && !deadline.passed(); ++i)
+    if (pending(query[i])) describe(i);
+}
+
 bool well_supported(const Segments& targets, const CentroidIndex& centroids, const RandomForestMatcher* classifier,
                     const LocalizerConfig& config, const Pose3d& T_map_query, int min_matched_segments, LocalizationResult& r) {
   const Support support = support_of(r.query, centroids, T_map_query, config.support_radius_m);
   r.support = support.count();
+  describe_pending(r.query, &support.pairs, config.segmentation.descriptors);
   r.inliers = filter_matches(r.query, targets, support.pairs, config.matcher, classifier);
   const int min_support = config.registration.min_support;
   if (r.support >= static_cast<size_t>(min_support) && r.inliers.size() >= static_cast<size_t>(min_matched_segments)) return true;

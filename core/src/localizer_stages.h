@@ -37,6 +37,12 @@ WindowPoints window_points(const Segments& query, const Segments& targets, const
 void refine_recent_window(const WindowPoints& points, const Eigen::Vector3f& sensor, float min_fitness,
                           const RefineConfig& config, const CovarianceConfig& covariance, LocalizationResult& r);
 
+// Query segments that carry no descriptor yet (the tracking path segments a cloud without
+// describing it): described here, the ones listed in `pairs` (those a pose puts on map
+// segments) or, with pairs null, every one. A segment's descriptor depends on its own points
+// (describe_segments), so describing later gives the same descriptors and answers.
+void describe_pending(Segments& query, const Matches* pairs, const DescriptorConfig& config, const Deadline& deadline = {});
+
 // The segment check of a registered pose: enough query segments land on map segments
 // (RegistrationConfig::min_support), and at least min_matched_segments of those pairs pass the
 // matcher (the registration's floor, or the surface layer's: SurfaceTrackingConfig). Fills r's

@@ -19,6 +19,7 @@ void PlaceRecognitionConfig::validate() const {
   detail::require_non_negative(min_height_m, owner, "min_height_m");
   detail::require_positive(max_height_m, owner, "max_height_m");
   if (!(max_height_m > min_height_m)) throw std::invalid_argument("PlaceRecognitionConfig.max_height_m must exceed min_height_m");
+  detail::require_positive(block_height_m, owner, "block_height_m");
   detail::require_positive(place_spacing_m, owner, "place_spacing_m");
   detail::require_positive(lateral_step_m, owner, "lateral_step_m");
   if (lateral_steps < 0 || lateral_steps > 10) throw std::invalid_argument("PlaceRecognitionConfig.lateral_steps must be in 0..10");
@@ -33,6 +34,10 @@ void PlaceRecognitionConfig::validate() const {
   detail::require_fraction(min_fitness, owner, "min_fitness");
   detail::require_non_negative(max_shifted_support, owner, "max_shifted_support", "(0: off)");
   detail::require_fraction(fitness_margin, owner, "fitness_margin");
+  if (!(map_elevation_min_deg >= -90.0f && map_elevation_max_deg <= 90.0f && map_elevation_min_deg < map_elevation_max_deg))
+    throw std::invalid_argument("PlaceRecognitionConfig.map_elevation_min_deg and map_elevation_max_deg must lie in -90..90, min below max");
+  detail::require_non_negative(elevation_excess_deg, owner, "elevation_excess_deg");
+  detail::require_non_negative(elevation_margin_deg, owner, "elevation_margin_deg");
 }
 
 size_t PlaceDescriptor::occupied() const {

@@ -144,6 +144,7 @@ PipelineConfig auto_pipeline_config(const InputMeasurements& m) {
   }
   c.preset = "auto";
   c.measured = m;
+  take_measured_elevations(c);
   c.validate();
   return c;
 }

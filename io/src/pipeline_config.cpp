@@ -162,7 +162,13 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("max_radius_m", l.places.max_radius_m);
   v("min_height_m", l.places.min_height_m);
   v("max_height_m", l.places.max_height_m);
+  v("occlusion", l.places.occlusion);
+  v("block_height_m", l.places.block_height_m);
+  v("elevation_excess_deg", l.places.elevation_excess_deg);
+  v("elevation_margin_deg", l.places.elevation_margin_deg);
   v("place_spacing_m", l.places.place_spacing_m);
+  v("lateral_step_m", l.places.lateral_step_m);
+  v("lateral_steps", l.places.lateral_steps);
   v("shortlist", l.places.shortlist);
   v("candidates", l.places.candidates);
   v("prior_radius_m", l.places.prior_radius_m);
@@ -424,6 +430,15 @@ LoopDetectorConfig loop_detector_config(const PipelineConfig& p) {
   return c;
 }
 
+void take_measured_elevations(PipelineConfig& c) {
+  if (!c.measured) return;
+  const InputMeasurements& m = *c.measured;
+  // Maps measured before elevations were: 0 .. 0, nothing known.
+  if (!(m.elevation_max_deg > m.elevation_min_deg)) return;
+  c.localizer.places.map_elevation_min_deg = static_cast<float>(std::max(-90.0, m.elevation_min_deg));
+  c.localizer.places.map_elevation_max_deg = static_cast<float>(std::min(90.0, m.elevation_max_deg));
+}
+
 PipelineConfig parse_pipeline_config(const std::string& json_text, const std::string& origin) {
   json in;
   try {
@@ -447,6 +462,7 @@ PipelineConfig parse_pipeline_config(const std::string& json_text, const std::st
   visit_fields(reader, c);
   if (in.contains("measured")) {
     c.measured = parse_measured(in["measured"], origin);
+    take_measured_elevations(c);
     in.erase("measured");
   }
   // How segmatch-mapbuilder --close-loops corrected the poses: a record, not a parameter.

@@ -117,6 +117,61 @@ TEST(PlaceRecognition, ColdStartLocalizesAScanWithoutAPriorByThePlaceItShows) {
   EXPECT_GT(r.covariance.trace(), 0.0);
 }
 
+// crop_elevation keeps what a sensor with that vertical field of view sees: known answers.
+TEST(PlaceRecognition, CropElevationKeepsThePointsWithinTheBand) {
+  const Eigen::Vector3f sensor(1.f, 2.f, 2.f);
+  PointCloud points;
+  for (double deg : {-30.0, -10.0, -1.0, 0.0, 1.9, 2.1, 15.0, 80.0}) {
+    const double d = 10.0;
+    points.push_back(Point{1.f + static_cast<float>(d), 2.f, 2.f + static_cast<float>(d * std::tan(deg * kDeg)), 0.f});
+  }
+  const PointCloud kept = crop_elevation(points, sensor, -15.0, 2.0);
+  ASSERT_EQ(kept.size(), 4u);  // -10, -1, 0, 1.9
+  EXPECT_NEAR(kept.front().z, 2.f + 10.f * std::tan(-10.0 * kDeg), 1e-5);
+  EXPECT_EQ(crop_elevation(points, sensor, -90.0, 90.0).size(), points.size());
+}
+
+// A map whose sensor looked no higher than +2 degrees (an HDL-64E on a car: its layer holds what
+// stands within about 3.4 m of the ground, seen from up to 40 m) and a scan from a sensor that
+// sees whole facades (a VLP-16 to +15): the scan's points above what the map's sensor saw have no
+// counterpart. Kept to the map's elevations (PlaceRecognitionConfig::map_elevation_*), the scan
+// localizes; taken whole, it fits worse.
+TEST(PlaceRecognition, ColdStartKeepsTheScanToWhatTheMapsSensorSaw) {
+  const MappedStreet m;
+  PointCloud street = m.layer;  // with facades 12 m tall on either side
+  for (const float y : {-17.f, 18.f})
+    for (float x = -8.f; x <= 58.f; x += 0.1f)
+      for (float z = 0.f; z <= 12.f; z += 0.1f) street.push_back(Point{x, y, z, 0.f});
+  const double reach_m = 2.0 + std::tan(2.0 * kDeg) * 40.0;
+  PointCloud low;
+  for (const Point& p : street)
+    if (p.z <= reach_m) low.push_back(p);
+  const auto surfaces = std::make_shared<test::InMemorySurfaces>(low);
+  LocalizerConfig config = config_with_ground();
+  const Segments targets = extract_segments(low, Eigen::Vector3f(25.f, 0.f, 2.f), config.segmentation);
+  const Eigen::Vector3d truth_map(22.6, -0.8, 2.0);
+  const Eigen::Vector3d s = m.T_query * truth_map;
+  const PointCloud scan = crop_cylinder(transformed(street, m.T_query), s, 35.0);
+  LocalizationResult refused;
+  refused.refusal = Refusal::kNoConsistentMatches;
+  refused.reason = "segment matching refused it";
+  refused.query = extract_segments(scan, s.cast<float>(), config.segmentation);
+  auto cold_start = [&](const LocalizerConfig& c) {
+    auto index = std::make_shared<const PlaceIndex>(
+        build_place_index(m.trajectory, [&](const Eigen::Vector3d& centre, double r) { return surfaces->near(centre, r); }, c.places));
+    const Localizer localizer(c, targets, nullptr, nullptr, surfaces, ready_places(index));
+    return localizer.recognize_place(refused, scan, scan, s.cast<float>());
+  };
+  const LocalizationResult whole = cold_start(config);
+  config.places.map_elevation_min_deg = -25.0f;
+  config.places.map_elevation_max_deg = 2.0f;
+  const LocalizationResult kept = cold_start(config);
+  ASSERT_TRUE(kept.localized()) << kept.reason;
+  EXPECT_LT((kept.T_map_query * s - truth_map).norm(), 0.1);
+  EXPECT_FALSE(whole.localized() && whole.refine_fitness >= kept.refine_fitness)
+      << "the whole scan fitted " << whole.refine_fitness << ", the kept one " << kept.refine_fitness;
+}
+
 TEST(PlaceRecognition, AScanOfAnUnmappedStreetIsRefusedWithTheReason) {
   const MappedStreet m;
   const LocalizerConfig config = config_with_ground();
@@ -180,6 +235,16 @@ TEST(PlaceRecognition, ConfigRefusesBadValuesByName) {
   c = {};
   c.lateral_steps = -1;
   EXPECT_TRUE(refused_with(c, "PlaceRecognitionConfig.lateral_steps"));
+  c = {};
+  c.map_elevation_min_deg = 5.0f;
+  c.map_elevation_max_deg = 2.0f;
+  EXPECT_TRUE(refused_with(c, "PlaceRecognitionConfig.map_elevation_min_deg"));
+  c = {};
+  c.elevation_excess_deg = -1.0f;
+  EXPECT_TRUE(refused_with(c, "PlaceRecognitionConfig.elevation_excess_deg"));
+  c = {};
+  c.block_height_m = 0.0f;
+  EXPECT_TRUE(refused_with(c, "PlaceRecognitionConfig.block_height_m"));
 }
 
 }  // namespace

@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
 
@@ -229,6 +230,47 @@ TEST(SurfaceTracking, AFallbackRefusalKeepsTrackingsReason) {
   answered.status = LocalizationStatus::kLocalized;
   keep_tracking_reason("tracking on the surface layer: why", answered);
   EXPECT_TRUE(answered.reason.empty()) << "an answer carries no reason";
+}
+
+// The tracking path segments a cloud without describing it: a tracked answer describes only the
+// segments its pose puts on map segments, and is the answer of the fully described query; a
+// refusal describes the rest before the segments path matches them.
+TEST(SurfaceTracking, TrackingFirstDescribesOnlyTheSegmentsItChecks) {
+  const Street s;
+  // The map lacks its four segments farthest from the sensor: their query counterparts land on
+  // nothing, and need no descriptor.
+  Segments targets = s.map_segments();
+  std::sort(targets.begin(), targets.end(), [&](const Segment& a, const Segment& b) {
+    return (a.centroid - s.sensor_map).norm() < (b.centroid - s.sensor_map).norm();
+  });
+  targets.resize(targets.size() - 4);
+  const Localizer localizer(s.config, targets, nullptr, nullptr, std::make_shared<test::InMemorySurfaces>(test::with_ground(s.map_cloud)));
+  const PointCloud cloud = transformed(s.map_cloud, s.T_query);
+  const Eigen::Vector3f sensor = s.sensor_query().cast<float>();
+  const PosePrior prior = s.prior(0.8, 2.0);
+  const LocalizationResult lazy = localizer.localize_tracking_first(cloud, sensor, CloudKind::kRaw, s.newest(), prior, Deadline{});
+  const LocalizationResult full = localizer.track(extract_segments(cloud, sensor, s.config.segmentation), s.newest(), sensor, prior);
+  ASSERT_TRUE(lazy.localized()) << lazy.reason;
+  ASSERT_TRUE(full.localized()) << full.reason;
+  EXPECT_TRUE(lazy.T_map_query.isApprox(full.T_map_query, 0.0)) << "the same pose, bit for bit";
+  EXPECT_EQ(lazy.support, full.support);
+  ASSERT_EQ(lazy.inliers.size(), full.inliers.size());
+  ASSERT_EQ(lazy.query.size(), full.query.size());
+  size_t described = 0;
+  for (size_t i = 0; i < lazy.query.size(); ++i) {
+    if (!lazy.query[i].has_eigen) continue;
+    ++described;
+    EXPECT_EQ(lazy.query[i].eigen, full.query[i].eigen) << "segment " << i;
+    EXPECT_EQ(lazy.query[i].esf, full.query[i].esf) << "segment " << i;
+  }
+  EXPECT_GE(described, lazy.support) << "every landing segment is described";
+  EXPECT_LT(described, lazy.query.size()) << "the scene has segments the pose does not check";
+  // A prior turned 20 degrees (5 allowed): tracking refuses, the segments path gets every
+  // segment described.
+  const LocalizationResult refused = localizer.localize_tracking_first(cloud, sensor, CloudKind::kRaw, s.newest(), s.prior(0.0, 20.0), Deadline{});
+  ASSERT_FALSE(refused.localized());
+  ASSERT_FALSE(refused.query.empty());
+  for (const Segment& g : refused.query) EXPECT_TRUE(g.has_eigen);
 }
 
 TEST(SurfaceTracking, ConfigRefusesBadValuesByName) {

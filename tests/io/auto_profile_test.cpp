@@ -105,6 +105,24 @@ TEST(AutoProfile, RingsRoundTripAndOlderMapsParseWithout) {
   }
 }
 
+// The elevations the map's sensor saw follow from its measurements, in the map builder's config
+// and in a map's parameters read back (a cold start keeps another sensor's scan to them); a
+// config without measurements leaves them open.
+TEST(AutoProfile, TheMeasuredElevationsBoundAColdStartsScan) {
+  InputMeasurements m = measured(true, false);
+  m.elevation_min_deg = -24.9;
+  m.elevation_max_deg = 2.0;
+  const PipelineConfig c = auto_pipeline_config(m);
+  EXPECT_FLOAT_EQ(c.localizer.places.map_elevation_min_deg, -24.9f);
+  EXPECT_FLOAT_EQ(c.localizer.places.map_elevation_max_deg, 2.0f);
+  const PipelineConfig back = parse_pipeline_config(to_json(c), "map parameters");
+  EXPECT_FLOAT_EQ(back.localizer.places.map_elevation_min_deg, -24.9f);
+  EXPECT_FLOAT_EQ(back.localizer.places.map_elevation_max_deg, 2.0f);
+  const PipelineConfig open = parse_pipeline_config(R"({"preset": "kitti-hdl64"})", "cfg.json");
+  EXPECT_FLOAT_EQ(open.localizer.places.map_elevation_min_deg, -90.0f);
+  EXPECT_FLOAT_EQ(open.localizer.places.map_elevation_max_deg, 90.0f);
+}
+
 TEST(AutoProfile, BadMeasurementsAreNamed) {
   try {
     parse_pipeline_config(R"({"preset": "auto", "measured": {"range_p50_m": "far"}})", "cfg.json");

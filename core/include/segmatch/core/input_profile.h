@@ -108,6 +108,15 @@ struct Rings {
 };
 Rings measure_rings(std::vector<double> elevations_deg);
 
+// The 1st and 99th percentiles of the elevations (degrees) at which `sensor` sees the points of
+// a cloud, from up to `sample` strided points farther than 0.1 m: the vertical field of view a
+// query shows, as measure_input() records an input's (elevation_min_deg, elevation_max_deg).
+// Both 0 for a cloud without such points.
+struct ElevationBand {
+  double min_deg = 0.0, max_deg = 0.0;
+};
+ElevationBand measure_elevations(const PointCloud& cloud, const Eigen::Vector3f& sensor, size_t sample = 4000);
+
 // Which scans measure_input() looks at when given `count` of them (indices, increasing).
 std::vector<size_t> scans_to_measure(size_t count, const InputProfileConfig& config = {});
 

@@ -187,6 +187,10 @@ void thin_segment_points(Segments& segments, size_t max_points);
 // paper (III-A), cut from whatever the vehicle sent.
 PointCloud crop_cylinder(const PointCloud& cloud, const Eigen::Vector3d& center, double radius_m);
 
+// The points of `cloud` seen from `sensor` at an elevation (degrees above the horizontal plane)
+// within [min_deg, max_deg]: what a sensor with that vertical field of view could see from there.
+PointCloud crop_elevation(const PointCloud& cloud, const Eigen::Vector3f& sensor, double min_deg, double max_deg);
+
 // Version of the segmentation and description code: part of the digest that names the
 // parameters a vehicle's segments were computed with (docs/protocol.md 5.5). Bump it whenever
 // a change makes the same cloud and parameters give other segments or descriptors.

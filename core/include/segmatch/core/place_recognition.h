@@ -54,6 +54,17 @@ struct PlaceRecognitionConfig {
   float min_fitness = 0.92f;      // of the registration (and of the search's peaks)
   float max_shifted_support = 0.0f;  // SurfaceTrackingConfig's look-alike check (0: off)
   float fitness_margin = 0.05f;      // a distinct place fitting within this of the best: ambiguous
+  // The elevations the map's sensor saw, from the sensor (the profile's 1st and 99th
+  // percentiles, measured when the map was built; io sets them from the map's "measured").
+  // A scan from another sensor class sees more: a VLP-16 walls to +15 degrees where an HDL-64E
+  // map holds them to +2. Those points have no counterpart in the map and only lower the
+  // fitness, so a cold start whose scan reaches more than elevation_excess_deg beyond this band
+  // (a vehicle's roll and pitch, an odometry frame's tilt, stay within it) keeps the points
+  // within the band widened by elevation_margin_deg. Unmeasured maps: -90..90, nothing dropped.
+  float map_elevation_min_deg = -90.0f;
+  float map_elevation_max_deg = 90.0f;
+  float elevation_excess_deg = 5.0f;
+  float elevation_margin_deg = 1.5f;
   void validate() const;      // throws std::invalid_argument naming the field
 };
 

@@ -50,6 +50,10 @@ struct PipelineConfig {
   void validate() const;
 };
 
+// Sets what follows from the measurements, not a parameter of its own: the elevations the map's
+// sensor saw (PlaceRecognitionConfig::map_elevation_*). No measurements: unchanged.
+void take_measured_elevations(PipelineConfig& c);
+
 // Presets:
 //   "auto"             the default of the tools that read an input: measured and derived by
 //                      io::auto_pipeline_config (auto_profile.h); without measurements (a
