@@ -127,10 +127,6 @@ int route(Impl& impl, mg_connection* c, const mg_request_info& ri) {
     respond(c, 200, "text/plain; version=0.0.4", impl.config.metrics->text());
     return 200;
   }
-  if (const ConsoleAsset* asset = find_console_asset(path == "/" ? "/index.html" : path)) {
-    respond(c, 200, asset->content_type, std::string(reinterpret_cast<const char*>(asset->data), asset->size));
-    return 200;
-  }
   return fail(c, 404, "no such page: " + path + " (the API: docs/console.md)");
 }
 
@@ -139,6 +135,13 @@ int handle(mg_connection* c, void* data) {
   const mg_request_info& ri = *mg_get_request_info(c);
   try {
     if (std::strcmp(ri.request_method, "GET") != 0) return fail(c, 405, "only GET", "Allow", "GET");
+    // The page's own files hold no data and are served to anyone who reaches the port (the
+    // browser fetches them without the token); the data behind them needs it.
+    const std::string path = ri.local_uri ? ri.local_uri : "";
+    if (const ConsoleAsset* asset = find_console_asset(path == "/" ? "/index.html" : path)) {
+      respond(c, 200, asset->content_type, std::string(reinterpret_cast<const char*>(asset->data), asset->size));
+      return 200;
+    }
     if (!authorized(impl, c, ri))
       return fail(c, 401, "this server needs its token: Authorization: Bearer TOKEN, or open /?token=TOKEN", "WWW-Authenticate",
                   "Bearer");

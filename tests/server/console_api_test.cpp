@@ -139,7 +139,11 @@ TEST(ServerConsole, BadRequestsGet4xxAndNeverDisturbLocalization) {
   console.max_request_bytes = 8192;
   ConsoleServer cs(console);
   const uint16_t port = cs.page->port();
+  EXPECT_EQ(http_get(port, "/").status, 200);  // the page's files hold no data: no token needed
+  EXPECT_EQ(http_get(port, "/app.js").status, 200);
   EXPECT_EQ(http_get(port, "/api/stats").status, 401);                        // no token
+  EXPECT_EQ(http_get(port, "/api/map").status, 401);
+  EXPECT_EQ(http_get(port, "/metrics").status, 401);
   EXPECT_EQ(http_get(port, "/api/stats", "Authorization: Bearer wrong\r\n").status, 401);
   EXPECT_EQ(http_get(port, "/api/stats?token=" + kToken).status, 200);       // the page's way
   EXPECT_EQ(http_get(port, "/nope", kAuth).status, 404);

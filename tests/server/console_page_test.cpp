@@ -36,15 +36,23 @@ std::string chromium_binary() {
 
 // One headless Chromium run on `url`; --virtual-time-budget lets the page load, fetch and poll
 // (virtual time stands still while a fetch is pending) before the DOM or the pixels are taken.
+// Each run has its own profile; a run that hangs (seen once in a dozen: no renderer came up) is
+// killed after 45 s and tried once more.
 std::string chromium(const std::string& binary, const std::string& what, const std::string& url, const std::string& folder) {
-  const std::string cmd = binary + " --headless --disable-gpu --no-sandbox --hide-scrollbars --no-first-run --disable-extensions "
-                          "--force-device-scale-factor=1 --window-size=1200,800 --virtual-time-budget=4000 --user-data-dir=" +
-                          folder + "/chromium-profile " + what + " '" + url + "'";
-  const test::CommandResult r = test::run_command("(" + cmd + " > " + folder + "/chromium.out 2> " + folder + "/chromium.err)");
+  static int runs = 0;
+  test::CommandResult r;
+  std::string cmd;
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    cmd = "timeout -k 5 45 " + binary + " --headless --disable-gpu --no-sandbox --hide-scrollbars --no-first-run "
+          "--disable-extensions --force-device-scale-factor=1 --window-size=1200,800 --virtual-time-budget=4000 "
+          "--user-data-dir=" + folder + "/profile-" + std::to_string(++runs) + " " + what + " '" + url + "'";
+    r = test::run_command("(" + cmd + " > " + folder + "/chromium.out 2> " + folder + "/chromium.err)");
+    if (r.code == 0) break;
+  }
+  EXPECT_EQ(r.code, 0) << cmd << "\n" << r.output;
   std::ifstream in(folder + "/chromium.out");
   std::stringstream s;
   s << in.rdbuf();
-  EXPECT_EQ(r.code, 0) << cmd << "\n" << r.output;
   return s.str();
 }
 
@@ -177,7 +185,8 @@ TEST(ServerConsole, PageDrawsTheMapAndTheFleetAndShowsRefusals) {
   // Vehicles: a green disc where each localization put the sensor, a red ring at the refusal's prior.
   for (const Eigen::Vector3d& v : localized_at) {
     const cv::Point2d p = to_px(v.x(), v.y());
-    EXPECT_GE(pixels_near(shot, p.x, p.y, 2, localized_green), 20) << "no vehicle drawn at " << p;
+    // The newest is a 7 px disc, the older ones 3 px: either fills most of the 5 x 5 around it.
+    EXPECT_GE(pixels_near(shot, p.x, p.y, 2, localized_green), 12) << "no vehicle drawn at " << p;
   }
   const cv::Point2d r = to_px(prior_at.x(), prior_at.y());
   EXPECT_GE(pixels_near(shot, r.x, r.y, 9, refused_red), 15) << "no refusal drawn at " << r;

@@ -7,8 +7,8 @@
 // Cost to localization: the HTTP threads only read what the server keeps anyway (counters,
 // the recent-answers ring of recent.h, the map) under short locks; tiles are built once per map
 // and cached. Bad requests are answered 4xx by these threads and never reach the localization
-// port: headers beyond max_request_bytes get 413, a client that does not send its request
-// within request_timeout_ms is dropped, unknown paths get 404, other methods than GET 405.
+// port: headers beyond max_request_bytes get 400, a client that does not send its request
+// within request_timeout_ms gets 400 and is dropped, unknown paths 404, other methods than GET 405.
 #pragma once
 
 #include <cstddef>
@@ -25,13 +25,14 @@ class Server;
 struct ConsoleConfig {
   std::string listen_address = "127.0.0.1";  // loopback unless another address is asked for
   uint16_t port = 0;                         // 0: a free one, see Console::port()
-  // The server's shared secret (ServerConfig::token): every request must carry it, as
-  // "Authorization: Bearer TOKEN" or "?token=TOKEN" (the page passes its own on). Empty: none.
+  // The server's shared secret (ServerConfig::token): every request for data (/api/, /metrics)
+  // must carry it, as "Authorization: Bearer TOKEN" or "?token=TOKEN" (the page passes its own
+  // on); the page's files hold none and are served without it. Empty: none.
   std::string token;
   int threads = 4;                 // HTTP worker threads (each serves one connection at a time)
   int request_timeout_ms = 5000;   // a request (headers) not read whole in this time: dropped
   int keep_alive_timeout_ms = 5000;
-  size_t max_request_bytes = 16384;  // request line and headers; beyond: 413
+  size_t max_request_bytes = 16384;  // request line and headers; beyond: 400
   size_t max_answers_per_reply = 1000;  // /api/answers lists at most this many per call
   size_t tile_cache_entries = 1024;     // tiles' JSON kept (LRU)
   std::shared_ptr<Metrics> metrics;     // also serve GET /metrics from it; null: 404 there
