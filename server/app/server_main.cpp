@@ -80,6 +80,20 @@ void reload(server::Server& served, const std::string& path, const server::MapLo
   }
 }
 
+// --http-port: the operator's page (console.h) on the server's token and metrics; null without.
+std::unique_ptr<server::Console> start_console(int http_port, server::ConsoleConfig console, const server::ServerConfig& config,
+                                               const server::Server& served) {
+  if (http_port < 0) return nullptr;
+  console.port = static_cast<uint16_t>(http_port);
+  console.token = config.token;
+  console.metrics = config.metrics;
+  auto page = std::make_unique<server::Console>(console, served);
+  info("operator's page on " + page->url() + (config.token.empty() ? "" : "?token=... (the token file's)") +
+       ", metrics at " + page->url() + "metrics");
+  std::cout << "console on " << page->url() << std::endl;
+  return page;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -156,16 +170,7 @@ int main(int argc, char** argv) {
     server::Server server(config, map);
     server.start();
     std::cout << "listening on " << server.address() << std::endl;
-    std::unique_ptr<server::Console> page;  // destroyed before the server it reads
-    if (http_port >= 0) {
-      console.port = static_cast<uint16_t>(http_port);
-      console.token = config.token;
-      console.metrics = config.metrics;
-      page = std::make_unique<server::Console>(console, server);
-      info("operator's page on " + page->url() + (config.token.empty() ? "" : "?token=... (the token file's)") +
-           ", metrics at " + page->url() + "metrics");
-      std::cout << "console on " << page->url() << std::endl;
-    }
+    std::unique_ptr<server::Console> page = start_console(http_port, console, config, server);  // reset before the server stops
     int signal = 0;
     while (sigwait(&signals, &signal) == 0 && signal == SIGHUP) reload(server, map_path, load, map_points);
     info("signal " + std::to_string(signal) + ": stopping (finishing in-flight requests)");
