@@ -11,6 +11,7 @@ const fadeS = Math.max(1, Number(params.get('fade_s')) || 120);
 const fixedSize = /^(\d+)x(\d+)$/.exec(params.get('size') || '');
 const kAnswersPerClient = 20;  // the trail drawn per client
 const kAnswersListed = 15;
+const kMaxClients = 200;       // clients drawn and listed: those heard from last
 const kMaxTiles = 600;         // tiles kept in memory; the view holds at most 64
 const kColors = {segment: '#3080ff', trajectory: '#8b949e', localized: '#00e676', outside_prior: '#ffb300',
                  not_localized: '#ff1744', error: '#ff1744', background: '#0d1117'};
@@ -232,7 +233,7 @@ function why(a) {
 function showAnswers() {
   const clients = document.getElementById('clients');
   clients.textContent = '';
-  for (const [peer, list] of state.clients) {
+  for (const [peer, list] of [...state.clients].reverse().slice(0, 30)) {  // the 30 heard from last
     const a = list[list.length - 1];
     row(clients, [{text: peer}, {text: a.status, cls: 'status-' + a.status}, {text: ago(a.time), cls: 'num'}]);
     row(clients, [{text: why(a), cls: 'reason'}]).firstChild.colSpan = 3;
@@ -259,10 +260,13 @@ function takeAnswers(reply) {
   state.serverOffsetS = reply.now - Date.now() / 1000;
   state.cursor = reply.cursor;
   for (const a of reply.answers) {
-    if (!state.clients.has(a.peer)) state.clients.set(a.peer, []);
-    const list = state.clients.get(a.peer);
+    // A client is a connection (the protocol names no vehicle); the most recently heard last.
+    const list = state.clients.get(a.peer) || [];
+    state.clients.delete(a.peer);
+    state.clients.set(a.peer, list);
     list.push(a);
     if (list.length > kAnswersPerClient) list.shift();
+    if (state.clients.size > kMaxClients) state.clients.delete(state.clients.keys().next().value);
     state.answers.push(a);
   }
   if (state.answers.length > 200) state.answers.splice(0, state.answers.length - 200);

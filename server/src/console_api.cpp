@@ -97,7 +97,7 @@ std::string answers_json(const Recent& recent, uint64_t since, size_t max_answer
 
 std::string query_value(const char* query_string, const char* name) {
   if (!query_string) return "";
-  char buf[256];
+  char buf[1024];  // a longer value (a token of over 1 KiB) reads as absent
   const int n = mg_get_var(query_string, std::strlen(query_string), name, buf, sizeof(buf));
   return n > 0 ? std::string(buf, static_cast<size_t>(n)) : "";
 }
