@@ -6,8 +6,14 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cstdlib>
+#include <fstream>
+#include <vector>
 
 namespace segmatch::bench {
 
@@ -68,6 +74,41 @@ void ConsolePoller::run() {
     get("/api/tiles/4/" + std::to_string(round % 4 - 2) + "/" + std::to_string(round / 4 % 4 - 2), body);
     while (!stop_ && std::chrono::steady_clock::now() < next) std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
+}
+
+namespace {
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0.0 : v.size() % 2 ? v[v.size() / 2] : (v[v.size() / 2 - 1] + v[v.size() / 2]) / 2;
+}
+
+}  // namespace
+
+int compare_console_poll(uint16_t console_port, int rounds, const std::string& json_path, const std::function<double()>& level) {
+  std::printf("  warm-up:");  // the first run fills the point cache: counted in neither
+  level();
+  std::vector<double> without, with;
+  uint64_t polls = 0, failures = 0;
+  for (int run = 0; run < 2 * rounds; ++run) {
+    const bool polled = run % 4 == 1 || run % 4 == 2;
+    std::printf("%s", polled ? "  polled:" : "  alone: ");
+    if (!polled) {
+      without.push_back(level());
+      continue;
+    }
+    const ConsolePoller poller(console_port, 1.0);
+    with.push_back(level());
+    polls += poller.requests(), failures += poller.failures();
+  }
+  const double a = median(without), b = median(with);
+  std::printf("console poll: median %.3f queries/s without, %.3f with the page polled every second: ratio %.3f "
+              "(%llu HTTP requests, %llu failed)\n", a, b, b / a, static_cast<unsigned long long>(polls),
+              static_cast<unsigned long long>(failures));
+  if (!json_path.empty())
+    std::ofstream(json_path) << nlohmann::json{{"console_poll", {{"without_qps", without}, {"with_qps", with}, {"median_without_qps", a},
+                                                                {"median_with_qps", b}, {"ratio", b / a}}}}.dump(2) << "\n";
+  return failures == 0 ? 0 : 1;
 }
 
 }  // namespace segmatch::bench

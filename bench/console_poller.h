@@ -6,6 +6,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <thread>
 
@@ -31,5 +32,11 @@ class ConsolePoller {
   std::atomic<uint64_t> requests_{0}, failures_{0}, bytes_{0};
   std::thread thread_;
 };
+
+// Runs `level` (one closed-loop level; its queries/s) once to warm up, then 2 x `rounds` times
+// alone and with a ConsolePoller on `console_port` each second, in the order ABBA BAAB ... so
+// that a drift of the machine weighs on both alike; prints each run, the medians and their
+// ratio (and writes them to `json_path` unless empty). Exit code: 1 if an HTTP request failed.
+int compare_console_poll(uint16_t console_port, int rounds, const std::string& json_path, const std::function<double()>& level);
 
 }  // namespace segmatch::bench

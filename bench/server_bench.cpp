@@ -264,35 +264,14 @@ int soak(Options o, const std::string& map_path, const std::vector<api::Localize
   return r.passed(config) ? 0 : 1;
 }
 
-// --console-poll: the same closed-loop level without and with a page polling the console every
-// second, in the order ABBA BAAB ... so that a drift of the machine weighs on both alike.
+// --console-poll: the page served beside this server, polled or not (console_poller.h).
 int console_poll(const server::Server& server, const Kind& kind, const Options& o) {
-  server::Console console({}, server);
+  const server::Console console({}, server);
+  const int per_client = std::max(1, o.bench.queries_per_level / o.console_clients);
   std::printf("console on %s; %d clients x %d queries per run, %d runs of each\n", console.url().c_str(), o.console_clients,
-              std::max(1, o.bench.queries_per_level / o.console_clients), o.console_rounds);
-  std::printf("  warm-up:");  // the first run fills the point cache: counted in neither
-  run_level(server.port(), kind, o.console_clients, std::max(1, o.bench.queries_per_level / o.console_clients));
-  std::vector<double> without, with;
-  uint64_t polls = 0, failures = 0;
-  for (int run = 0; run < 2 * o.console_rounds; ++run) {
-    const bool polled = (run % 4 == 1 || run % 4 == 2);
-    std::printf("%s", polled ? "  polled:" : "  alone: ");
-    if (!polled) {
-      without.push_back(run_level(server.port(), kind, o.console_clients, std::max(1, o.bench.queries_per_level / o.console_clients)).queries_per_s);
-      continue;
-    }
-    bench::ConsolePoller poller(console.port(), 1.0);
-    with.push_back(run_level(server.port(), kind, o.console_clients, std::max(1, o.bench.queries_per_level / o.console_clients)).queries_per_s);
-    polls += poller.requests(), failures += poller.failures();
-  }
-  const double a = percentile(without, 0.5), b = percentile(with, 0.5);
-  std::printf("console poll: median %.3f queries/s without, %.3f with the page polled every second: ratio %.3f "
-              "(%llu HTTP requests, %llu failed)\n", a, b, b / a, static_cast<unsigned long long>(polls),
-              static_cast<unsigned long long>(failures));
-  if (!o.json_path.empty())
-    std::ofstream(o.json_path) << nlohmann::json{{"console_poll", {{"without_qps", without}, {"with_qps", with},
-                                                  {"median_without_qps", a}, {"median_with_qps", b}, {"ratio", b / a}}}}.dump(2) << "\n";
-  return failures == 0 ? 0 : 1;
+              per_client, o.console_rounds);
+  return bench::compare_console_poll(console.port(), o.console_rounds, o.json_path,
+                                     [&] { return run_level(server.port(), kind, o.console_clients, per_client).queries_per_s; });
 }
 
 }  // namespace

@@ -7,6 +7,8 @@ const params = new URLSearchParams(location.search);
 const token = params.get('token') || '';
 const pollMs = Math.max(200, Number(params.get('poll_ms')) || 1000);
 const fadeS = Math.max(1, Number(params.get('fade_s')) || 120);
+// ?polls=N: stop after N polls (a snapshot: screenshots and tests, with nothing left in flight).
+const maxPolls = Number(params.get('polls')) || Infinity;
 // ?size=WxH: a canvas of fixed size (screenshots, tests); otherwise the window's.
 const fixedSize = /^(\d+)x(\d+)$/.exec(params.get('size') || '');
 const kAnswersPerClient = 20;  // the trail drawn per client
@@ -282,8 +284,9 @@ function poll() {
         showAnswers();
         draw();
         setConnection(true);
-        document.body.dataset.polls = (Number(document.body.dataset.polls) || 0) + 1;
-        setTimeout(poll, drained ? pollMs : 0);
+        const polls = (Number(document.body.dataset.polls) || 0) + 1;
+        document.body.dataset.polls = polls;
+        if (polls < maxPolls || !drained) setTimeout(poll, drained ? pollMs : 0);
       })
       .catch(e => { setConnection(false, e.message); setTimeout(poll, pollMs); });
 }
