@@ -11,10 +11,12 @@
 // (server_soak.h); exits 1 when the soak fails (errors, RSS growth over 5 %, unclean exit).
 #include <segmatch/api/client.h>
 #include <segmatch/io/pipeline_config.h>
+#include <segmatch/server/console.h>
 #include <segmatch/server/server.h>
 #include <segmatch/sim/city.h>
 #include <segmatch/vehicle/segment_query.h>
 
+#include "console_poller.h"
 #include "server_bench_world.h"
 #include "server_soak.h"
 
@@ -209,7 +211,8 @@ struct Options {
   BenchOptions bench;
   uint64_t seed = 3;
   double subsample_leaf_m = 0.0;
-  bool raw = false, l2 = false, soak = false;
+  bool raw = false, l2 = false, soak = false, console_poll = false;
+  int console_rounds = 3, console_clients = 4;
   std::string model_path = SEGMATCH_SOURCE_DIR "/maps/models/default-rf.yml", json_path, map_points = "lazy";
   bench::SoakConfig soak_config;
 };
@@ -234,6 +237,11 @@ void add_options(CLI::App& app, Options& o) {
       ->capture_default_str()
       ->check(CLI::Range(1, 1000000));
   app.add_option("--server-binary", o.soak_config.server_binary, "soak: segmatch-server to run (default: next to this program)");
+  app.add_flag("--console-poll", o.console_poll,
+               "instead: closed-loop cloud queries with and without a browser's polling of the operator's page (each "
+               "second), alternately, and the ratio of the median queries/s");
+  app.add_option("--console-rounds", o.console_rounds, "--console-poll: runs of each kind")->capture_default_str()->check(CLI::Range(1, 50));
+  app.add_option("--console-clients", o.console_clients, "--console-poll: concurrent clients")->capture_default_str()->check(CLI::Range(1, 64));
   app.add_option("--json", o.json_path, "write the figures as JSON: {\"cloud\": {...}, \"segments\": {...}}");
 }
 
@@ -254,6 +262,16 @@ int soak(Options o, const std::string& map_path, const std::vector<api::Localize
   std::filesystem::remove(map_path);
   if (!o.json_path.empty()) std::ofstream(o.json_path) << nlohmann::json{{"soak", r.to_json()}}.dump(2) << "\n";
   return r.passed(config) ? 0 : 1;
+}
+
+// --console-poll: the page served beside this server, polled or not (console_poller.h).
+int console_poll(const server::Server& server, const Kind& kind, const Options& o) {
+  const server::Console console({}, server);
+  const int per_client = std::max(1, o.bench.queries_per_level / o.console_clients);
+  std::printf("console on %s; %d clients x %d queries per run, %d runs of each\n", console.url().c_str(), o.console_clients,
+              per_client, o.console_rounds);
+  return bench::compare_console_poll(console.port(), o.console_rounds, o.json_path,
+                                     [&] { return run_level(server.port(), kind, o.console_clients, per_client).queries_per_s; });
 }
 
 }  // namespace
@@ -299,6 +317,13 @@ int main(int argc, char** argv) {
   std::printf("map points: %s\n", o.map_points.c_str());
   server.start();
   std::printf("server on %s, %u cores\n", server.address().c_str(), std::thread::hardware_concurrency());
+  if (o.console_poll) {
+    const Kind cloud{"cloud (LOCALIZE)", [&](api::Client& c, size_t i) { return c.localize(requests[i]); }, requests.size()};
+    const int rc = console_poll(server, cloud, o);
+    server.stop();
+    std::filesystem::remove(map_path);
+    return rc;
+  }
 
   std::vector<double> client_ms;
   const std::vector<api::LocalizeSegmentsRequest> segment_requests = segment_like_a_vehicle(server.port(), requests, client_ms);

@@ -10,6 +10,8 @@ PACKAGES=(
   libcli11-dev nlohmann-json3-dev
   libceres-dev libzstd-dev liblz4-dev
   prometheus-cpp-dev curl
+  libcivetweb-dev  # the operator's page (server/src/console.cpp); prometheus-cpp's exposer uses it too
+  chromium  # tests/server/console_page_test.cpp opens the operator's page headless (skipped without it)
   file dpkg-dev  # cpack -G DEB (tests/install): ELF detection and dpkg-shlibdeps
   python3-venv python3-numpy python3-setuptools python3-wheel python3-pytest  # python/ and tests/python
   haproxy  # tests/deploy: replicas behind deploy/haproxy (Debian's own haproxy service listens on nothing)

@@ -1,4 +1,5 @@
 // segmatch-server: serves one segment map to many vehicles over the SGMQ protocol.
+#include <segmatch/server/console.h>
 #include <segmatch/server/log.h>
 #include <segmatch/server/metrics.h>
 #include <segmatch/server/server.h>
@@ -79,6 +80,20 @@ void reload(server::Server& served, const std::string& path, const server::MapLo
   }
 }
 
+// --http-port: the operator's page (console.h) on the server's token and metrics; null without.
+std::unique_ptr<server::Console> start_console(int http_port, server::ConsoleConfig console, const server::ServerConfig& config,
+                                               const server::Server& served) {
+  if (http_port < 0) return nullptr;
+  console.port = static_cast<uint16_t>(http_port);
+  console.token = config.token;
+  console.metrics = config.metrics;
+  auto page = std::make_unique<server::Console>(console, served);
+  info("operator's page on " + page->url() + (config.token.empty() ? "" : "?token=... (the token file's)") +
+       ", metrics at " + page->url() + "metrics");
+  std::cout << "console on " << page->url() << std::endl;
+  return page;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -105,6 +120,14 @@ int main(int argc, char** argv) {
                  "serve Prometheus metrics over HTTP on this port (GET /metrics; 0: a free port, printed)")
       ->check(CLI::Range(0, 65535));
   app.add_option("--metrics-listen", metrics_listen, "address of the metrics endpoint (default loopback)")->capture_default_str();
+  int http_port = -1;
+  server::ConsoleConfig console;
+  app.add_option("--http-port", http_port,
+                 "serve the operator's page and its JSON API (docs/console.md) over HTTP on this port, with the "
+                 "token if there is one, and GET /metrics (0: a free port, printed); may equal --metrics-port")
+      ->check(CLI::Range(0, 65535));
+  app.add_option("--http-listen", console.listen_address, "address of the operator's page (default loopback)")->capture_default_str();
+  app.add_option("--http-threads", console.threads, "HTTP threads of the operator's page")->capture_default_str()->check(CLI::Range(1, 64));
   std::string log_requests = "on";  // on|off rather than a flag: a service file says which
   app.add_option("--log-requests", log_requests, "one log line per request: on or off")
       ->capture_default_str()
@@ -136,16 +159,22 @@ int main(int argc, char** argv) {
     const double load_s = seconds_since(load_start);
     for (const std::string& w : map->warnings) server::log_to_stderr(server::LogLevel::kWarning, w);
     info(describe(*map, map_points, load_s) + (config.token.empty() ? "" : ", token required"));
-    if (metrics_port >= 0) {
+    // The page's port carries /metrics too: the same port given twice is one listener.
+    const bool shared_port = http_port > 0 && metrics_port == http_port;
+    if (metrics_port >= 0 && !shared_port) {
       config.metrics = std::make_shared<server::Metrics>(metrics_listen, static_cast<uint16_t>(metrics_port));
       info("metrics on http://" + metrics_listen + ":" + std::to_string(config.metrics->port()) + "/metrics");
+    } else if (http_port >= 0) {
+      config.metrics = std::make_shared<server::Metrics>();
     }
     server::Server server(config, map);
     server.start();
     std::cout << "listening on " << server.address() << std::endl;
+    std::unique_ptr<server::Console> page = start_console(http_port, console, config, server);  // reset before the server stops
     int signal = 0;
     while (sigwait(&signals, &signal) == 0 && signal == SIGHUP) reload(server, map_path, load, map_points);
     info("signal " + std::to_string(signal) + ": stopping (finishing in-flight requests)");
+    page.reset();
     server.stop();
     const server::ServerCounters c = server.counters();
     info("stopped: " + std::to_string(c.requests) + " requests, " + std::to_string(c.localized) + " localized, " +

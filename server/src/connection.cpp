@@ -7,6 +7,7 @@
 #include "segmatch/server/metrics.h"
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <future>
 #include <optional>
@@ -46,7 +47,9 @@ struct Handled {
   std::string status = "ok";
   bool is_localize = false, localized = false, error = false, timed_out = false;
   uint16_t error_code = 0;  // with error
+  std::string error_message;
   bool close_after = false;
+  std::optional<Answer> answer;  // a localization's reply, for the operator's page (recent.h)
 };
 
 Handled error_reply(ErrorCode code, const std::string& message, bool close_after) {
@@ -55,6 +58,7 @@ Handled error_reply(ErrorCode code, const std::string& message, bool close_after
   h.status = "error(" + std::to_string(static_cast<int>(code)) + ": " + message + ")";
   h.error = true;
   h.error_code = static_cast<uint16_t>(code);
+  h.error_message = message;
   h.close_after = close_after;
   return h;
 }
@@ -101,6 +105,65 @@ Outcome localize(const LoadedMap& map, api::LocalizeSegmentsRequest& r, const De
   return serve_localize_segments(map, std::move(r), deadline);
 }
 
+// What the operator's page needs of a request, taken before it moves into the worker. The page
+// shows every answer's refusal code and method, so the localizer is always asked for them;
+// what the client did not ask for is taken out of its reply again (answer_of), which then
+// encodes byte for byte as before.
+struct Asked {
+  Eigen::Vector3d sensor_local = Eigen::Vector3d::Zero();
+  Eigen::Quaterniond orientation_local = Eigen::Quaterniond::Identity();
+  bool has_prior = false;
+  Pose3d T_map_local_prior = Pose3d::Identity();
+  bool refusal_code = false, detail = false;  // what the client asked for
+};
+
+template <typename Request>
+Asked ask_everything(Request& r, uint32_t prior_bit, uint32_t refusal_bit, uint32_t detail_bit) {
+  Asked a;
+  a.sensor_local = r.sensor_position_local;
+  a.orientation_local = r.sensor_orientation_local;
+  a.has_prior = (r.flags & prior_bit) != 0;
+  a.T_map_local_prior = r.T_map_local_prior;
+  a.refusal_code = (r.flags & refusal_bit) != 0;
+  a.detail = (r.flags & detail_bit) != 0;
+  r.flags |= refusal_bit | detail_bit;
+  return a;
+}
+Asked ask_everything(api::LocalizeRequest& r) {
+  return ask_everything(r, api::kFlagHasPrior, api::kFlagRefusalCode, api::kFlagDetail);
+}
+Asked ask_everything(api::LocalizeSegmentsRequest& r) {
+  return ask_everything(r, api::kSegmentsFlagHasPrior, api::kSegmentsFlagRefusalCode, api::kSegmentsFlagDetail);
+}
+
+void set_pose(Answer& a, const Pose3d& T_map_local, const Asked& asked) {
+  const Eigen::Vector3d p = T_map_local * asked.sensor_local;
+  const Eigen::Matrix3d R = T_map_local.linear() * asked.orientation_local.normalized().toRotationMatrix();
+  a.has_pose = true;
+  a.x_m = p.x(), a.y_m = p.y(), a.yaw_rad = std::atan2(R(1, 0), R(0, 0));
+}
+
+// The page's view of a reply; then the reply as the client asked for it.
+Answer answer_of(api::LocalizeReply& reply, const Asked& asked) {
+  Answer a;
+  a.request_id = reply.request_id;
+  a.status = api::to_string(reply.status);
+  a.refusal = api::to_string(reply.refusal);
+  a.refusal_code = static_cast<uint16_t>(reply.refusal);
+  a.reason = reply.reason;
+  if (reply.status != api::LocalizeStatus::kNotLocalized) set_pose(a, reply.T_map_local, asked);
+  else if (asked.has_prior) set_pose(a, asked.T_map_local_prior, asked), a.pose_from_prior = true;
+  if (reply.detail && reply.detail->estimate) {
+    const api::ReplyDetail::Estimate& e = *reply.detail->estimate;
+    a.method = api::to_string(static_cast<api::ReplyMethod>(e.method));
+    const Eigen::Matrix<double, 6, 6> c = api::covariance_matrix(e.covariance_upper);  // rotation, then position
+    if (c(3, 3) > 0.0 && c(4, 4) > 0.0) a.has_covariance = true, a.cov_xx_m2 = c(3, 3), a.cov_xy_m2 = c(3, 4), a.cov_yy_m2 = c(4, 4);
+  }
+  if (!asked.refusal_code) reply.refusal = api::RefusalCode::kNone;
+  if (!asked.detail) reply.detail.reset();
+  return a;
+}
+
 // LOCALIZE or LOCALIZE_SEGMENTS: decode, check, localize on the worker pool, reply.
 template <typename Request>
 Handled handle_localize(Server::State& s, const std::vector<uint8_t>& payload, TimePoint start) {
@@ -123,6 +186,7 @@ Handled handle_localize(Server::State& s, const std::vector<uint8_t>& payload, T
   std::snprintf(detail, sizeof(detail), " id=%llu points=%zu", static_cast<unsigned long long>(request.request_id),
                 point_count(request));
   h.detail = detail;
+  const Asked asked = ask_everything(request);
   // The localization runs on the bounded worker pool; this connection thread waits for it.
   // The task is shared with the pool: the worker may still be inside it when get() returns.
   // From here on only the worker touches `request`.
@@ -147,6 +211,7 @@ Handled handle_localize(Server::State& s, const std::vector<uint8_t>& payload, T
     api::LocalizeReply& reply = std::get<api::LocalizeReply>(outcome);
     reply.timings.server_total =
         std::chrono::duration<float, std::milli>(std::chrono::steady_clock::now() - start).count();
+    h.answer = answer_of(reply, asked);
     h.reply = api::encode(reply);
     h.status = api::to_string(reply.status);
     h.localized = reply.status == api::LocalizeStatus::kLocalized;
@@ -235,6 +300,22 @@ void count(Metrics& metrics, const char* type, const Handled& h, double ms) {
   if (h.error) metrics.error(h.error_code);
 }
 
+// The answer as the page lists it (the reply's part was filled by answer_of).
+Answer recent_answer(Handled& h, const std::string& peer, const char* type, double ms) {
+  Answer a = h.answer ? std::move(*h.answer) : Answer{};
+  h.answer.reset();
+  a.peer = peer;
+  a.type = type;
+  a.latency_ms = ms;
+  if (h.error) {
+    a.status = "error";
+    a.refusal = "NONE";
+    a.error_code = h.error_code;
+    a.reason = h.error_message;
+  }
+  return a;
+}
+
 }  // namespace
 
 void serve_connection(Server::State& s, api::Socket socket, const std::string& peer) {
@@ -269,6 +350,7 @@ void serve_connection(Server::State& s, api::Socket socket, const std::string& p
     const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     s.stats.record(h.is_localize, h.localized, h.error, h.timed_out, ms);
     const char* type_name = d == DecodeStatus::kOk ? api::to_string(static_cast<MessageType>(header.type)) : "FRAME";
+    if (h.is_localize) s.recent->add(recent_answer(h, peer, type_name, ms));
     if (s.config.metrics) count(*s.config.metrics, type_name, h, ms);
     r = api::write_all(socket.fd(), h.reply.data(), h.reply.size(), api::deadline_after(s.config.write_timeout_s));
     log_request(s, peer, type_name, h, ms);

@@ -97,6 +97,7 @@ std::shared_ptr<const LoadedMap> load_map(const std::string& path, const MapLoad
     map->lazy_points = std::make_shared<const storage::LazyPoints>(shared_reader, options.cache_points);
   }
   fit_extent(*map, segments);
+  for (const storage::Keyframe& k : reader.trajectory()) map->trajectory.push_back(k.T_map_sensor.translation());
   // The surface layer (schema 4) is always read tile by tile: it is larger than the segments and
   // a query reads one disc of it. Maps without one register the newest scans onto segment points.
   map->surfaces = storage::make_lazy_surfaces(shared_reader, options.cache_points);

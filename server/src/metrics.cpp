@@ -8,6 +8,7 @@
 #include <prometheus/histogram.h>
 #include <prometheus/metric_family.h>
 #include <prometheus/registry.h>
+#include <prometheus/text_serializer.h>
 
 #include <chrono>
 #include <mutex>
@@ -87,9 +88,12 @@ Metrics::Metrics(const std::string& listen_address, uint16_t port) : impl_(std::
   impl_->exposer->RegisterCollectable(impl_->state);
 }
 
+Metrics::Metrics() : impl_(std::make_unique<Impl>()) {}
+
 Metrics::~Metrics() = default;
 
 uint16_t Metrics::port() const {
+  if (!impl_->exposer) return 0;
   const std::vector<int> ports = impl_->exposer->GetListeningPorts();
   return ports.empty() ? 0 : static_cast<uint16_t>(ports.front());
 }
@@ -103,6 +107,12 @@ void Metrics::error(uint16_t code) { impl_->errors.Add({{"code", std::to_string(
 void Metrics::in_flight(int delta) { impl_->in_flight.Increment(delta); }
 void Metrics::connections(int delta) { impl_->connections.Increment(delta); }
 void Metrics::map(const std::string& name, int schema, size_t segments) { impl_->state->set_map(name, schema, segments); }
+
+std::string Metrics::text() const {
+  std::vector<prometheus::MetricFamily> families = impl_->registry->Collect();
+  for (prometheus::MetricFamily& f : impl_->state->Collect()) families.push_back(std::move(f));
+  return prometheus::TextSerializer().Serialize(families);
+}
 
 }  // namespace server
 }  // namespace segmatch

@@ -158,6 +158,7 @@ Server::Server(const ServerConfig& config, std::shared_ptr<const LoadedMap> map)
   if (config.max_connections < 1) throw std::invalid_argument("max_connections must be >= 1");
   if (!(config.read_timeout_s > 0) || !(config.write_timeout_s > 0)) throw std::invalid_argument("timeouts must be > 0");
   state_->config = config;
+  state_->recent = std::make_unique<Recent>(std::max<size_t>(1, config.recent_answers));
   if (config.metrics) config.metrics->map(map->metadata.name, map->schema_version, map->segment_count());
   state_->map = std::move(map);
   state_->limits.max_payload_bytes = config.max_frame_bytes;
@@ -190,6 +191,7 @@ void Server::replace_map(std::shared_ptr<const LoadedMap> map) {
 }
 
 std::shared_ptr<const LoadedMap> Server::map() const { return state_->current_map(); }
+const Recent& Server::recent() const { return *state_->recent; }
 
 void Server::stop() {
   State& s = *state_;

@@ -56,6 +56,7 @@ struct Server::State {
   std::mutex connections_mutex;
   std::list<ConnectionThread> connections;
   Stats stats;
+  std::unique_ptr<Recent> recent;
   std::mutex stop_mutex;  // serialises stop(); stats_cv waits on it
   std::condition_variable stats_cv;
   bool started = false, stopped = false;

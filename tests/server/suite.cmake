@@ -6,6 +6,7 @@ target_link_libraries(make_server_world PRIVATE segmatch_api segmatch_sim segmat
 target_include_directories(make_server_world PRIVATE ${CMAKE_CURRENT_SOURCE_DIR})
 set_target_properties(make_server_world PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${CMAKE_BINARY_DIR}/tests)
 segmatch_test_suite(test_server server segmatch_server segmatch_api segmatch_vehicle segmatch_sim segmatch_storage
-                    segmatch_io WHOLE_SUITES ServerWorld ServerLocalization ServerRobustness ServerTracking ServerSegments
+                    segmatch_io ${OpenCV_LIBS} nlohmann_json::nlohmann_json
+                    WHOLE_SUITES ServerWorld ServerLocalization ServerRobustness ServerTracking ServerSegments ServerConsole
                     FIXTURE server_world FIXTURE_SETUP ServerWorld)
 add_dependencies(test_server make_server_world)

@@ -48,6 +48,9 @@ struct LoadedMap {
   LoadedMap& operator=(const LoadedMap&) = delete;
   ~LoadedMap() { stop_places->store(true); }  // a map dropped at once does not wait for its places
   int schema_version = 0;  // of the map file as read (an old one is served as it is)
+  // The sensor positions of the mapping traversal's keyframes (map frame; empty when the map
+  // stores none): the operator's page draws them.
+  std::vector<Eigen::Vector3d> trajectory;
   size_t segment_count() const { return localizer ? localizer->targets().size() : 0; }
 };
 

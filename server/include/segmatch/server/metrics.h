@@ -24,10 +24,13 @@ class Metrics {
   // Listens on listen_address:port (port 0: a free one, see port()). Throws std::runtime_error
   // when it cannot.
   Metrics(const std::string& listen_address, uint16_t port);
+  // Counted but not served on a port of its own: text() only (the operator's page's HTTP port
+  // serves it, console.h).
+  Metrics();
   ~Metrics();
   Metrics(const Metrics&) = delete;
   Metrics& operator=(const Metrics&) = delete;
-  uint16_t port() const;
+  uint16_t port() const;  // 0 without a port of its own
 
   // Thread-safe, called by the server as frames are answered and connections come and go.
   void request(const std::string& type, const std::string& status, double seconds, bool is_localize);
@@ -35,6 +38,9 @@ class Metrics {
   void in_flight(int delta);
   void connections(int delta);
   void map(const std::string& name, int schema, size_t segments);  // replaces the previous one
+  // What GET /metrics answers, in Prometheus' text format: the operator's page's HTTP port
+  // serves it too (console.h), so one port may carry both.
+  std::string text() const;
 
  private:
   struct Impl;

@@ -15,6 +15,7 @@
 #pragma once
 
 #include <segmatch/server/map_service.h>
+#include <segmatch/server/recent.h>
 
 #include <cstdint>
 #include <functional>
@@ -46,6 +47,8 @@ struct ServerConfig {
   std::function<void(const std::string&)> log;
   // Prometheus metrics (metrics.h), counted as frames are answered; null: none.
   std::shared_ptr<Metrics> metrics;
+  // The recent answers kept for the operator's page (recent.h, docs/console.md).
+  size_t recent_answers = 4096;
 };
 
 struct ServerCounters {
@@ -79,6 +82,8 @@ class Server {
   // ends. Thread-safe. Throws std::invalid_argument for a null map.
   void replace_map(std::shared_ptr<const LoadedMap> map);
   std::shared_ptr<const LoadedMap> map() const;  // the map new requests get
+  // The last answers and the localization statistics (the operator's page reads them).
+  const Recent& recent() const;
 
   struct State;
 
