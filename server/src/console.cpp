@@ -10,6 +10,7 @@
 #include "segmatch/server/server.h"
 
 #include <civetweb.h>
+#include <nlohmann/json.hpp>
 
 #include <chrono>
 #include <cstring>
@@ -52,19 +53,9 @@ void respond(mg_connection* c, int status, const char* content_type, const std::
   mg_write(c, body.data(), body.size());
 }
 
-std::string json_string(const std::string& text) {
-  std::string out = "\"";
-  for (char ch : text) {
-    if (ch == '"' || ch == '\\') out += '\\', out += ch;
-    else if (static_cast<unsigned char>(ch) < 0x20) out += ' ';
-    else out += ch;
-  }
-  return out + "\"";
-}
-
 int fail(mg_connection* c, int status, const std::string& why, const char* extra_name = nullptr,
          const char* extra_value = nullptr) {
-  respond(c, status, "application/json", "{\"error\":" + json_string(why) + ",\"status\":" + std::to_string(status) + "}",
+  respond(c, status, "application/json", nlohmann::json{{"error", why}, {"status", status}}.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace),
           extra_name, extra_value);
   return status;
 }

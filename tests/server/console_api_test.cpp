@@ -1,4 +1,4 @@
-// The operator's page's JSON API (issue 36, docs/console.md) and what bad HTTP clients get:
+// The operator's page's JSON API (docs/console.md) and what bad HTTP clients get:
 // 4xx answers, never a disturbed localization port.
 #include "server/http_util.h"
 #include "server_test_util.h"

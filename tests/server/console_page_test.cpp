@@ -1,4 +1,4 @@
-// The operator's page in a real browser (issue 36): a server on the tiny city answers a few
+// The operator's page in a real browser: a server on the tiny city answers a few
 // revisit queries and a refusal, then headless Chromium opens the page twice: --dump-dom (the
 // DOM after its scripts ran: the statistics, the refusal's reason, the view transform) and
 // --screenshot (the segments and the vehicles drawn where the transform puts them, in their

@@ -1,4 +1,4 @@
-// The operator's page (issue 36, docs/console.md): an HTTP port (civetweb) serving a
+// The operator's page (docs/console.md): an HTTP port (civetweb) serving a
 // single-page console compiled into the binary (server/console/: plain JS and a canvas, no
 // files read at run time, nothing fetched from elsewhere) and the JSON API it polls under
 // /api/: the map, its segments in tiles, the recent answers since a cursor and the statistics.

@@ -1,5 +1,5 @@
 // The server's recent answers and the statistics of its localizations, for the operator's page
-// (issue 36, docs/console.md): a fixed-size ring of the last answers (what the page draws per
+// (docs/console.md): a fixed-size ring of the last answers (what the page draws per
 // client) and counts kept since start (what it tabulates). Memory is bounded whatever the
 // traffic: `capacity` answers, `latency_window` latencies and one slot per second of the rate
 // window. Filled by the connection threads as replies are produced; read by the HTTP threads.
