@@ -1,4 +1,4 @@
-# `cmake --install` and `cpack -G DEB` (README, "Use it from your stack"). Two components:
+# `cmake --install` and `cpack -G DEB` (docs/integration.md). Two components:
 #   runtime  the tools, the shipped models (share/segmatch/models, found by the tools relative to
 #            their own folder), the docs, the systemd unit and the HAProxy files;
 #   dev      the libraries segmatch::core, io, storage and api (static), their headers and the
@@ -15,8 +15,11 @@ foreach(tool ${SEGMATCH_TOOLS})
 endforeach()
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/maps/models/ DESTINATION ${CMAKE_INSTALL_DATADIR}/segmatch/models
         COMPONENT runtime FILES_MATCHING PATTERN "*.yml")
-install(FILES ${PROJECT_SOURCE_DIR}/README.md ${PROJECT_SOURCE_DIR}/docs/protocol.md ${PROJECT_SOURCE_DIR}/docs/deploy.md
+# The README and the manual as they sit in the repository, so that the README's links resolve.
+install(FILES ${PROJECT_SOURCE_DIR}/README.md ${PROJECT_SOURCE_DIR}/LICENSE ${PROJECT_SOURCE_DIR}/NOTICE
         DESTINATION ${CMAKE_INSTALL_DOCDIR} COMPONENT runtime)
+install(DIRECTORY ${PROJECT_SOURCE_DIR}/docs/ DESTINATION ${CMAKE_INSTALL_DOCDIR}/docs COMPONENT runtime
+        FILES_MATCHING PATTERN "*.md" PATTERN "*.png")
 install(FILES ${PROJECT_SOURCE_DIR}/deploy/systemd/segmatch-server@.service DESTINATION lib/systemd/system COMPONENT runtime)
 install(FILES ${PROJECT_SOURCE_DIR}/deploy/systemd/segmatch-server.env ${PROJECT_SOURCE_DIR}/deploy/haproxy/haproxy.cfg
               ${PROJECT_SOURCE_DIR}/deploy/kubernetes/segmatch.yaml
