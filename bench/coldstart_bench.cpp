@@ -1,4 +1,4 @@
-// segmatch-bench-coldstart: what a cold start costs (issue 34). Single raw scans of a sequence,
+// segmatch-bench-coldstart: what a cold start costs. Single raw scans of a sequence,
 // one every --every-m, each sent alone without a prior (LOCALIZE with the scan as its newest
 // scans) to a map loaded in-process, one after another on one thread: the server time per query
 // (median, p90), how many localized and by which method, and how long the map's places take to
@@ -79,7 +79,7 @@ int main(int argc, char** argv) {
     std::printf("%zu single-scan queries without a prior, %zu localized (not scored: see segmatch-eval localize --single-scan)",
                 server_ms.size(), localized);
     for (const auto& [method, n] : by_method) std::printf(", %s %zu", method.c_str(), n);
-    std::printf("\nserver time per query: median %.1f ms, p90 %.1f ms (issue 34's target: <= 50 ms median on one core)\n",
+    std::printf("\nserver time per query: median %.1f ms, p90 %.1f ms (the target: <= 50 ms median on one core)\n",
                 quantile(server_ms, 0.5), quantile(server_ms, 0.9));
   } catch (const std::exception& e) {
     std::fprintf(stderr, "segmatch-bench-coldstart: error: %s\n", e.what());

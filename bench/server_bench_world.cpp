@@ -96,7 +96,7 @@ std::string build_map(const sim::City& city, const io::PipelineConfig& config, c
   sim::for_each_kept_scan(caster, sim::hdl64e(), city.first, config.local_cloud, sim::LocalCloudSchedule{},
                           [&](size_t frame, const sim::SimulatedScan& scan) { surfaces.add_scan(scan.points, city.first.T_world_lidar[frame]); });
   writer.set_surfaces(surfaces.points(), config.surfaces.leaf_m, config.surfaces.tile_m);
-  if (!model.empty()) writer.set_classifier({"opencv-rtrees-yaml", model});
+  if (!model.empty()) writer.set_classifier({storage::kClassifierFormatRTreesYaml, model});
   writer.commit();
   return path;
 }

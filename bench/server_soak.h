@@ -1,5 +1,5 @@
 // segmatch-bench-server --soak: segmatch-server as its own process, many clients sending
-// queries back to back for a long run, the server's resident memory watched (issue 18).
+// queries back to back for a long run, the server's resident memory watched.
 #pragma once
 
 #include <segmatch/api/client.h>

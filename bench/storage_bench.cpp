@@ -193,7 +193,7 @@ WriteResult write_map(const std::string& path, int segments, float area_m, const
   const auto t = Clock::now();
   writer.set_trajectory(trajectory);
   std::ifstream model(SEGMATCH_SOURCE_DIR "/maps/models/default-rf.yml", std::ios::binary);
-  writer.set_classifier({"opencv-rtrees-yaml", std::string(std::istreambuf_iterator<char>(model), {})});
+  writer.set_classifier({storage::kClassifierFormatRTreesYaml, std::string(std::istreambuf_iterator<char>(model), {})});
   const auto c = Clock::now();
   writer.commit();
   result.commit_seconds = seconds_since(c);

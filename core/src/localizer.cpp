@@ -1,6 +1,7 @@
 #include "segmatch/core/localizer.h"
 
 #include "localizer_stages.h"
+#include "segment_stages.h"
 
 #include <chrono>
 #include <algorithm>
@@ -10,13 +11,6 @@
 
 namespace segmatch {
 namespace {
-
-using detail::gather;
-using detail::rank_by_support;
-using detail::Ranked;
-using detail::spread_axis;
-using detail::targets_near_prior;
-using detail::within_prior;
 
 class Stopwatch {
  public:
@@ -33,29 +27,7 @@ class Stopwatch {
 };
 
 using detail::refuse;
-
-// The floors in force: with a prior, the *_with_prior ones that are set (>= 0).
-struct Floors {
-  int min_support;
-  float min_fitness, min_confidence;
-};
-Floors floors_of(const LocalizerConfig& c, bool prior) {
-  auto pick = [prior](auto with_prior, auto without) { return prior && with_prior >= 0 ? with_prior : without; };
-  return {pick(c.min_support_with_prior, c.min_support), pick(c.min_refine_fitness_with_prior, c.min_refine_fitness),
-          pick(c.min_confidence_with_prior, c.min_confidence)};
-}
-
-// Confidence in 0..1: grows with the number of query segments that agree with the pose
-// beyond the minimum (each extra independent agreement makes a coincidence much less
-// likely) and is scaled by how well the surfaces agree after refinement.
-float confidence_of(size_t support, int min_support, float fitness) {
-  const double extra = static_cast<double>(support) - min_support + 1.0;
-  return static_cast<float>((1.0 - std::exp(-extra / 3.0)) * fitness);
-}
-
-LocalizationResult stopped(LocalizationResult r, const char* when) {
-  return refuse(std::move(r), Refusal::kDeadlinePassed, std::string("the query's deadline passed ") + when);
-}
+using detail::stopped;
 
 void check_prior(const PosePrior* prior) {
   if (prior && !(prior->radius_m > 0.0 && std::isfinite(prior->radius_m) && prior->T_map_query.matrix().allFinite() &&
@@ -311,123 +283,35 @@ LocalizationResult Localizer::localize_tracking_first(const PointCloud& cloud, c
   return r;
 }
 
+// The paper's pipeline after segmentation, one named stage a line (segment_stages.h).
 LocalizationResult Localizer::localize_segments(Segments query, const Eigen::Vector3f& sensor_position,
                                                 const PosePrior* prior, const ModuleTimings& timings,
                                                 const Deadline& deadline) const {
+  using namespace detail;
   check_prior(prior);
+  const SegmentMap map{config_, targets_, index_, centroids_, classifier_.get(), points_.get()};
+  const SegmentQuery q{sensor_position, prior};
+  SegmentWork w;
   LocalizationResult r;
   r.timings = timings;
-  Stopwatch total, clock;
-  const double before_ms = timings.total_ms;  // the caller's segmentation, if any
-  auto finish = [&](LocalizationResult res) {
-    res.timings.total_ms = before_ms + total.lap();
-    return res;
-  };
-  const int min_inliers = config_.verification.min_inliers;
   r.query = std::move(query);
   r.query_segments = r.query.size();
-  if (deadline.passed()) return finish(stopped(std::move(r), "before retrieval"));
-  if (targets_.empty()) return finish(refuse(std::move(r), Refusal::kEmptyMap, "the map has no segments"));
-  if (prior && config_.registration.enabled) {  // its time counts as refinement
-    detail::register_near_prior(targets_, points_.get(), centroids_, classifier_.get(), config_, *prior, sensor_position, r);
-    r.timings.refine_ms = clock.lap();
-    if (r.localized()) return finish(std::move(r));
-    r.refine_fitness = r.refine_rmse_m = 0.0f;
-    r.support = 0;
-    r.inliers.clear();
-    if (deadline.passed()) return finish(stopped(std::move(r), "during registration"));
-  }
-  if (r.query.size() < static_cast<size_t>(min_inliers))
-    return finish(refuse(std::move(r), Refusal::kTooFewSegments, "only " + std::to_string(r.query.size()) +
-                                           " segments in the query cloud (at least " +
-                                           std::to_string(min_inliers) + " needed)"));
-  // Paper III-D: k-NN candidates in feature space (with a prior, among the map segments it
-  // allows), then the classifier.
-  const Matches candidates =
-      prior ? retrieve_candidates_among(r.query, targets_, index_.scaling(),
-                                        targets_near_prior(r.query, targets_, sensor_position, *prior), config_.retrieval)
-            : retrieve_candidates(r.query, index_, config_.retrieval);
-  r.candidates = candidates.size();
-  r.timings.retrieve_ms = clock.lap();
-  if (deadline.passed()) return finish(stopped(std::move(r), "during retrieval"));
-  const Matches matches = filter_matches(r.query, targets_, candidates, config_.matcher, classifier_.get());
-  r.matches = matches.size();
-  r.timings.classify_ms = clock.lap();
-  if (deadline.passed()) return finish(stopped(std::move(r), "during classification"));
-  // Paper III-E: geometric verification on the segment centroids.
-  VerificationResult v = verify_matches(r.query, targets_, matches, config_.verification, deadline);
-  r.timings.verify_ms = clock.lap();
-  if (deadline.passed()) return finish(stopped(std::move(r), "during verification"));
-  if (!v.found)
-    return finish(refuse(std::move(r), Refusal::kNoConsistentMatches, "no geometrically consistent set of " + std::to_string(min_inliers) +
-                                           " matches among " + std::to_string(matches.size())));
-  const size_t verified = v.hypotheses.size();
-  const std::vector<PoseHypothesis> hypotheses = within_prior(std::move(v.hypotheses), sensor_position, prior);
-  if (hypotheses.empty())
-    return finish(refuse(std::move(r), Refusal::kOutsidePrior, "none of the " + std::to_string(verified) + " verified poses is within " +
-                                           std::to_string(prior->radius_m) + " m of the prior"));
-  // Beyond the paper: the hypothesis that explains most of the query wins, if unambiguous.
-  const Ranked ranked = rank_by_support(hypotheses, r.query, centroids_, config_.support_radius_m);
-  const PoseHypothesis& best = hypotheses[ranked.best];
-  r.hypotheses = hypotheses.size();
-  r.support = ranked.support.count();
-  r.runner_up_support = ranked.runner_up;
-  r.inliers = best.inliers;
-  r.T_map_query = best.T_target_query;
-  r.timings.verify_ms += clock.lap();
-  const Floors floors = floors_of(config_, prior != nullptr);
-  const int min_support = floors.min_support;
-  if (r.support < static_cast<size_t>(min_support))
-    return finish(refuse(std::move(r), Refusal::kLowSupport, "only " + std::to_string(r.support) + " query segments agree with the best pose (at least " +
-                                           std::to_string(min_support) + " needed)"));
-  if (static_cast<float>(r.runner_up_support) >= config_.max_ambiguity * static_cast<float>(r.support))
-    return finish(refuse(std::move(r), Refusal::kAmbiguous, "ambiguous: two distinct poses are supported by " + std::to_string(r.support) +
-                                           " and " + std::to_string(r.runner_up_support) + " query segments"));
-  // With a prior, retrieval looked only where the prior puts each segment: a look-alike just
-  // beyond it was never a hypothesis. A street of poles 6 m apart under a prior 6 m off and 3 m
-  // wide was answered one pole off; the objects fit the truth as well (detail::look_alike_beside).
-  if (prior) {
-    std::string beside = detail::look_alike_beside(r.T_map_query, spread_axis(r.query, r.T_map_query), centroids_, config_,
-                                                   detail::ambiguity_range_m(config_, *prior), r);
-    if (!beside.empty()) return finish(refuse(std::move(r), Refusal::kAmbiguous, "ambiguous within the prior: " + beside));
-  }
-  r.refine_fitness = 1.0f;
-  if (deadline.passed()) return finish(stopped(std::move(r), "during ranking"));
-  if (config_.refine_pose) {
-    const size_t stride = segment_point_stride(r.query, static_cast<size_t>(config_.refine.max_segment_points));
-    const PointCloud query_points = gather(r.query, ranked.support.pairs, true, stride);
-    const PointCloud target_points = gather(targets_, ranked.support.pairs, false, 1, points_.get());
-    const RefineResult refined = refine_alignment(query_points, target_points, r.T_map_query, config_.refine,
-                                                  r.T_map_query * sensor_position.cast<double>());
-    r.timings.refine_ms += clock.lap();
-    if (deadline.passed()) return finish(stopped(std::move(r), "during refinement"));
-    r.refine_fitness = refined.fitness;
-    r.refine_rmse_m = refined.rmse_m;
-    if (refined.fitness < floors.min_fitness)
-      return finish(refuse(std::move(r), Refusal::kSurfacesDisagree, "matched segments' surfaces disagree (fitness " +
-                                             std::to_string(refined.fitness) + ")"));
-    const float max_rmse_m = config_.max_refine_rmse_voxels * config_.segmentation.voxel.leaf_m;
-    if (max_rmse_m > 0.0f && refined.rmse_m > max_rmse_m)
-      return finish(refuse(std::move(r), Refusal::kSurfacesDisagree, "matched segments' surfaces are " +
-                                             std::to_string(refined.rmse_m) + " m apart (RMS, at most " +
-                                             std::to_string(max_rmse_m) + ")"));
-    r.T_map_query = refined.T_target_query;
-    r.covariance = pose_covariance(refined, config_.covariance);
-    if (config_.refine.recent_window_m > 0.0f)
-      detail::refine_recent_window(detail::window_points(r.query, targets_, points_.get(), sensor_position.cast<double>(), r.T_map_query,
-                                         stride, config_.refine.recent_window_m),
-                           sensor_position, floors.min_fitness, config_.refine, config_.covariance, r);
-    r.timings.refine_ms += clock.lap();
-  }
-  r.confidence = confidence_of(r.support, min_support, r.refine_fitness);
-  const float min_confidence = floors.min_confidence;
-  if (r.confidence < min_confidence) {
-    char why[96];
-    std::snprintf(why, sizeof(why), "confidence %.2f below min_confidence %.2f", r.confidence, min_confidence);
-    return finish(refuse(std::move(r), Refusal::kLowConfidence, why));
-  }
-  r.status = LocalizationStatus::kLocalized;
-  return finish(std::move(r));
+  StageRunner run(r, deadline);
+  if (deadline.passed()) return stopped(run.finish(), "before retrieval");
+  if (targets_.empty()) return refuse(run.finish(), Refusal::kEmptyMap, "the map has no segments");
+  using T = ModuleTimings;
+  if (prior && config_.registration.enabled && !run(&T::refine_ms, "during registration", [&] { return register_first(map, q, r); }))
+    return run.finish();
+  // Each stage runs when the one before went on.
+  (void)(run(nullptr, nullptr, [&] { return enough_segments(map, r); }) &&
+         run(&T::retrieve_ms, "during retrieval", [&] { return retrieve(map, q, r, w); }) &&
+         run(&T::classify_ms, "during classification", [&] { return classify(map, r, w); }) &&
+         run(&T::verify_ms, "during verification", [&] { return verify(map, deadline, r, w); }) &&
+         run(&T::verify_ms, nullptr, [&] { return apply_prior(q, r, w); }) &&
+         run(&T::verify_ms, "during ranking", [&] { return rank(map, q, r, w); }) &&
+         run(&T::refine_ms, "during refinement", [&] { return refine(map, q, r, w); }) &&
+         run(nullptr, nullptr, [&] { return confidence(map, q, r); }));
+  return run.finish();
 }
 
 LocalizationResult Localizer::track(Segments query, const PointCloud& newest, const Eigen::Vector3f& sensor_position,

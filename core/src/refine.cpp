@@ -163,6 +163,20 @@ Pose3d point_to_point_step(const std::vector<Correspondence>& corr) {
   return delta;
 }
 
+// The query points, subsampled by a deterministic stride to at most max_points, in spatial
+// order (0.5 m blocks), so that consecutive nearest-neighbour queries reuse cached grid cells.
+std::vector<Eigen::Vector3d> subsampled_source(const PointCloud& query_points, size_t max_points) {
+  const size_t stride = (query_points.size() + max_points - 1) / max_points;
+  std::vector<Eigen::Vector3d> source;
+  source.reserve(query_points.size() / stride + 1);
+  for (size_t i = 0; i < query_points.size(); i += stride) source.push_back(query_points[i].xyz().cast<double>());
+  std::sort(source.begin(), source.end(), [](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+    const Eigen::Vector3d ka = (a * 2.0).array().floor(), kb = (b * 2.0).array().floor();
+    return std::lexicographical_compare(ka.data(), ka.data() + 3, kb.data(), kb.data() + 3);
+  });
+  return source;
+}
+
 }  // namespace
 
 RefineResult refine_alignment(const PointCloud& query_points, const PointCloud& target_points,
@@ -172,18 +186,7 @@ RefineResult refine_alignment(const PointCloud& query_points, const PointCloud& 
   result.T_target_query = initial;
   if (query_points.empty() || target_points.empty()) return result;
 
-  // Deterministic stride subsampling of the query.
-  const size_t stride =
-      (query_points.size() + config.max_query_points - 1) / static_cast<size_t>(config.max_query_points);
-  std::vector<Eigen::Vector3d> source;
-  source.reserve(query_points.size() / stride + 1);
-  for (size_t i = 0; i < query_points.size(); i += stride)
-    source.push_back(query_points[i].xyz().cast<double>());
-  // Queried in spatial order (0.5 m blocks), so consecutive queries reuse cached grid cells.
-  std::sort(source.begin(), source.end(), [](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
-    const Eigen::Vector3d ka = (a * 2.0).array().floor(), kb = (b * 2.0).array().floor();
-    return std::lexicographical_compare(ka.data(), ka.data() + 3, kb.data(), kb.data() + 3);
-  });
+  const std::vector<Eigen::Vector3d> source = subsampled_source(query_points, static_cast<size_t>(config.max_query_points));
 
   // Cells as wide as the correspondence distance: a query rarely needs more than its own cell
   // and the nearest faces of its neighbours.

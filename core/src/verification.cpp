@@ -239,6 +239,21 @@ Matches best_scored(const Matches& candidates, size_t max_count) {
   return kept;
 }
 
+// At most max_seeds of the matches in `order` (most-connected first): all of them when they
+// fit; else half the budget on the best-connected, half on a random sample of the rest.
+std::vector<int> choose_seeds(const std::vector<int>& order, size_t max_seeds, uint64_t seed) {
+  if (order.size() <= max_seeds) return order;
+  std::vector<int> seeds(order.begin(), order.begin() + max_seeds / 2);
+  std::vector<int> rest(order.begin() + max_seeds / 2, order.end());
+  Rng rng(seed);
+  for (size_t k = 0; seeds.size() < max_seeds && k < rest.size(); ++k) {
+    const size_t pick = k + rng.index(rest.size() - k);  // partial Fisher-Yates
+    std::swap(rest[k], rest[pick]);
+    seeds.push_back(rest[k]);
+  }
+  return seeds;
+}
+
 }  // namespace
 
 VerificationResult verify_matches(const Segments& queries, const Segments& targets,
@@ -279,19 +294,7 @@ VerificationResult verify_matches(const Segments& queries, const Segments& targe
   std::iota(order.begin(), order.end(), 0);
   std::stable_sort(order.begin(), order.end(),
                    [&](int a, int b) { return degree[a] > degree[b]; });
-  std::vector<int> seeds = order;
-  const size_t max_seeds = static_cast<size_t>(config.max_iterations);
-  if (n > max_seeds) {
-    // Half the budget on the best-connected seeds, half on a random sample of the rest.
-    seeds.assign(order.begin(), order.begin() + max_seeds / 2);
-    std::vector<int> rest(order.begin() + max_seeds / 2, order.end());
-    Rng rng(config.seed);
-    for (size_t k = 0; seeds.size() < max_seeds && k < rest.size(); ++k) {
-      const size_t pick = k + rng.index(rest.size() - k);  // partial Fisher-Yates
-      std::swap(rest[k], rest[pick]);
-      seeds.push_back(rest[k]);
-    }
-  }
+  const std::vector<int> seeds = choose_seeds(order, static_cast<size_t>(config.max_iterations), config.seed);
 
   // Distinct clusters, largest first. A seed already inside a kept cluster would mostly grow
   // that cluster again, so it is skipped: this bounds the work and yields diverse hypotheses.

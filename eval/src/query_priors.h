@@ -1,4 +1,4 @@
-// What a replayed query knows before it is sent (issue 15): nothing (global), the Tracker's
+// What a replayed query knows before it is sent: nothing (global), the Tracker's
 // last fix (--track), or a GNSS-like guess (--gnss-sigma-m); and the same-run comparison of a
 // query with and without its prior (--compare-global).
 #pragma once

@@ -14,6 +14,7 @@
 #include <segmatch/io/sequence.h>
 #include <segmatch/posegraph/close_loops.h>
 
+#include <segmatch/cli/progress.h>
 #include <segmatch/cli/tool.h>
 
 #include <CLI/CLI.hpp>
@@ -148,7 +149,10 @@ int run_main(Options o) {
   co.graph = o.graph;
   if (o.scan_edges) co.scan_edges = o.scan_match;
   co.verbose = o.verbose;
+  cli::Progress progress("loop", co.frames.size(), "scans");
+  co.on_scan = [&progress](size_t done, size_t) { progress.update(done); };
   const posegraph::ClosedLoops r = posegraph::close_loops(seq, config, classifier, co);
+  progress.finish();
   std::printf("%zu local clouds, %zu loops, %zu map segments; per local cloud %.0f ms median, %.0f ms p90\n",
               r.processed.size(), r.loops.size(), r.map_odom.size(), percentile(r.step_ms, 0.5),
               percentile(r.step_ms, 0.9));

@@ -26,8 +26,6 @@ namespace fs = std::filesystem;
 namespace segmatch::mapbuilder {
 namespace {
 
-constexpr const char* kClassifierFormat = "opencv-rtrees-yaml";
-
 // Refuses before any work is done, so an existing map is never put at risk by a typo.
 void check_output(const BuildOptions& o) {
   const fs::path out(o.output);
@@ -82,7 +80,7 @@ std::optional<storage::ClassifierBlob> load_classifier(const BuildOptions& o) {
       return std::nullopt;
     }
   }
-  storage::ClassifierBlob blob{kClassifierFormat, io::read_file_bytes(path, "classifier model file")};
+  storage::ClassifierBlob blob{storage::kClassifierFormatRTreesYaml, io::read_file_bytes(path, "classifier model file")};
   try {
     RandomForestMatcher::load(blob.bytes);
   } catch (const std::exception& e) {

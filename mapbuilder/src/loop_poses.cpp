@@ -1,5 +1,6 @@
 #include "loop_poses.h"
 
+#include <segmatch/cli/progress.h>
 #include <segmatch/core/matcher.h>
 #include <segmatch/posegraph/close_loops.h>
 
@@ -27,7 +28,10 @@ LoopCorrectedPoses close_loops_first(const io::Sequence& seq, const std::vector<
   o.frames = frames;
   o.should_stop = [stop_signal] { return *stop_signal != 0; };
   if (scan_edges) o.scan_edges = posegraph::ScanMatchConfig{};
+  cli::Progress progress("loop", frames.size(), "scans");
+  o.on_scan = [&progress](size_t done, size_t) { progress.update(done); };
   const posegraph::ClosedLoops r = posegraph::close_loops(seq, config, rf, o);
+  progress.finish();
 
   size_t downweighted = 0;
   double max_shift_m = 0;

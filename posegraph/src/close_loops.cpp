@@ -1,6 +1,5 @@
 #include "segmatch/posegraph/close_loops.h"
 
-#include <segmatch/cli/progress.h>
 
 #include <algorithm>
 #include <cstdio>
@@ -64,7 +63,6 @@ ClosedLoops close_loops(const io::Sequence& seq, const LoopDetectorConfig& confi
   std::optional<ScanMatcher> scans;
   if (o.scan_edges) scans.emplace(*o.scan_edges);
   ClosedLoops r;
-  cli::Progress progress("loop", o.frames.size(), "scans", o.progress ? stderr : nullptr);
   for (size_t frame : o.frames) {
     if (o.should_stop && o.should_stop()) break;
     const io::CloudData scan = seq.scan(frame);
@@ -87,9 +85,8 @@ ClosedLoops close_loops(const io::Sequence& seq, const LoopDetectorConfig& confi
       }
       print_loop(l, o.optimize ? &*r.last_solve : nullptr);
     }
-    progress.advance();
+    if (o.on_scan) o.on_scan(r.frames.size(), o.frames.size());
   }
-  progress.finish();
   if (o.optimize && !graph.graph().scans.empty()) {  // the scan edges after the last loop count too
     r.last_solve = graph.solve();
     r.solve_ms.push_back(r.last_solve->solve_ms);

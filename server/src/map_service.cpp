@@ -12,14 +12,12 @@ namespace segmatch {
 namespace server {
 namespace {
 
-constexpr const char* kClassifierFormat = "opencv-rtrees-yaml";
-
 // The map's classifier, or null. Refuses formats this build cannot read.
 std::shared_ptr<const RandomForestMatcher> load_classifier(const storage::MapReader& reader) {
   const std::optional<storage::ClassifierBlob> blob = reader.classifier();
   if (!blob) return nullptr;
-  if (blob->format != kClassifierFormat)
-    throw std::runtime_error(reader.path() + ": classifier format '" + blob->format + "' is not " + kClassifierFormat);
+  if (blob->format != storage::kClassifierFormatRTreesYaml)
+    throw std::runtime_error(reader.path() + ": classifier format '" + blob->format + "' is not " + storage::kClassifierFormatRTreesYaml);
   try {
     return std::make_shared<const RandomForestMatcher>(RandomForestMatcher::load(blob->bytes));
   } catch (const std::exception& e) {

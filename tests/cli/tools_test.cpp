@@ -1,4 +1,4 @@
-// Every tool speaks the same command line at its edges (issue 19): --version names the tool, the
+// Every tool speaks the same command line at its edges: --version names the tool, the
 // build's version, the map schema and the protocol; a command-line mistake exits 2; the output
 // is -o/--output (old --out still accepted); a server is --server HOST:PORT.
 #include "segmatch/cli/tool.h"

@@ -1,4 +1,4 @@
-// Valid but extreme inputs (issue 18): an empty cloud, a million points in one voxel, a city
+// Valid but extreme inputs: an empty cloud, a million points in one voxel, a city
 // 10,000 km from the origin, a segment of one point. Each gets an answer (a pose or a typed
 // refusal) with finite numbers; nothing throws, crashes or hangs.
 #include "segmatch/core/descriptors.h"

@@ -1,4 +1,4 @@
-// Scale-out as shipped (issue 17): segmatch-server replicas behind HAProxy running
+// Scale-out as shipped: segmatch-server replicas behind HAProxy running
 // deploy/haproxy/haproxy.cfg unchanged, its health check speaking SGMQ to replicas that require
 // a token. Sixteen vehicles replay the tiny city through the balancer while one replica is
 // killed with SIGKILL with requests in flight and started again.

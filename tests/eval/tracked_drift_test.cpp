@@ -1,4 +1,4 @@
-// A vehicle tracked over a kilometre with drifting LiDAR-inertial odometry (issue 37): its local
+// A vehicle tracked over a kilometre with drifting LiDAR-inertial odometry: its local
 // clouds are built from segmatch-sim's odom_poses.txt, as on a car, and `--track` feeds each fix
 // forward as the next query's prior. A tracker that turned a biased answer into the next prior
 // would let the answers drift away from the truth along the route, and away from what the same

@@ -72,7 +72,7 @@ void cloud_seeds() {
   io::write_pcd(seed("pcd", "compressed.pcd"), cloud, io::PcdEncoding::kBinaryCompressed);
   io::write_pcd(seed("pcd", "labels.pcd"), cloud, io::PcdEncoding::kBinaryCompressed, &labels);
   io::write_pcd(seed("pcd", "empty.pcd"), PointCloud{}, io::PcdEncoding::kAscii);
-  // Valid but extreme (issue 18): one point, and coordinates 10,000 km from the origin.
+  // Valid but extreme: one point, and coordinates 10,000 km from the origin.
   io::write_pcd(seed("pcd", "one_point.pcd"), small_cloud(1), io::PcdEncoding::kBinary);
   PointCloud far = cloud;
   for (Point& p : far) p.x += 1e7f, p.y -= 1e7f;
@@ -152,7 +152,7 @@ void map_seed() {
   trajectory[1].index = 1;
   trajectory[1].time_s = 0.1;
   writer.set_trajectory(trajectory);
-  writer.set_classifier({"opencv-rtrees-yaml", "%YAML:1.0\n"});
+  writer.set_classifier({storage::kClassifierFormatRTreesYaml, "%YAML:1.0\n"});
   writer.commit();
 }
 

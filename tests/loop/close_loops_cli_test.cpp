@@ -1,4 +1,4 @@
-// Loop closure that closes the loop (issue 21), end to end with the built tools on a
+// Loop closure that closes the loop, end to end with the built tools on a
 // simulated closed route (segmatch-sim --route-00 loop) whose odometry drifts as in
 // loop_closure_test.cpp (0.3 % long, 0.2 deg / 100 m yaw, 2 mm / m climb): segmatch-loop
 // --optimize --scan-edges corrects the trajectory, scale included, and writes every output;
@@ -70,7 +70,7 @@ TEST_F(ClosedRoute, LoopOptimizeCorrectsTheDriftedOdometry) {
   const double before = t["odometry_error"]["rmse_m"], after = t["corrected_error"]["rmse_m"];
   std::printf("[close loops] ATE RMSE %.3f -> %.3f m\n", before, after);
   EXPECT_GT(before, 1.0) << "the odometry must drift";
-  EXPECT_LT(after, 0.2) << "issue 21: <= 0.2 m; the scale error needs the scan edges";
+  EXPECT_LT(after, 0.2) << "the target is <= 0.2 m; the scale error needs the scan edges";
   const nlohmann::json& scans = t["scan_edges"];
   EXPECT_GT(scans["accepted"].get<int>(), 900) << scans.dump();
   EXPECT_EQ(scans["downweighted"].get<int>(), 0) << scans.dump();

@@ -102,7 +102,7 @@ TEST_F(HkuLoop, RevisitIsDetectedWithin50m) {
   EXPECT_LE(first_after_m, 50.0);
 }
 
-// hku-mb never returns to its start: any loop is false (issue 14: a setting found on
+// hku-mb never returns to its start: any loop is false (a setting found on
 // hku-loop1 must hold on the second Livox recording).
 TEST_F(HkuLoop, SecondLivoxRecordingHasNoLoop) {
   const HkuRun& r = *mb_;

@@ -1,4 +1,4 @@
-// segmatch-loop end to end on hku-loop1 with no preset and no loop option (issue 14): the auto
+// segmatch-loop end to end on hku-loop1 with no preset and no loop option: the auto
 // profile measures the recording as narrow-fov and brings that class's loop settings, every
 // output file is written, the revisit is detected and no loop is false. And a missing input folder is refused by name.
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// --metrics-port (issue 17): the Prometheus endpoint, scraped with curl as a Prometheus server
+// --metrics-port: the Prometheus endpoint, scraped with curl as a Prometheus server
 // would, counts exactly the frames a client sent.
 #include "server_test_util.h"
 #include "support/run_command.h"

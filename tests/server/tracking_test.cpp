@@ -1,4 +1,4 @@
-// Tracking between fixes through the server (issue 15): a wrong prior costs a few queries and
+// Tracking between fixes through the server: a wrong prior costs a few queries and
 // falls back to a global one, never a false pose; after a gap in the map (queries that cannot
 // localize while the vehicle drives on) tracking recovers.
 #include "server_test_util.h"

@@ -142,7 +142,7 @@ inline MapMetadata test_metadata(const std::string& name = "test map") {
   MapMetadata m;
   m.name = name;
   m.frame = "map";
-  m.created_utc = "2024-05-01T12:34:56Z";
+  m.created_utc = "1999-05-01T12:34:56Z";
   m.tool_version = "segmatch 0.1.0-test";
   m.parameters_json = R"({"voxel_size_m": 0.1, "segmenter": "euclidean", "esf_bins": 640})";
   return m;

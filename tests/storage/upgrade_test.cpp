@@ -14,7 +14,7 @@ namespace test {
 namespace {
 
 const std::string kOldMap = SEGMATCH_TINY3_MAP;  // maps/tiny-3/map.sqlite.tar.xz, unpacked at configure time
-// The same map upgraded to schema 2 by the schema-2 build (2026-12-03): lossless.
+// The same map upgraded to schema 2 by the schema-2 build: lossless.
 const std::string kSchemaTwoMap = SEGMATCH_SOURCE_DIR "/maps/tiny-3/map-schema2.sqlite";
 
 enum class Esf { kExact, kQuantised };

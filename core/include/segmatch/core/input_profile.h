@@ -1,4 +1,4 @@
-// What an input looks like, measured from its scans and poses (issue 14: the `auto` profile).
+// What an input looks like, measured from its scans and poses (the `auto` profile).
 // A sensor class is told by its geometry, not by a name the user has to know: how much of the
 // horizon a scan covers (a spinning LiDAR 360 deg, a Livox Avia ~70 deg), how far it sees, how
 // far apart its points are, and whether a SLAM front end already voxel-downsampled it (then

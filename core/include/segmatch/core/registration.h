@@ -101,7 +101,7 @@ struct NewestScansConfig {
 // min_fitness here, and the pose must be supported by the segments as every registration is
 // (RegistrationConfig::min_support, min_matched_segments): walls and ground agree along a
 // street anywhere, its objects only at the right place. Its ICP reads a few thousand points,
-// not the segments' tens of thousands, and no segment points travel (README, 2026-12-06).
+// not the segments' tens of thousands, and no segment points travel (README).
 struct SurfaceTrackingConfig {
   bool enabled = true;
   float leaf_m = 0.5f;        // the newest scans are thinned to this voxel grid
@@ -114,7 +114,7 @@ struct SurfaceTrackingConfig {
   // Of the fine stage, as RegistrationConfig::min_fitness. The one false answer of the
   // wrong-prior stress without the check below had 0.89: fitness says the scans lie on surfaces,
   // not that they lie at the right place along them. 0.75 refused true answers on the bench's
-  // tiny city, whose revisit sees a changed world (0.52-0.62; README, 2026-12-06).
+  // tiny city, whose revisit sees a changed world (0.52-0.62; README).
   float min_fitness = 0.55f;
   // A tracker's prior is centimetres off after a fix: the fine stage alone, from the prior, is
   // tried first, and its answer stands when it passes every gate having moved the sensor at most
@@ -122,20 +122,20 @@ struct SurfaceTrackingConfig {
   // Only for priors no wider than fine_first_max_radius_m (api::Tracker's floor, 3 m: its sigma is
   // then at most 1 m): from a prior a metre off, the fine stage alone can settle in a local
   // minimum near it (riverside02 frame 115, a prior 7.8 m wide after 130 m without a fix: 1.06 m
-  // off, README 2026-12-06), where both stages do not settle at all.
+  // off, README), where both stages do not settle at all.
   float fine_first_m = 0.3f;
   float fine_first_max_radius_m = 3.0f;
   // The registered pose shifted along its weakest horizontal axis and across it, up to
   // ambiguity_range_m: where the query's segments find at least max_shifted_support times the
   // support they find at the pose, the objects say the vehicle is elsewhere (refused). True
   // answers reached at most 0.79 (riverside02), 0.69 (demo city), 0.24 (hku-mb); the one false
-  // answer of the wrong-prior stress without this check, 2.8 (README, 2026-12-06).
+  // answer of the wrong-prior stress without this check, 2.8 (README).
   float ambiguity_range_m = 12.0f;
   float max_shifted_support = 0.8f;
   // Of the segments that land on map segments, at least this many pass the matcher (as
   // RegistrationConfig::min_matched_segments). 2 answered riverside02 frame 37 (support 25,
   // true) but also frame 115, back from an unmapped street with a prior 7.8 m wide: 1.06 m off,
-  // support 11, 2 matched, fitness 0.84, well constrained (README, 2026-12-06).
+  // support 11, 2 matched, fitness 0.84, well constrained (README).
   int min_matched_segments = 3;
   // ... and this many when the fine stage alone answered, moving the prior at most fine_first_m:
   // the tracker's prediction, an independent witness, then agrees with the scans. Frame 37 above

@@ -1,4 +1,4 @@
-// Localization evaluation (issue 6): a second traversal is replayed as a vehicle would
+// Localization evaluation: a second traversal is replayed as a vehicle would
 // (io::replay_sequence), each query goes to a localizer (the server over the protocol, or the
 // same code in-process), and every answer is scored against the ground truth.
 #pragma once
@@ -52,7 +52,7 @@ struct LocalizationRunConfig {
   // metres per horizontal axis (seeded), radius 3 sigma. 0: none. Excludes track.
   double gnss_sigma_m = 0.0;
   uint64_t gnss_seed = 1;
-  // A stress test (issue 33: a wrong prior must never become a fix): every query's prior is the
+  // A stress test (a wrong prior must never become a fix): every query's prior is the
   // true pose moved wrong_prior_m in a random horizontal direction (seeded by gnss_seed), with
   // radius wrong_prior_radius_m. 0: off. Excludes track and gnss_sigma_m.
   double wrong_prior_m = 0.0, wrong_prior_radius_m = 3.0;

@@ -19,7 +19,7 @@ namespace segmatch {
 namespace eval {
 
 struct Thresholds {
-  double false_translation_m = 1.0;  // a localization farther off than this is false (issue 6)
+  double false_translation_m = 1.0;  // a localization farther off than this is false
   double false_rotation_deg = 3.0;
   double mapped_radius_m = 10.0;     // a query is on a mapped street within this of the map's trajectory
 };

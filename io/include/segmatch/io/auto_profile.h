@@ -1,4 +1,4 @@
-// The `auto` profile (issue 14): measure the input, derive every parameter from the
+// The `auto` profile: measure the input, derive every parameter from the
 // measurements. Named presets stay as explicit overrides.
 //
 // Rules (each cites what it was chosen on; README "Parameters" holds the figures):

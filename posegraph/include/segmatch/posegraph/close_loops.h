@@ -26,7 +26,9 @@ struct CloseLoopsOptions {
   // (scan_edges.h); the graph is then also solved once at the end, loops or not.
   std::optional<ScanMatchConfig> scan_edges;
   bool verbose = false;        // print what each local cloud did (stderr)
-  bool progress = true;        // progress bar with ETA (stderr)
+  // Called after each scan with how many of `frames` are done (e.g. a progress bar with ETA;
+  // the caller owns its output, so this library prints none).
+  std::function<void(size_t done, size_t total)> on_scan;
   // Polled before each scan: true stops the run early (what was fed so far is returned).
   std::function<bool()> should_stop;
 };

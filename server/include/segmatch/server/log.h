@@ -1,4 +1,4 @@
-// segmatch-server's log lines: "2026-12-03T21:22:36.123Z INFO text", an ISO-8601 UTC timestamp
+// segmatch-server's log lines: "YYYY-MM-DDThh:mm:ss.sssZ INFO text", an ISO-8601 UTC timestamp
 // to the millisecond and a level, so that journald, Kubernetes and log shippers need no parser
 // of their own.
 #pragma once

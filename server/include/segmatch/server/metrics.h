@@ -1,4 +1,4 @@
-// Prometheus metrics of a segmatch-server (issue 17), served over HTTP by prometheus-cpp (Debian's
+// Prometheus metrics of a segmatch-server, served over HTTP by prometheus-cpp (Debian's
 // prometheus-cpp-dev: its registry, text format and civetweb exposer), GET /metrics:
 //   segmatch_requests_total{type,status}     frames answered: type LOCALIZE, PING, ...; status
 //                                            localized / not_localized / outside_prior / ok / error

@@ -25,9 +25,9 @@ class StorageError : public std::runtime_error {
 // belongs to some other program and is refused.
 constexpr uint32_t kApplicationId = 0x53674D70u;
 // PRAGMA user_version: the schema this build writes, and the oldest one it still reads.
-// Schema 2 (2026-12-03) packs points and ESF losslessly and keeps points in their own table;
-// schema 3 (2026-12-03) stores ESF as u16 integers, sparse (storage/src/packed_blobs.h), the
-// rest as schema 2; schema 4 (2026-12-05) adds the surface layer (map_writer.h), the rest as
+// Schema 2 packs points and ESF losslessly and keeps points in their own table;
+// schema 3 stores ESF as u16 integers, sparse (storage/src/packed_blobs.h), the
+// rest as schema 2; schema 4 adds the surface layer (map_writer.h), the rest as
 // schema 3. Schema 1 to 3 maps are still read; segmatch-mapinfo --upgrade OLD NEW rewrites them
 // as schema 4 (without a surface layer: the old file holds no scans to make one from).
 constexpr int kSchemaVersion = 4;
@@ -58,7 +58,8 @@ struct Keyframe {
 };
 
 // The trained segment classifier, stored as opaque bytes (the format string says how to read
-// them, e.g. "opencv-rtrees-yaml").
+// them). The one format this build writes and reads: OpenCV's RTrees saved as YAML.
+inline constexpr const char* kClassifierFormatRTreesYaml = "opencv-rtrees-yaml";
 struct ClassifierBlob {
   std::string format;
   std::string bytes;
