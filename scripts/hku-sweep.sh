@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Reproduces the sweep behind the livox-keyframes preset (README "What we measured"): segmatch-loop
+# Reproduces the sweep behind the livox-keyframes preset (docs/how-defaults-were-chosen.md): segmatch-loop
 # on ../shared/data/real/hku-loop1 with the odometry-only poses and a 1 m / 2 deg drift bound, over
 # L2 threshold x verification resolution x cylinder radius x minimum segment size, one line each:
 # true and false loops, and revisit local clouds with a true loop.

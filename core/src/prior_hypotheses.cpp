@@ -30,7 +30,7 @@ Ranked rank_by_support(const std::vector<PoseHypothesis>& hypotheses, const Segm
 
 // The hypotheses that put the sensor within the prior's radius and turn it by at most the
 // prior's max_rotation_deg (all of them without a prior). The turn was once left unchecked: on
-// hku-mb, priors 6 m off gave poses turned 11-17 deg (README, "continuous localization").
+// hku-mb, priors 6 m off gave poses turned 11-17 deg (docs/how-defaults-were-chosen.md).
 std::vector<PoseHypothesis> within_prior(std::vector<PoseHypothesis> hypotheses, const Eigen::Vector3f& sensor,
                                          const PosePrior* prior) {
   if (!prior) return hypotheses;

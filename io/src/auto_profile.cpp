@@ -101,7 +101,7 @@ PipelineConfig auto_pipeline_config(const InputMeasurements& m) {
   const std::string sensor = m.sensor_class();
   if (sensor == "sparse-spinning") {
     fit_segmentation_to_spacing(c, m);
-    // riverside02 keyframes 0-140 (README "What we measured"): the simulation-trained forest
+    // riverside02 keyframes 0-140 (docs/how-defaults-were-chosen.md): the simulation-trained forest
     // at 0.72 passes half the true pairs it sees on sparse real segments; 0.6 over k = 500
     // passes more, and support 14 keeps the look-alikes that then verify out.
     c.localizer.retrieval.k = 500;

@@ -30,7 +30,7 @@ std::string opcode_name(uint8_t opcode) {
 }
 
 // Slicing by 8 (eight tables, eight bytes a step): a byte at a time made the CRC the largest
-// cost of reading a bag (README, "ROS 2 bags": segmatch-bench-bag).
+// cost of reading a bag (docs/measurements.md, "Input: bags and folders": segmatch-bench-bag).
 uint32_t crc32(uint32_t crc, const void* data, size_t n) {
   static const std::array<std::array<uint32_t, 256>, 8> table = [] {
     std::array<std::array<uint32_t, 256>, 8> t{};

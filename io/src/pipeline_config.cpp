@@ -334,7 +334,7 @@ void PipelineConfig::validate() const {
 // The core's structs hold the paper's parameters; the product adds a confidence floor. On the
 // demo world (seed 1) every false localization came from an unmapped street with confidence
 // 0.70-0.73 and every true one had >= 0.84, so 0.8; it was then checked on a demo world it
-// was not chosen on (seed 2, README "What we measured").
+// was not chosen on (seed 2, docs/how-defaults-were-chosen.md).
 PipelineConfig::PipelineConfig() {
   localizer.min_confidence = 0.8f;
   // With a prior (tracking, GNSS) look-alikes far away cannot pass, so a low fitness floor.
@@ -344,7 +344,7 @@ PipelineConfig::PipelineConfig() {
   // priors 6 m off (radius 3 m, `segmatch-eval localize --wrong-prior-m 6`) segment matching
   // answered within them at confidence 0.25-0.31 (demo 1, hku-mb 3: all false), while true
   // answers under priors had >= 0.50 on the demo, riverside02, hku-mb and hku-loop1 but one
-  // (riverside02, 0.22): 0.35 (README, "continuous localization").
+  // (riverside02, 0.22): 0.35 (docs/how-defaults-were-chosen.md).
   localizer.min_refine_fitness_with_prior = 0.2f;
   localizer.min_confidence_with_prior = 0.35f;
 }
@@ -378,7 +378,7 @@ PipelineConfig pipeline_preset(const std::string& name) {
     // between passes. Matching is loose (all eigen-feature neighbours within L2 3.0, 0.7 m
     // consistency, support 4) and a 30 m cylinder gives each query more segments; what keeps
     // look-alikes out is the odometry prior of loop closure (loop_detector_config below).
-    // Chosen by a sweep on hku-loop1 itself (README "What we measured"); no second Livox
+    // Chosen by a sweep on hku-loop1 itself (docs/how-defaults-were-chosen.md); no second Livox
     // recording was available to validate it. L2 matcher: no classifier was trained on
     // Livox segments.
     c = pipeline_preset("sparse-keyframes");

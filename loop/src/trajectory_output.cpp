@@ -162,7 +162,7 @@ void print_summary(const TrajectorySummary& s, const std::vector<LoopClosure>& l
     if (s.scan_edges_downweighted * 5 > s.scan_edges_accepted)
       std::printf("warning: the optimiser down-weighted %zu of %zu scan edges: the registrations disagree with the "
                   "odometry far beyond their sigma. An odometry this consistent (LiDAR-inertial) is better without "
-                  "--scan-edges (README, \"Pose-graph optimisation\")\n",
+                  "--scan-edges (docs/loop-closure.md)\n",
                   s.scan_edges_downweighted, s.scan_edges_accepted);
   }
   std::printf("segment map: %zu segments in the odometry frame, %zu on the corrected trajectory (%zu duplicates merged)\n",

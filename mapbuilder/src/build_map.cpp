@@ -163,7 +163,7 @@ void warn_far_from_origin(const io::Sequence& seq, const std::vector<size_t>& fr
 // An empty or nearly empty map localizes nothing, and a user finds out only when the fleet
 // queries it: refuse it here, naming what the profile measured and what it chose. The floor
 // (50 per km) is 30-70 times below every map the project builds from real or simulated drives
-// (README, measurements).
+// (docs/measurements.md).
 void check_segment_count(const MapBuilder& b, const io::PipelineConfig& config, double min_per_km) {
   const size_t segments = b.segments().size();
   const double km = b.distance_driven_m() / 1000.0;

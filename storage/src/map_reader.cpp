@@ -124,7 +124,7 @@ Connection open_read_only(const std::string& path) {
   // 2 GB limit Debian's build allows; larger files fall back to reads beyond it).
   // locking_mode EXCLUSIVE: the shared lock taken at the first read is kept, so a lazy point
   // read makes no lock, unlock and change-counter check of its own (system calls that were much
-  // of a read's time; README, "map size"). Nothing ever writes a published map in place (writers
+  // of a read's time; docs/measurements.md, "Map size and storage"). Nothing ever writes a published map in place (writers
   // rename a new file over it), so the lock holds nobody up.
   exec(db.get(), "PRAGMA mmap_size = 2147418112; PRAGMA locking_mode = EXCLUSIVE", path);
   return db;

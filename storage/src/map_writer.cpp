@@ -218,7 +218,7 @@ void MapWriter::Impl::publish() {
   // Segments and their points were inserted in turn, so each table's pages are spread over the
   // whole file; a copy written table by table keeps the segments (what a server loads) in one
   // stretch, and opening a city map reads that stretch instead of faulting in pages from
-  // everywhere (README, "map size").
+  // everywhere (docs/measurements.md, "Map size and storage").
   {
     Statement vacuum(db.get(), "VACUUM INTO ?", temporary_path);
     vacuum.bind_text(1, compact_path);
@@ -251,7 +251,7 @@ MapWriter MapWriter::create(const std::string& path, const MapMetadata& metadata
   sqlite3* db = impl->db.get();
   // Small pages: a BLOB's overflow chain wastes half a page on average, which with schema 1's
   // 64 KiB pages was about as much as the packed data itself; 1 KiB pages cost nothing
-  // measurable when loading (README, "map size"). The journal may live in memory and syncs may
+  // measurable when loading (docs/measurements.md, "Map size and storage"). The journal may live in memory and syncs may
   // be skipped because a failed build only loses the temporary file, and commit() fsyncs the
   // finished file itself.
   exec(db, "PRAGMA page_size = 1024; PRAGMA journal_mode = MEMORY; PRAGMA synchronous = OFF;"

@@ -20,7 +20,7 @@ namespace detail {
 namespace {
 
 // zstd level 12: decompression runs as fast at every level, so only the build pays for a higher
-// one; 12 is the last level before the build time starts to grow (README, "map size").
+// one; 12 is the last level before the build time starts to grow (docs/measurements.md, "Map size and storage").
 constexpr int kLevel = 12;
 constexpr size_t kPointHeader = 36;  // schema 1's point header (segment_codec.cpp)
 constexpr uint32_t kInt16 = 1, kFloat32 = 2;

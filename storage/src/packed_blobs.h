@@ -34,7 +34,7 @@ std::string unpack_esf(BlobView packed, EsfDescriptor* esf);
 // Schema 3's ESF: quantised to u16 (core/esf_quantization.h, as LOCALIZE_SEGMENTS sends it) and
 // sparse: the int8 exponent, an 80-byte mask of the non-zero bins (bit i % 8 of byte i / 8),
 // then their mantissas, u16 little-endian. No entropy coder: decoding a zstd frame per segment
-// was most of opening a city map, and this is smaller anyway (README, "map size").
+// was most of opening a city map, and this is smaller anyway (docs/measurements.md, "Map size and storage").
 std::vector<uint8_t> pack_esf_sparse(const EsfDescriptor& esf);
 // Empty string on success, else what is wrong with the blob.
 std::string unpack_esf_sparse(BlobView packed, EsfDescriptor* esf);

@@ -50,7 +50,7 @@ void load_chunk(const std::string& path, int schema_version, bool with_points, C
 // A city map's segments are hundreds of megabytes (an ESF alone is 2.5 KB) that the load touches
 // for the first time: asking for transparent huge pages before that (where the kernel leaves
 // it to madvise) takes one fault per 2 MB instead of one per 4 KB page, which is most of the
-// load's time on a virtual machine (README, "map size"). Only advice: ignored where refused.
+// load's time on a virtual machine (docs/measurements.md, "Map size and storage"). Only advice: ignored where refused.
 void prefer_huge_pages(void* data, size_t bytes) {
   const uintptr_t huge = uintptr_t{2} << 20;
   const uintptr_t begin = (reinterpret_cast<uintptr_t>(data) + huge - 1) & ~(huge - 1);

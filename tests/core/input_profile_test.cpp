@@ -91,7 +91,7 @@ TEST(InputProfile, NothingToMeasureIsRefused) {
 }
 
 // The same wall seen from two poses 2 m apart: the right poses put both scans on one surface,
-// poses off by 3 m do not (riverside02's second half, README "What we measured").
+// poses off by 3 m do not (riverside02's second half, docs/how-defaults-were-chosen.md).
 TEST(InputProfile, PoseAgreementTellsRightFromWrongPoses) {
   const PointCloud a = scan_of(180.0, 32, 720, 15.0);
   Pose3d T_world_b = Pose3d::Identity();

@@ -78,7 +78,7 @@ Outcome query_along(const Localizer& localizer, const World& world, const Traver
   schedule.every_m = 10.0;
   schedule.seed = seed;
   // Exact simulated poses: nothing drifts, so no age limit (it is there for a vehicle's odometry
-  // and would only thin these clouds: README, "What we measured").
+  // and would only thin these clouds: docs/how-defaults-were-chosen.md).
   for_each_voxelized_cloud(caster, hdl64e(), t, without_age_limit(LocalCloudConfig{}), localizer.config().segmentation.voxel, schedule,
                            [&](const SimulatedLocalCloud& lc) {
     PointCloud cloud = lc.cloud;

@@ -1,6 +1,6 @@
 // Localization on every real recording with the default (auto) profile, as a new user runs it:
 // segmatch-mapbuilder with no preset, then segmatch-eval localize. Asserts no false
-// localization and a floor on the fraction localized, below this build's figures (README "What
+// localization and a floor on the fraction localized, below this build's figures (docs/how-defaults-were-chosen.md,
 // we measured"): riverside02 35 of 111, hku-mb 38 of 39, hku-loop1's revisit 2 of 6.
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

@@ -26,7 +26,7 @@ namespace {
 constexpr double kDegPerRad = 180.0 / M_PI;
 
 // Frames at least 2 m apart, as a car at ~80 km/h gives them (the local cloud keeps none closer
-// than 1 m, paper IV-A). Frames 1 m apart found the same loops at twice the cost (README,
+// than 1 m, paper IV-A). Frames 1 m apart found the same loops at twice the cost (docs/how-defaults-were-chosen.md,
 // "What we measured").
 std::vector<size_t> spaced_frames(const Traversal& t) {
   std::vector<size_t> frames;

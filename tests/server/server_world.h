@@ -36,7 +36,7 @@ inline io::PipelineConfig fast_config() {
   // points (60-230 MB), over the 64 MiB frame limit and seconds to localize.
   c.local_cloud.subsample_leaf_m = 0.1;
   // The queries are built from the exact simulated poses: nothing drifts, and the age limit
-  // (there for a vehicle's odometry) would only thin them (README, "What we measured").
+  // (there for a vehicle's odometry) would only thin them (docs/how-defaults-were-chosen.md).
   c.local_cloud.max_scan_age_m = 0.0;
   // For the same reason no recent-window refinement: it corrects the odometry's drift near the
   // sensor, and here there is none. On this small map a window holds a few segments, and

@@ -35,7 +35,7 @@ struct TrackerConfig {
   // an unmapped street, or a local cloud that is mostly one. Back on a mapped street a tracked
   // query is answered from the newest scans alone (tracking on the surface layer), where a
   // global one needs the whole cloud to be mapped: with 3, riverside02 went global at frame 117,
-  // 10 m back on the map, and missed it; with 6 it was tracked and answered (README).
+  // 10 m back on the map, and missed it; with 6 it was tracked and answered (docs/how-defaults-were-chosen.md).
   int failures_before_global = 6;
   // Squared Mahalanobis distance of the horizontal innovation: chi-square with 2 degrees of
   // freedom at 99.9 %.

@@ -3,7 +3,7 @@
 // Rounding moves a bin by at most 2^-16 of the largest one. A power of two makes the round trip
 // exact from the integers on (quantising a dequantised histogram gives the same integers), so
 // re-encoding never drifts. LOCALIZE_SEGMENTS (docs/protocol.md 5.5) and map schema 3 both
-// carry ESF this way; the demo and the real recordings localized identically with it (README,
+// carry ESF this way; the demo and the real recordings localized identically with it (docs/how-defaults-were-chosen.md,
 // "map size").
 #pragma once
 

@@ -22,7 +22,7 @@ struct LocalCloudConfig {
   // it a scan stays until the vehicle is radius + range away, and on a block it drives around
   // far longer: odometry that built the cloud drifts over all that driving, and where the route
   // returns the same street is held twice, metres apart. 60 m (one radius): chosen on the demo
-  // city with simulated LiDAR-inertial odometry, riverside02 0-164, hku-mb and hku-loop1 (README,
+  // city with simulated LiDAR-inertial odometry, riverside02 0-164, hku-mb and hku-loop1 (docs/how-defaults-were-chosen.md,
   // "What we measured"); maps written before it keep 0.
   double max_scan_age_m = 60.0;
   void validate() const;  // throws std::invalid_argument naming the field

@@ -48,7 +48,7 @@ struct PlaceRecognitionConfig {
   // The tracking gates for a cold start, in place of the tracker's. One scan holds a few
   // segments, too few to witness a pose (true and false poses alike had 0-11 landing, 0-3
   // matched): the registration's fitness decides. True poses fitted 0.957-0.999, the best false
-  // ones 0.883 (simulated demo city, HDL-64E) and 0.723 (riverside02 keyframes); README.
+  // ones 0.883 (simulated demo city, HDL-64E) and 0.723 (riverside02 keyframes); docs/how-defaults-were-chosen.md.
   int min_support = 0;            // query segments landing on map segments under the pose
   int min_matched_segments = 0;   // of those, passing the matcher
   float min_fitness = 0.92f;      // of the registration (and of the search's peaks)

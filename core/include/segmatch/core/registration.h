@@ -38,7 +38,7 @@ struct RegistrationConfig {
   // Priors wider than this are not a starting point for ICP (its basin is a metre or two): such
   // queries go to segment matching directly. On riverside02 with GNSS-like priors (sigma 10 m,
   // radius 30 m) registration found wrong minima along the street, 1-15 m off with fitness up
-  // to 0.82, and on hku-mb (sigma 3 m, radius 9 m) one 1.1 m off (README); a tracker's prior
+  // to 0.82, and on hku-mb (sigma 3 m, radius 9 m) one 1.1 m off (docs/how-defaults-were-chosen.md); a tracker's prior
   // (api::Tracker, at least 3 m) is a metre or less off after a fix, and wider than 10 m only
   // after some 160 m without one.
   float max_prior_radius_m = 10.0f;
@@ -53,7 +53,7 @@ struct RegistrationConfig {
   int min_support = 10;
   // ... and at least this many of those pairs pass the matcher (the classifier, as in segment
   // matching): segments that land on a map segment by coincidence are other objects. Measured
-  // (README): true registrations had 2 or more (riverside02 2, demo 6, hku-mb 32 at the
+  // (docs/how-defaults-were-chosen.md): true registrations had 2 or more (riverside02 2, demo 6, hku-mb 32 at the
   // least), registrations from priors 6 m off 0.
   int min_matched_segments = 3;
   // At least this fraction of the query points within the fine correspondence distance of the
@@ -101,7 +101,7 @@ struct NewestScansConfig {
 // min_fitness here, and the pose must be supported by the segments as every registration is
 // (RegistrationConfig::min_support, min_matched_segments): walls and ground agree along a
 // street anywhere, its objects only at the right place. Its ICP reads a few thousand points,
-// not the segments' tens of thousands, and no segment points travel (README).
+// not the segments' tens of thousands, and no segment points travel (docs/how-defaults-were-chosen.md).
 struct SurfaceTrackingConfig {
   bool enabled = true;
   float leaf_m = 0.5f;        // the newest scans are thinned to this voxel grid
@@ -114,33 +114,33 @@ struct SurfaceTrackingConfig {
   // Of the fine stage, as RegistrationConfig::min_fitness. The one false answer of the
   // wrong-prior stress without the check below had 0.89: fitness says the scans lie on surfaces,
   // not that they lie at the right place along them. 0.75 refused true answers on the bench's
-  // tiny city, whose revisit sees a changed world (0.52-0.62; README).
+  // tiny city, whose revisit sees a changed world (0.52-0.62; docs/how-defaults-were-chosen.md).
   float min_fitness = 0.55f;
   // A tracker's prior is centimetres off after a fix: the fine stage alone, from the prior, is
   // tried first, and its answer stands when it passes every gate having moved the sensor at most
-  // fine_first_m (0: off); otherwise both stages run, as from any prior (README: server time).
+  // fine_first_m (0: off); otherwise both stages run, as from any prior (docs/measurements.md: server time).
   // Only for priors no wider than fine_first_max_radius_m (api::Tracker's floor, 3 m: its sigma is
   // then at most 1 m): from a prior a metre off, the fine stage alone can settle in a local
   // minimum near it (riverside02 frame 115, a prior 7.8 m wide after 130 m without a fix: 1.06 m
-  // off, README), where both stages do not settle at all.
+  // off, docs/how-defaults-were-chosen.md), where both stages do not settle at all.
   float fine_first_m = 0.3f;
   float fine_first_max_radius_m = 3.0f;
   // The registered pose shifted along its weakest horizontal axis and across it, up to
   // ambiguity_range_m: where the query's segments find at least max_shifted_support times the
   // support they find at the pose, the objects say the vehicle is elsewhere (refused). True
   // answers reached at most 0.79 (riverside02), 0.69 (demo city), 0.24 (hku-mb); the one false
-  // answer of the wrong-prior stress without this check, 2.8 (README).
+  // answer of the wrong-prior stress without this check, 2.8 (docs/how-defaults-were-chosen.md).
   float ambiguity_range_m = 12.0f;
   float max_shifted_support = 0.8f;
   // Of the segments that land on map segments, at least this many pass the matcher (as
   // RegistrationConfig::min_matched_segments). 2 answered riverside02 frame 37 (support 25,
   // true) but also frame 115, back from an unmapped street with a prior 7.8 m wide: 1.06 m off,
-  // support 11, 2 matched, fitness 0.84, well constrained (README).
+  // support 11, 2 matched, fitness 0.84, well constrained (docs/how-defaults-were-chosen.md).
   int min_matched_segments = 3;
   // ... and this many when the fine stage alone answered, moving the prior at most fine_first_m:
   // the tracker's prediction, an independent witness, then agrees with the scans. Frame 37 above
   // is such an answer (moved 0.03 m); frame 115 is not. Held without a false fix on riverside02,
-  // hku-mb and the demo city, tracked and under wrong priors (README, "What we measured").
+  // hku-mb and the demo city, tracked and under wrong priors (docs/how-defaults-were-chosen.md).
   int min_matched_segments_near_prior = 2;
   // ... and also when at least this many query segments land on map segments under the pose
   // (twice RegistrationConfig::min_support): a layout of objects that dense, with no shifted pose
@@ -148,7 +148,7 @@ struct SurfaceTrackingConfig {
   // otherwise. riverside02 frame 37 under GNSS-like priors (sigma 10 m): support 25, 2 matched,
   // 0.05 m off, refused in every seed before; frame 115 above (support 11) stays refused.
   // Held without a false fix on riverside02, hku-mb and the demo city, tracked, under GNSS
-  // priors and under wrong priors (README, "What we measured"). 0: off.
+  // priors and under wrong priors (docs/how-defaults-were-chosen.md). 0: off.
   int min_support_for_fewer_matched = 20;
   void validate() const;      // throws std::invalid_argument naming the field
 };
@@ -158,7 +158,7 @@ struct SurfaceTrackingConfig {
 // errors would give; neighbouring points' errors are correlated (the information of N points
 // is far less than N independent ones: the scale), and errors the points cannot see remain:
 // the map's own poses, the odometry's warp across the window (the floor). Both are calibrated
-// on data (README, "continuous localization").
+// on data (docs/how-defaults-were-chosen.md).
 struct CovarianceConfig {
   float scale = 25.0f;
   float floor_m = 0.05f;    // standard deviation added on each position axis

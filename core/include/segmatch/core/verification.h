@@ -40,7 +40,7 @@ struct VerificationConfig {
   // Beyond the paper, a resource bound: with more candidates than this, only this many with the
   // highest scores are verified (in their order). The consistency graph takes n^2 bits, so a
   // query built to match everything (a forest of identical poles) could otherwise make a
-  // server allocate gigabytes; 30,000 candidates take 112 MB. The README has the counts real
+  // server allocate gigabytes; 30,000 candidates take 112 MB. docs/how-defaults-were-chosen.md has the counts real
   // queries reach. 0 = no bound.
   int max_candidates = 30000;
   void validate() const;  // throws std::invalid_argument naming the field

@@ -1,7 +1,7 @@
 // The `auto` profile: measure the input, derive every parameter from the
 // measurements. Named presets stay as explicit overrides.
 //
-// Rules (each cites what it was chosen on; README "Parameters" holds the figures):
+// Rules (each cites what it was chosen on; docs/parameters.md holds the figures):
 //   dense-spinning  (raw scans of a 360-degree sensor: KITTI, the simulator)  -> kitti-hdl64,
 //                   the paper's Table I values, unchanged;
 //   sparse-spinning (keyframes a SLAM front end voxelized, 360 degrees: riverside02) -> voxel

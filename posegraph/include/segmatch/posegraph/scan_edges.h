@@ -3,7 +3,7 @@
 // distances in metres, so these edges see what loops cannot: a loop that returns to the same
 // place still closes under an odometry that overestimates every step by 0.3 %, while scans
 // 1 m apart tell the true 1 m. Wheel odometry (scale, yaw-rate bias) is the case they are for;
-// LiDAR-inertial odometry is already this good (README, "Pose-graph optimisation").
+// LiDAR-inertial odometry is already this good (docs/loop-closure.md).
 //
 // A registration becomes an edge only when it is plausible: enough of the scan lands on the
 // previous ones (fitness) and it stays near the odometry's step (a failed ICP in a corridor
