@@ -23,6 +23,7 @@ const state = {map: null, view: null, tiles: new Map(), pending: new Set(), curs
 const canvas = document.getElementById('map');
 const ctx = canvas.getContext('2d');
 
+// The token of the page's address goes with every API call as a header, not in its URL.
 function api(path) {
   const headers = token ? {Authorization: 'Bearer ' + token} : {};
   return fetch(path, {headers, cache: 'no-store'}).then(r => {
