@@ -23,6 +23,7 @@ const state = {map: null, view: null, tiles: new Map(), pending: new Set(), curs
 const canvas = document.getElementById('map');
 const ctx = canvas.getContext('2d');
 
+// The token of the page's address goes with every API call as a header, not in its URL.
 function api(path) {
   const headers = token ? {Authorization: 'Bearer ' + token} : {};
   return fetch(path, {headers, cache: 'no-store'}).then(r => {
@@ -58,9 +59,13 @@ function fitView() {
   let [x0, y0, x1, y1] = [b.min[0], b.min[1], b.max[0], b.max[1]];
   for (const p of state.map.trajectory) x0 = Math.min(x0, p[0]), y0 = Math.min(y0, p[1]), x1 = Math.max(x1, p[0]), y1 = Math.max(y1, p[1]);
   const asked = (params.get('view') || '').split(',').map(Number);
-  if (asked.length === 4 && asked.every(Number.isFinite)) [x0, y0, x1, y1] = asked;
+  const viewAsked = asked.length === 4 && asked.every(Number.isFinite);
+  if (viewAsked) [x0, y0, x1, y1] = asked;
   const margin = 24;
-  const w = Math.max(1, x1 - x0), h = Math.max(1, y1 - y0);
+  // The bounds of a map of one segment are a point: fitted as 1 m. An asked box may be smaller
+  // (a covariance ellipse of a few centimetres).
+  const least = viewAsked ? 0.01 : 1;
+  const w = Math.max(least, x1 - x0), h = Math.max(least, y1 - y0);
   const scale = Math.min((canvas.width - 2 * margin) / w, (canvas.height - 2 * margin) / h);
   state.view = {cx: (x0 + x1) / 2, cy: (y0 + y1) / 2, scale: Math.max(scale, 1e-4)};
   publishView();

@@ -12,6 +12,7 @@
 #include <civetweb.h>
 #include <nlohmann/json.hpp>
 
+#include <cctype>
 #include <chrono>
 #include <cstring>
 #include <mutex>
@@ -48,6 +49,8 @@ void respond(mg_connection* c, int status, const char* content_type, const std::
   mg_response_header_add(c, "Cache-Control", "no-store", -1);
   mg_response_header_add(c, "X-Content-Type-Options", "nosniff", -1);
   mg_response_header_add(c, "Content-Security-Policy", kSecurityPolicy, -1);
+  // The page's address may hold the token (?token=): never pass it on as a Referer.
+  mg_response_header_add(c, "Referrer-Policy", "no-referrer", -1);
   if (extra_name) mg_response_header_add(c, extra_name, extra_value, -1);
   mg_response_header_send(c);
   mg_write(c, body.data(), body.size());
@@ -78,6 +81,32 @@ bool authorized(const Impl& impl, mg_connection* c, const mg_request_info& ri) {
   const char* header = mg_get_header(c, "Authorization");
   if (header && std::strncmp(header, "Bearer ", 7) == 0 && same_token(header + 7, impl.config.token)) return true;
   return same_token(query_value(ri.query_string, "token"), impl.config.token);
+}
+
+// The token as a query value: every byte but the unreserved ones as %XX, which also makes it
+// safe inside an HTML attribute.
+std::string url_encoded(const std::string& text) {
+  static const char* kHex = "0123456789ABCDEF";
+  std::string out;
+  for (unsigned char ch : text) {
+    if (std::isalnum(ch) || ch == '-' || ch == '.' || ch == '_' || ch == '~') out += static_cast<char>(ch);
+    else out += {'%', kHex[ch >> 4], kHex[ch & 15]};
+  }
+  return out;
+}
+
+// A browser loads the page's script and style sheet by their addresses in index.html, with no
+// header of ours: when the page was opened as /?token=TOKEN those addresses carry it on (the
+// placeholder {{token_query}}). Only then: a page fetched with the header (a proxy that adds
+// it, docs/console.md) names its files without the token, which never reaches the browser.
+std::string asset_body(const Impl& impl, const ConsoleAsset& asset, const mg_request_info& ri) {
+  std::string body(reinterpret_cast<const char*>(asset.data), asset.size);
+  const std::string placeholder = "{{token_query}}";
+  const bool in_query = !impl.config.token.empty() && same_token(query_value(ri.query_string, "token"), impl.config.token);
+  const std::string query = in_query ? "?token=" + url_encoded(impl.config.token) : "";
+  for (size_t at = body.find(placeholder); at != std::string::npos; at = body.find(placeholder, at + query.size()))
+    body.replace(at, placeholder.size(), query);
+  return body;
 }
 
 // /api/tiles/Z/X/Y
@@ -126,16 +155,16 @@ int handle(mg_connection* c, void* data) {
   const mg_request_info& ri = *mg_get_request_info(c);
   try {
     if (std::strcmp(ri.request_method, "GET") != 0) return fail(c, 405, "only GET", "Allow", "GET");
-    // The page's own files hold no data and are served to anyone who reaches the port (the
-    // browser fetches them without the token); the data behind them needs it.
+    // Every path needs the token, the page's own files too: whoever reaches the port without
+    // it learns nothing, not even which server this is.
+    if (!authorized(impl, c, ri))
+      return fail(c, 401, "this server needs its token: open /?token=TOKEN, or send Authorization: Bearer TOKEN",
+                  "WWW-Authenticate", "Bearer");
     const std::string path = ri.local_uri ? ri.local_uri : "";
     if (const ConsoleAsset* asset = find_console_asset(path == "/" ? "/index.html" : path)) {
-      respond(c, 200, asset->content_type, std::string(reinterpret_cast<const char*>(asset->data), asset->size));
+      respond(c, 200, asset->content_type, asset_body(impl, *asset, ri));
       return 200;
     }
-    if (!authorized(impl, c, ri))
-      return fail(c, 401, "this server needs its token: Authorization: Bearer TOKEN, or open /?token=TOKEN", "WWW-Authenticate",
-                  "Bearer");
     return route(impl, c, ri);
   } catch (const std::exception& e) {
     return fail(c, 500, std::string("console: ") + e.what());

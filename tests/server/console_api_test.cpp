@@ -139,13 +139,6 @@ TEST(ServerConsole, BadRequestsGet4xxAndNeverDisturbLocalization) {
   console.max_request_bytes = 8192;
   ConsoleServer cs(console);
   const uint16_t port = cs.page->port();
-  EXPECT_EQ(http_get(port, "/").status, 200);  // the page's files hold no data: no token needed
-  EXPECT_EQ(http_get(port, "/app.js").status, 200);
-  EXPECT_EQ(http_get(port, "/api/stats").status, 401);                        // no token
-  EXPECT_EQ(http_get(port, "/api/map").status, 401);
-  EXPECT_EQ(http_get(port, "/metrics").status, 401);
-  EXPECT_EQ(http_get(port, "/api/stats", "Authorization: Bearer wrong\r\n").status, 401);
-  EXPECT_EQ(http_get(port, "/api/stats?token=" + kToken).status, 200);       // the page's way
   EXPECT_EQ(http_get(port, "/nope", kAuth).status, 404);
   EXPECT_EQ(http_get(port, "/api/tiles/99/0/0", kAuth).status, 400);
   EXPECT_EQ(http_get(port, "/api/tiles/3/x/0", kAuth).status, 400);
@@ -179,6 +172,57 @@ TEST(ServerConsole, BadRequestsGet4xxAndNeverDisturbLocalization) {
   }
   EXPECT_EQ(http_get(port, "/api/stats", kAuth).status, 200);  // and the page is back
   EXPECT_EQ(cs.s.server->counters().errors, 0u);
+}
+
+// Every path answers 401 without the token, the page's own files too; the page opened as
+// /?token=T names its script and style sheet with the token (percent-encoded), and a browser's
+// requests for them so pass.
+TEST(ServerConsole, EveryPathNeedsTheToken) {
+  ConsoleServer cs;
+  const uint16_t port = cs.page->port();
+  for (const std::string path : {"/", "/index.html", "/app.js", "/style.css", "/api/map", "/api/stats", "/api/answers",
+                                 "/api/tiles/5/0/0", "/metrics", "/nope"}) {
+    const HttpReply none = http_get(port, path);
+    EXPECT_EQ(none.status, 401) << path;
+    EXPECT_NE(none.head.find("WWW-Authenticate: Bearer"), std::string::npos) << path << ": " << none.head;
+    EXPECT_EQ(json::parse(none.body, nullptr, false).value("status", 0), 401) << path << ": " << none.body;
+    EXPECT_EQ(http_get(port, path, "Authorization: Bearer wrong\r\n").status, 401) << path;
+    EXPECT_EQ(http_get(port, path + "?token=wrong").status, 401) << path;
+    EXPECT_EQ(http_get(port, path + "?token=" + kToken.substr(1)).status, 401) << path;
+    const int expected = path == "/nope" ? 404 : 200;
+    EXPECT_EQ(http_get(port, path + "?token=" + kToken).status, expected) << path;
+    EXPECT_EQ(http_get(port, path, kAuth).status, expected) << path;
+  }
+  EXPECT_NE(http_get(port, "/?token=" + kToken).body.find("src=\"app.js?token=" + kToken + "\""), std::string::npos);
+  // Fetched with the header (a proxy adding it), the page does not hand the token to the browser.
+  const HttpReply proxied = http_get(port, "/", kAuth);
+  EXPECT_NE(proxied.body.find("src=\"app.js\""), std::string::npos) << proxied.body;
+  EXPECT_EQ(proxied.body.find(kToken), std::string::npos) << proxied.body;
+
+  // A token with bytes that mean something in a URL or in HTML.
+  server::ConsoleConfig odd;
+  odd.token = "a b&c<d\"e%f+";
+  auto odd_page = std::make_unique<server::Console>(odd, *cs.s.server);
+  const std::string encoded = "a%20b%26c%3Cd%22e%25f%2B";
+  const HttpReply html = http_get(odd_page->port(), "/?token=" + encoded);
+  ASSERT_EQ(html.status, 200) << html.head;
+  EXPECT_NE(html.body.find("href=\"style.css?token=" + encoded + "\""), std::string::npos) << html.body;
+  EXPECT_NE(html.body.find("src=\"app.js?token=" + encoded + "\""), std::string::npos) << html.body;
+  EXPECT_EQ(html.body.find("{{"), std::string::npos);
+  EXPECT_EQ(http_get(odd_page->port(), "/app.js?token=" + encoded).status, 200);
+  EXPECT_EQ(http_get(odd_page->port(), "/style.css", "Authorization: Bearer " + odd.token + "\r\n").status, 200);
+
+  // Without a token everything is served, and the page's addresses carry none.
+  auto no_token = std::make_unique<server::Console>(server::ConsoleConfig{}, *cs.s.server);
+  const HttpReply plain = http_get(no_token->port(), "/");
+  EXPECT_EQ(plain.status, 200);
+  EXPECT_NE(plain.body.find("src=\"app.js\""), std::string::npos) << plain.body;
+  EXPECT_EQ(http_get(no_token->port(), "/api/map").status, 200);
+  // Stopping a console takes up to 2 s (civetweb's listener polls that long): these two stop
+  // side by side.
+  std::thread stop([&] { odd_page.reset(); });
+  no_token.reset();
+  stop.join();
 }
 
 TEST(ServerConsole, MetricsShareTheHttpPort) {

@@ -1,162 +1,182 @@
-// The operator's page in a real browser: a server on the tiny city answers a few
-// revisit queries and a refusal, then headless Chromium opens the page twice: --dump-dom (the
-// DOM after its scripts ran: the statistics, the refusal's reason, the view transform) and
-// --screenshot (the segments and the vehicles drawn where the transform puts them, in their
-// colours). Skipped when Chromium is not installed (scripts/install-deps.sh installs it).
-// SEGMATCH_CONSOLE_SCREENSHOT=FILE keeps the screenshot (docs/img/console.png was taken so).
+// The operator's page in a real browser: a server answers localizations and a refusal, then
+// headless Chromium opens the page with the token in its address (/?token=...), twice. First
+// the whole map: its DOM (the statistics, the refusal's reason, the view transform) and its
+// pixels (the segments, the first traversal, the vehicles and the refusal where the transform
+// puts them, in their colours; the panel styled). Then zoomed on the newest localized answer:
+// its covariance ellipse, a ring of the expected size. Skipped when Chromium is not installed
+// (scripts/install-deps.sh installs it).
+//
+// By default on the server suites' tiny city (its map copied with the first traversal as the
+// trajectory: the shared map has none), three revisit queries of one vehicle.
+// SEGMATCH_CONSOLE_DEMO=FOLDER (scripts/demo.sh's output: demo-map.sqlite and world/): the demo
+// city instead, two vehicles replaying its sequence 01 through segmatch-eval (docs/console.md).
+// SEGMATCH_CONSOLE_SCREENSHOT=FILE keeps the whole map's screenshot (docs/img/console.png and
+// docs/img/console-demo.png are taken so).
+#include "server/console_page.h"
 #include "server/http_util.h"
 #include "server_test_util.h"
 
 #include <segmatch/server/console.h>
 #include <segmatch/server/metrics.h>
+#include <segmatch/sim/city.h>
+#include <segmatch/sim/dataset.h>
+#include <segmatch/storage/map_reader.h>
+#include <segmatch/storage/map_writer.h>
 
 #include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
+
+#include <sys/stat.h>
 
 #include <filesystem>
-#include <fstream>
-#include <functional>
-#include <regex>
-#include <sstream>
+#include <iomanip>
 
 using namespace segmatch;
 using namespace segmatch::testing;
 using nlohmann::json;
+namespace fs = std::filesystem;
 
 namespace {
 
 const std::string kToken = "page-test-token";
 
-std::string chromium_binary() {
-  for (const char* name : {"chromium", "chromium-browser"}) {
-    const test::CommandResult r = test::run_command(std::string("command -v ") + name);
-    if (r.code == 0 && !r.output.empty()) return r.output.substr(0, r.output.find('\n'));
+// The run's scratch folder: the shared world's (removed with it), or for the demo one of its
+// own, so that the demo run does not build the tiny world.
+struct Scratch {
+  explicit Scratch(bool demo)
+      : path(demo ? (fs::temp_directory_path() / ("segmatch_console_demo_" + std::to_string(::getpid()))).string()
+                  : test_world().folder + "/console"),
+        own(demo) {
+    fs::create_directories(path);
   }
-  return "";
-}
-
-// One headless Chromium run on `url`; --virtual-time-budget lets the page load, fetch and poll
-// (virtual time stands still while a fetch is pending) before the DOM or the pixels are taken.
-// Each run has its own profile. Without --run-all-compositor-stages-before-draw a --screenshot
-// run hung 6 times in 10 here (virtual time waiting on a frame that is never drawn; a
-// --dump-dom run never did); with it, 0 in 20. A run not finished in 25 s (they take 3-10 s)
-// is still killed and tried again, up to three times.
-std::string chromium(const std::string& binary, const std::string& what, const std::string& url, const std::string& folder) {
-  static int runs = 0;
-  test::CommandResult r;
-  std::string cmd;
-  for (int attempt = 0; attempt < 3; ++attempt) {
-    cmd = "timeout -k 5 25 " + binary + " --headless --disable-gpu --no-sandbox --hide-scrollbars --no-first-run "
-          "--disable-extensions --force-device-scale-factor=1 --window-size=1200,800 --virtual-time-budget=4000 "
-          "--run-all-compositor-stages-before-draw "
-          "--user-data-dir=" + folder + "/profile-" + std::to_string(++runs) + " " + what + " '" + url + "'";
-    r = test::run_command("(" + cmd + " > " + folder + "/chromium.out 2> " + folder + "/chromium.err)");
-    if (r.code == 0) break;
+  ~Scratch() {
+    std::error_code ec;
+    if (own && !std::getenv("SEGMATCH_KEEP_TEST_FILES")) fs::remove_all(path, ec);
   }
-  EXPECT_EQ(r.code, 0) << cmd << "\n" << r.output;
-  std::ifstream in(folder + "/chromium.out");
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-std::string attribute(const std::string& dom, const std::string& element_id, const std::string& name) {
-  const size_t at = dom.find("id=\"" + element_id + "\"");
-  if (at == std::string::npos) return "";
-  const size_t open = dom.rfind('<', at), close = dom.find('>', at);
-  const std::string tag = dom.substr(open, close - open);
-  std::smatch m;
-  if (!std::regex_search(tag, m, std::regex(name + "=\"([^\"]*)\""))) return "";
-  return m[1];
-}
-
-std::string element_text(const std::string& dom, const std::string& element_id) {
-  const size_t at = dom.find("id=\"" + element_id + "\"");
-  if (at == std::string::npos) return "";
-  const size_t start = dom.find('>', at) + 1;
-  return dom.substr(start, dom.find('<', start) - start);
-}
-
-std::string html_escaped(const std::string& text) {
-  std::string out;
-  for (char c : text) out += c == '&' ? "&amp;" : c == '<' ? "&lt;" : c == '>' ? "&gt;" : std::string(1, c);
-  return out;
-}
-
-// Pixels within `radius` of (x, y) whose colour passes `is`.
-template <typename Pred>
-int pixels_near(const cv::Mat& image, double x, double y, int radius, Pred is) {
-  int n = 0;
-  for (int dy = -radius; dy <= radius; ++dy)
-    for (int dx = -radius; dx <= radius; ++dx) {
-      const int px = static_cast<int>(std::lround(x)) + dx, py = static_cast<int>(std::lround(y)) + dy;
-      if (px < 0 || py < 0 || px >= image.cols || py >= image.rows) continue;
-      const cv::Vec3b bgr = image.at<cv::Vec3b>(py, px);
-      n += is(bgr[2], bgr[1], bgr[0]);
-    }
-  return n;
-}
-
-// The page's colours (server/console/app.js kColors), with room for antialiasing and fading.
-bool segment_blue(int r, int g, int b) { return b > 200 && r < 110 && g > 90 && g < 170; }
-bool localized_green(int r, int g, int b) { return g > 170 && r < 90 && b < 160; }
-bool refused_red(int r, int g, int b) { return r > 190 && g < 90 && b < 120; }
-
-// What the page should show: one vehicle replayed three revisit queries; another was refused at
-// its prior, the bounds' corner farthest from the first.
-struct Fleet {
-  std::vector<Eigen::Vector3d> localized_at;
-  Eigen::Vector3d prior_at;
-  api::LocalizeReply refused;
+  const std::string path;
+  const bool own;
 };
 
-Fleet replay(const RunningServer& s, const server::LoadedMap& map) {
-  Fleet f;
+// The shared map with the tiny city's first traversal as its trajectory: make_city is
+// deterministic, so this is the traversal the map's segments were taken along.
+std::shared_ptr<const server::LoadedMap> tiny_map_with_trajectory(const std::string& folder) {
+  const storage::MapReader reader = storage::MapReader::open(test_world().map_path);
+  const sim::City city = sim::make_city(sim::dataset_preset("tiny", 3));
+  std::vector<storage::Keyframe> keyframes;
+  for (size_t i = 0; i < city.first.size(); ++i)
+    keyframes.push_back({static_cast<uint32_t>(i), city.first.times_s[i], city.first.T_world_lidar[i]});
+  const std::string path = folder + "/tiny-with-trajectory.sqlite";
+  storage::MapWriter writer = storage::MapWriter::create(path, reader.metadata(), true);
+  writer.add_segments(reader.load_segments(), {});
+  writer.set_trajectory(keyframes);
+  writer.commit();
+  return server::load_map(path);
+}
+
+// One vehicle, three revisit queries; where it was localized.
+std::vector<Eigen::Vector3d> replay_tiny(const RunningServer& s) {
+  std::vector<Eigen::Vector3d> localized_at;
   api::Client vehicle = s.client(kToken);
   for (size_t i = 0; i < 3; ++i) {
     const Query& q = test_world().queries()[i];
     const api::LocalizeReply r = vehicle.localize(q.request);
-    if (r.status == api::LocalizeStatus::kLocalized) f.localized_at.push_back(r.T_map_local * q.request.sensor_position_local);
+    if (r.status == api::LocalizeStatus::kLocalized) localized_at.push_back(r.T_map_local * q.request.sensor_position_local);
   }
-  if (f.localized_at.empty()) return f;
-  f.prior_at = map.extent_min;
+  return localized_at;
+}
+
+// The demo city as docs/console.md shows it: its sequence 01 replayed through this server by
+// two vehicles (segmatch-eval localize, one connection each), one asking globally every 5 m up
+// to scan 400, one tracking every 4 m from scan 400 to 720. The replays end there, not at the
+// sequence's end (where both would stand on the same street): where the two were when the
+// picture was first taken by hand, 24 s into full replays.
+void replay_demo(const RunningServer& s, const std::string& demo, const std::string& folder) {
+  const std::string eval = std::string(SEGMATCH_BIN_DIR) + "/segmatch-eval";
+  ASSERT_TRUE(fs::exists(eval)) << eval << " is missing: cmake --build build --target segmatch-eval";
+  const std::string token_file = folder + "/token";
+  std::ofstream(token_file) << kToken;
+  ::chmod(token_file.c_str(), 0600);
+  const std::string common = "'" + eval + "' localize --map '" + demo + "/demo-map.sqlite' --sim '" + demo +
+                             "/world' --server 127.0.0.1:" + std::to_string(s.server->port()) + " --token-file '" +
+                             token_file + "' --quiet";
+  const test::CommandResult r = test::run_command(
+      "(" + common + " --every-m 5 --last 400 > '" + folder + "/global.log' 2>&1 & a=$!; " + common +
+      " --every-m 4 --track --first 400 --last 720 > '" + folder + "/tracking.log' 2>&1 & b=$!; "
+      "wait $a; ra=$?; wait $b; rb=$?; exit $((ra | rb)))");
+  ASSERT_EQ(r.code, 0) << r.output << test::run_command("tail -5 '" + folder + "/global.log' '" + folder + "/tracking.log'").output;
+}
+
+// A refusal at its prior: the corner of the map's bounds farthest from `from`.
+std::pair<Eigen::Vector3d, api::LocalizeReply> refuse_far_from(const RunningServer& s, const server::LoadedMap& map,
+                                                               const Eigen::Vector3d& from) {
+  Eigen::Vector3d prior = map.extent_min;
   for (const Eigen::Vector3d& corner : {map.extent_min, map.extent_max, Eigen::Vector3d(map.extent_min.x(), map.extent_max.y(), 0),
                                        Eigen::Vector3d(map.extent_max.x(), map.extent_min.y(), 0)})
-    if ((corner - f.localized_at.front()).head<2>().norm() > (f.prior_at - f.localized_at.front()).head<2>().norm()) f.prior_at = corner;
-  f.prior_at.z() = 0;
+    if ((corner - from).head<2>().norm() > (prior - from).head<2>().norm()) prior = corner;
+  prior.z() = 0;
   api::LocalizeRequest refuse;
   refuse.request_id = 99;
   refuse.flags = api::kFlagHasPrior;
-  refuse.T_map_local_prior.translation() = f.prior_at;
+  refuse.T_map_local_prior.translation() = prior;
   refuse.prior_radius_m = 5.0;
   refuse.points.push_back(Point{1.f, 1.f, 1.f, 0.f});
-  f.refused = s.client(kToken).localize(refuse);
-  return f;
+  return {prior, s.client(kToken).localize(refuse)};
 }
 
-// The segments blue at (nearly) every centroid and nowhere in the margin; a green disc where
-// each localization put the sensor; a red ring at the refusal's prior.
-void check_pixels(const cv::Mat& shot, const server::LoadedMap& map, const Fleet& f, const std::function<cv::Point2d(const Eigen::Vector3d&)>& to_px) {
-  size_t blue = 0, checked = 0;
-  for (const Segment& seg : map.localizer->targets()) {
-    const cv::Point2d p = to_px(seg.centroid.cast<double>());
-    bool near_vehicle = cv::norm(p - to_px(f.prior_at)) < 22;
-    for (const Eigen::Vector3d& v : f.localized_at) near_vehicle |= cv::norm(p - to_px(v)) < 22;
-    if (near_vehicle) continue;
-    ++checked;
-    blue += pixels_near(shot, p.x, p.y, 1, segment_blue) > 0;
+json get_json(uint16_t port, const std::string& target) {
+  const HttpReply r = http_get(port, target + (target.find('?') == std::string::npos ? "?" : "&") + "token=" + kToken);
+  EXPECT_EQ(r.status, 200) << target << ": " << r.body;
+  return json::parse(r.body, nullptr, false);
+}
+
+// Every answer the server keeps, oldest first.
+json all_answers(uint16_t port) {
+  json out = json::array();
+  for (uint64_t cursor = 0;;) {
+    const json reply = get_json(port, "/api/answers?since=" + std::to_string(cursor));
+    if (reply["answers"].empty()) return out;
+    for (const json& a : reply["answers"]) out.push_back(a);
+    cursor = reply["cursor"];
   }
-  EXPECT_GT(checked, 50u);
-  EXPECT_GE(blue, checked * 95 / 100) << blue << " of " << checked << " segment centroids drawn blue";
-  EXPECT_EQ(pixels_near(shot, 6, 6, 5, segment_blue), 0);
-  for (const Eigen::Vector3d& v : f.localized_at) {
-    const cv::Point2d p = to_px(v);
-    // The newest is a 7 px disc, the older ones 3 px: either fills most of the 5 x 5 around it.
-    EXPECT_GE(pixels_near(shot, p.x, p.y, 2, localized_green), 12) << "no vehicle drawn at " << p;
-  }
-  const cv::Point2d r = to_px(f.prior_at);
-  EXPECT_GE(pixels_near(shot, r.x, r.y, 9, refused_red), 15) << "no refusal drawn at " << r;
-  EXPECT_LE(pixels_near(shot, r.x, r.y, 2, refused_red), 4) << "a refusal is a ring, not a disc";
+}
+
+size_t localized_in(const json& answers) {
+  return static_cast<size_t>(std::count_if(answers.begin(), answers.end(), [](const json& a) { return a["status"] == "localized"; }));
+}
+
+// The statistics agree with the server's counters, with Prometheus' and with the answers.
+void check_statistics(uint16_t port, const server::Server& server, const server::Metrics& metrics, size_t localized) {
+  const json stats = get_json(port, "/api/stats");
+  const server::ServerCounters counters = server.counters();
+  EXPECT_EQ(stats["counters"]["localize_requests"], counters.localize_requests);
+  EXPECT_EQ(stats["counters"]["localized"], counters.localized);
+  EXPECT_EQ(counters.localized, localized);
+  EXPECT_EQ(stats["localization"]["by_type_status"]["LOCALIZE/localized"], localized);
+  const std::string prom = metrics.text();
+  EXPECT_NE(prom.find("segmatch_requests_total{status=\"localized\",type=\"LOCALIZE\"} " + std::to_string(localized)),
+            std::string::npos) << prom;
+  EXPECT_EQ(stats["localization"]["latency_ms"]["samples"], std::min<uint64_t>(counters.localize_requests, 1024));
+}
+
+// The page zoomed on the newest localized answer that carries a covariance: a box whose fit
+// (within 652 px of the canvas) makes the 2-sigma ellipse's semi-major axis 150 px.
+void check_zoomed_ellipse(const std::string& browser, const std::string& url, const std::string& folder,
+                          const std::vector<DrawnAnswer>& drawn) {
+  const auto with_ellipse = std::find_if(drawn.rbegin(), drawn.rend(), [](const DrawnAnswer& a) {
+    return a.newest && a.localized() && !a.answer["pose"]["from_prior"].get<bool>() && a.answer.contains("covariance_xy");
+  });
+  ASSERT_NE(with_ellipse, drawn.rend()) << "no newest answer of a client carries a covariance";
+  const json& c = with_ellipse->answer["covariance_xy"];
+  const double mean = (c[0].get<double>() + c[2].get<double>()) / 2;
+  const double major_sigma = std::sqrt(mean + std::hypot((c[0].get<double>() - c[2].get<double>()) / 2, c[1].get<double>()));
+  const double half = 652.0 * 2 * major_sigma / 150 / 2;
+  std::ostringstream box;
+  box << std::setprecision(12) << with_ellipse->x() - half << ',' << with_ellipse->y() - half << ','
+      << with_ellipse->x() + half << ',' << with_ellipse->y() + half;
+  const PageRun zoomed = open_page(browser, url + "&view=" + box.str(), folder, folder + "/ellipse.png");
+  ASSERT_FALSE(zoomed.shot.empty());
+  const View near = view_of(zoomed.dom, 860, 700);
+  EXPECT_NEAR(near.cx, with_ellipse->x(), 1e-6);
+  check_ellipse(zoomed.shot, near, *with_ellipse);
 }
 
 }  // namespace
@@ -164,55 +184,70 @@ void check_pixels(const cv::Mat& shot, const server::LoadedMap& map, const Fleet
 TEST(ServerConsole, PageDrawsTheMapAndTheFleetAndShowsRefusals) {
   const std::string browser = chromium_binary();
   if (browser.empty()) GTEST_SKIP() << "chromium is not installed (scripts/install-deps.sh installs it): the page was not opened";
+  const char* demo = std::getenv("SEGMATCH_CONSOLE_DEMO");
+  const Scratch folder(demo != nullptr);
   auto metrics = std::make_shared<server::Metrics>();
   server::ServerConfig config;
   config.token = kToken;
   config.metrics = metrics;
-  RunningServer s(config);
+  const std::shared_ptr<const server::LoadedMap> loaded =
+      demo ? server::load_map(std::string(demo) + "/demo-map.sqlite") : tiny_map_with_trajectory(folder.path);
+  const server::LoadedMap& map = *loaded;
+  RunningServer s(config, loaded);
   server::ConsoleConfig cc;
   cc.token = kToken;
   const server::Console page(cc, *s.server);
-  const server::LoadedMap& map = *s.server->map();
-  const Fleet fleet = replay(s, map);
-  ASSERT_FALSE(fleet.localized_at.empty());
-  ASSERT_NE(fleet.refused.status, api::LocalizeStatus::kLocalized);
-  const json answers = json::parse(http_get(page.port(), "/api/answers?token=" + kToken).body);
-  const std::string refusal_code = answers["answers"].back()["refusal"];
+  const std::vector<Eigen::Vector3d> tiny_localized = demo ? std::vector<Eigen::Vector3d>{} : replay_tiny(s);
+  if (demo) replay_demo(s, demo, folder.path);
+  if (::testing::Test::HasFatalFailure()) return;
+  json answers = all_answers(page.port());
+  const auto first = std::find_if(answers.begin(), answers.end(), [](const json& a) { return a["status"] == "localized"; });
+  ASSERT_NE(first, answers.end()) << "nothing was localized";
+  const auto [prior_at, refused] = refuse_far_from(s, map, {(*first)["pose"]["x"].get<double>(), (*first)["pose"]["y"].get<double>(), 0.0});
+  ASSERT_NE(refused.status, api::LocalizeStatus::kLocalized);
+  answers = all_answers(page.port());
+  const std::string refusal_code = answers.back()["refusal"];
+  const size_t localized = localized_in(answers);
+  if (!demo) {  // the page is served what the vehicle was told
+    ASSERT_EQ(localized, tiny_localized.size());
+    size_t i = 0;
+    for (const json& a : answers)
+      if (a["status"] == "localized") {
+        const Eigen::Vector2d served(a["pose"]["x"].get<double>(), a["pose"]["y"].get<double>());
+        EXPECT_LT((served - tiny_localized[i++].head<2>()).norm(), 1e-6);
+      }
+  }
 
-  // The statistics agree with the server's counters and with Prometheus'.
-  const json stats = json::parse(http_get(page.port(), "/api/stats?token=" + kToken).body);
+  check_statistics(page.port(), *s.server, *metrics, localized);
   const server::ServerCounters counters = s.server->counters();
-  EXPECT_EQ(stats["counters"]["localize_requests"], counters.localize_requests);
-  EXPECT_EQ(stats["counters"]["localized"], counters.localized);
-  EXPECT_EQ(stats["localization"]["by_type_status"]["LOCALIZE/localized"], fleet.localized_at.size());
-  const std::string prom = metrics->text();
-  EXPECT_NE(prom.find("segmatch_requests_total{status=\"localized\",type=\"LOCALIZE\"} " + std::to_string(fleet.localized_at.size())),
-            std::string::npos) << prom;
-  EXPECT_EQ(stats["localization"]["latency_ms"]["samples"], counters.localize_requests);
 
-  // The DOM after the page's scripts ran: its numbers, the refusal's reason, the view transform.
-  const std::string folder = test_world().folder + "/console";
-  std::filesystem::create_directories(folder);
-  // One poll, then nothing in flight: a run whose page kept polling hung now and then (no
-  // screenshot after minutes) while virtual time waited on the fetches.
-  // No fading within the hour: a retried screenshot comes a minute later.
+  // The whole map. One poll, then nothing in flight: a run whose page kept polling hung now and
+  // then while virtual time waited on the fetches. No fading within the hour: a retried run
+  // comes a minute later.
   const std::string url = page.url() + "?token=" + kToken + "&size=860x700&polls=1&fade_s=3600";
-  const std::string dom = chromium(browser, "--dump-dom", url, folder);
-  ASSERT_FALSE(attribute(dom, "map", "data-scale").empty()) << dom.substr(0, 4000);
-  EXPECT_EQ(element_text(dom, "map-name"), "tiny-3");
+  const PageRun whole = open_page(browser, url, folder.path, folder.path + "/console.png");
+  ASSERT_FALSE(whole.shot.empty());
+  if (const char* keep = std::getenv("SEGMATCH_CONSOLE_SCREENSHOT"))
+    fs::copy_file(folder.path + "/console.png", keep, fs::copy_options::overwrite_existing);
+  const std::string& dom = whole.dom;
+  EXPECT_EQ(element_text(dom, "map-name"), map.metadata.name);
   EXPECT_EQ(element_text(dom, "stat-localize_requests"), std::to_string(counters.localize_requests));
   EXPECT_EQ(element_text(dom, "stat-localized"), std::to_string(counters.localized));
   EXPECT_EQ(element_text(dom, "stat-errors"), std::to_string(counters.errors));
   EXPECT_NE(dom.find("id=\"refusal-" + refusal_code + "\""), std::string::npos) << "refusals by reason";
-  EXPECT_NE(dom.find(html_escaped(refusal_code + ": " + fleet.refused.reason)), std::string::npos) << "the refusal's reason";
-  const double scale = std::stod(attribute(dom, "map", "data-scale")), cx = std::stod(attribute(dom, "map", "data-cx")),
-               cy = std::stod(attribute(dom, "map", "data-cy"));
+  EXPECT_NE(dom.find(html_escaped(refusal_code + ": " + refused.reason)), std::string::npos) << "the refusal's reason";
+  const View view = view_of(dom, 860, 700);
+  ASSERT_GT(view.scale, 0);
+  EXPECT_GE(pixels_near(whole.shot, 1194, 400, 2, panel_background), 15) << "the style sheet was not applied";
+  std::vector<Eigen::Vector3d> centroids;
+  for (const Segment& seg : map.localizer->targets()) centroids.push_back(seg.centroid.cast<double>());
+  const std::vector<DrawnAnswer> drawn = drawn_answers(answers);
+  check_segments(whole.shot, view, centroids, drawn);
+  check_localized(whole.shot, view, drawn);
+  check_refusal(whole.shot, view, prior_at);
+  const json trajectory = get_json(page.port(), "/api/map")["trajectory"];
+  ASSERT_GT(trajectory.size(), 10u) << "the map has no trajectory to draw";
+  check_trajectory(whole.shot, view, trajectory, centroids, drawn);
 
-  chromium(browser, "--screenshot=" + folder + "/console.png", url, folder);
-  const cv::Mat shot = cv::imread(folder + "/console.png", cv::IMREAD_COLOR);
-  ASSERT_FALSE(shot.empty());
-  if (const char* keep = std::getenv("SEGMATCH_CONSOLE_SCREENSHOT"))
-    std::filesystem::copy_file(folder + "/console.png", keep, std::filesystem::copy_options::overwrite_existing);
-  // The canvas is 860 x 700 (?size=) at the page's top left: its centre is (430, 350).
-  check_pixels(shot, map, fleet, [&](const Eigen::Vector3d& v) { return cv::Point2d(430 + (v.x() - cx) * scale, 350 - (v.y() - cy) * scale); });
+  check_zoomed_ellipse(browser, url, folder.path, drawn);
 }

@@ -74,9 +74,10 @@ inline double angle_error_deg(const Pose3d& a, const Pose3d& b) {
   return Eigen::AngleAxisd(a.linear().transpose() * b.linear()).angle() * 180.0 / M_PI;
 }
 
-// A server on an ephemeral loopback port, log lines kept for inspection.
+// A server on an ephemeral loopback port, log lines kept for inspection; on the shared world's
+// map unless given another.
 struct RunningServer {
-  explicit RunningServer(server::ServerConfig config = {}) {
+  explicit RunningServer(server::ServerConfig config = {}, std::shared_ptr<const server::LoadedMap> map = nullptr) {
     config.listen_address = "127.0.0.1";
     config.port = 0;
     if (config.workers == 0) config.workers = 2;
@@ -84,7 +85,10 @@ struct RunningServer {
       std::lock_guard<std::mutex> lock(log_mutex);
       log.push_back(line);
     };
-    static std::shared_ptr<const server::LoadedMap> map = server::load_map(test_world().map_path);
+    if (!map) {
+      static const std::shared_ptr<const server::LoadedMap> shared = server::load_map(test_world().map_path);
+      map = shared;
+    }
     server = std::make_unique<server::Server>(config, map);
     server->start();
   }

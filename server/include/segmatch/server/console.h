@@ -25,9 +25,10 @@ class Server;
 struct ConsoleConfig {
   std::string listen_address = "127.0.0.1";  // loopback unless another address is asked for
   uint16_t port = 0;                         // 0: a free one, see Console::port()
-  // The server's shared secret (ServerConfig::token): every request for data (/api/, /metrics)
-  // must carry it, as "Authorization: Bearer TOKEN" or "?token=TOKEN" (the page passes its own
-  // on); the page's files hold none and are served without it. Empty: none.
+  // The server's shared secret (ServerConfig::token): every request, the page's own files too,
+  // must carry it, as "Authorization: Bearer TOKEN" or "?token=TOKEN"; otherwise 401. A browser
+  // opens the page as /?token=TOKEN: the page then names its script and style sheet with the
+  // token, and its API calls send the header. Empty: none.
   std::string token;
   int threads = 4;                 // HTTP worker threads (each serves one connection at a time)
   int request_timeout_ms = 5000;   // a request (headers) not read whole in this time: dropped
