@@ -3,7 +3,7 @@
 // calling thread (one core), against the real-time budget: a local cloud every N metres at
 // 10 m/s leaves N / 10 s per local cloud. Scans are simulated between steps, not timed. Also
 // prints the time of the steps that only accumulate a scan.
-#include "segmatch/core/loop_closure.h"
+#include "segmatch/core/loop/loop_closure.h"
 #include "segmatch/sim/dataset.h"
 #include "segmatch/sim/lidar.h"
 #include "segmatch/sim/traversal.h"

@@ -1,9 +1,9 @@
 // Map building throughput on simulated HDL-64E scans: the scans are simulated first, so only
 // the mapping (accumulation, crop, segmentation, description, merging) and the map write are
 // timed, on one core.
-#include "segmatch/core/local_cloud.h"
-#include "segmatch/core/map_builder.h"
-#include "segmatch/core/voxel_accumulator.h"
+#include "segmatch/core/localization/local_cloud.h"
+#include "segmatch/core/mapping/map_builder.h"
+#include "segmatch/core/preprocess/voxel_accumulator.h"
 #include "segmatch/sim/dataset.h"
 #include "segmatch/sim/lidar.h"
 #include "segmatch/sim/raycaster.h"

@@ -4,9 +4,9 @@
 // excludes the conversion to pcl::PointCloud<pcl::PointXYZ>.
 #pragma once
 
-#include "segmatch/core/localizer.h"
-#include "segmatch/core/segment.h"
-#include "segmatch/core/types.h"
+#include "segmatch/core/localization/localizer.h"
+#include "segmatch/core/segmentation/segment.h"
+#include "segmatch/core/common/types.h"
 
 #include <chrono>
 #include <cstddef>

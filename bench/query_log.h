@@ -2,7 +2,7 @@
 // against a reference pose) and the table it prints of them.
 #pragma once
 
-#include "segmatch/core/localizer.h"
+#include "segmatch/core/localization/localizer.h"
 
 #include <cstddef>
 #include <vector>

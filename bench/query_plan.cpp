@@ -1,6 +1,6 @@
 #include "query_plan.h"
 
-#include "segmatch/core/random.h"
+#include "segmatch/core/detail/random.h"
 #include "segmatch/sim/traversal.h"
 
 #include <algorithm>

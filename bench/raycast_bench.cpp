@@ -8,8 +8,8 @@
 // Usage: segmatch-bench-raycast [--scans N] [--details N] [--seed N]
 //   --details  facade detail boxes per street-facing building (default 36: ~100k
 //              primitives in total; 90 gives ~200k, 150 ~300k)
-#include "segmatch/core/random.h"
-#include "segmatch/core/types.h"
+#include "segmatch/core/detail/random.h"
+#include "segmatch/core/common/types.h"
 #include "segmatch/sim/lidar.h"
 #include "segmatch/sim/raycaster.h"
 #include "segmatch/sim/scene.h"

@@ -1,7 +1,7 @@
 #include "server_bench_world.h"
 
-#include <segmatch/core/preprocess.h>
-#include <segmatch/core/surface_layer.h>
+#include <segmatch/core/preprocess/preprocess.h>
+#include <segmatch/core/mapping/surface_layer.h>
 #include <segmatch/sim/keyframes.h>
 #include <segmatch/sim/local_clouds.h>
 #include <segmatch/storage/map_writer.h>

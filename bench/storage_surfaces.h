@@ -3,7 +3,7 @@
 // to open the map and to read the layer near a place.
 #pragma once
 
-#include <segmatch/core/types.h>
+#include <segmatch/core/common/types.h>
 #include <segmatch/storage/map_types.h>
 
 #include <string>

@@ -7,7 +7,7 @@
 // world, other lane). Each query segment's k nearest map segments in feature space are its
 // candidate pairs; same instance = positive; negatives are kept at 1:50 (paper IV-B).
 #include "segmatch/cli/progress.h"
-#include "segmatch/core/training.h"
+#include "segmatch/core/training/training.h"
 #include "segmatch/eval/real_pairs.h"
 #include "segmatch/io/error.h"
 #include "segmatch/io/auto_profile.h"

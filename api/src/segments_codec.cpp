@@ -14,8 +14,8 @@
 
 #include "codec_util.h"
 
-#include <segmatch/core/esf_quantization.h>
-#include <segmatch/core/localizer.h>
+#include <segmatch/core/description/esf_quantization.h>
+#include <segmatch/core/localization/localizer.h>
 
 #include <algorithm>
 #include <cmath>

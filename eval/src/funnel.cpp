@@ -1,7 +1,7 @@
 #include "segmatch/eval/funnel.h"
 #include "segmatch/eval/localization_run.h"
 
-#include "segmatch/core/support.h"
+#include "segmatch/core/verification/support.h"
 #include "segmatch/io/pose_io.h"
 #include "segmatch/io/replay.h"
 #include "segmatch/io/sequence.h"

@@ -4,7 +4,7 @@
 #pragma once
 
 #include "segmatch/api/tracker.h"
-#include "segmatch/core/random.h"
+#include "segmatch/core/detail/random.h"
 #include "segmatch/eval/localization_run.h"
 
 #include <functional>

@@ -1,8 +1,8 @@
 #include "segmatch/eval/real_pairs.h"
 
 #include "segmatch/cli/progress.h"
-#include "segmatch/core/map_builder.h"
-#include "segmatch/core/voxel_accumulator.h"
+#include "segmatch/core/mapping/map_builder.h"
+#include "segmatch/core/preprocess/voxel_accumulator.h"
 #include "segmatch/io/sequence.h"
 
 #include <vector>

@@ -1,6 +1,6 @@
 #include "segmatch/io/replay.h"
 
-#include "segmatch/core/voxel_accumulator.h"
+#include "segmatch/core/preprocess/voxel_accumulator.h"
 #include "segmatch/io/error.h"
 
 #include <cmath>

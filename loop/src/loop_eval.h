@@ -3,7 +3,7 @@
 // local clouds taken near a place driven long enough before.
 #pragma once
 
-#include <segmatch/core/loop_closure.h>
+#include <segmatch/core/loop/loop_closure.h>
 
 #include <string>
 #include <vector>

@@ -7,7 +7,7 @@
 #include "loop_output.h"
 #include "trajectory_output.h"
 
-#include <segmatch/core/loop_closure.h>
+#include <segmatch/core/loop/loop_closure.h>
 #include <segmatch/io/auto_profile.h>
 #include <segmatch/io/pipeline_config.h>
 #include <segmatch/io/pose_io.h>

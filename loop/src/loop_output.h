@@ -1,7 +1,7 @@
 // What segmatch-loop writes: the loops as text, a g2o pose graph and a top-down picture.
 #pragma once
 
-#include <segmatch/core/loop_closure.h>
+#include <segmatch/core/loop/loop_closure.h>
 
 #include "loop_eval.h"
 

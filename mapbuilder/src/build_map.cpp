@@ -4,8 +4,8 @@
 #include "loop_poses.h"
 
 #include <segmatch/cli/progress.h>
-#include <segmatch/core/map_builder.h>
-#include <segmatch/core/matcher.h>
+#include <segmatch/core/mapping/map_builder.h>
+#include <segmatch/core/matching/matcher.h>
 #include <segmatch/io/auto_profile.h>
 #include <segmatch/io/pipeline_config.h>
 #include <segmatch/io/sequence.h>

@@ -1,7 +1,7 @@
 #include "loop_poses.h"
 
 #include <segmatch/cli/progress.h>
-#include <segmatch/core/matcher.h>
+#include <segmatch/core/matching/matcher.h>
 #include <segmatch/posegraph/close_loops.h>
 
 #include <cstdio>

@@ -2,7 +2,7 @@
 // (ASCII PLY or PCD, since io's writers carry intensity, not colour) and a top-down PNG.
 #pragma once
 
-#include <segmatch/core/segment.h>
+#include <segmatch/core/segmentation/segment.h>
 #include <segmatch/storage/map_types.h>
 
 #include <cstdint>

@@ -8,7 +8,7 @@
 #include <limits>
 #include <vector>
 
-#include <segmatch/core/simd.h>
+#include <segmatch/core/detail/simd.h>
 
 namespace segmatch::sim::bvh {
 
@@ -74,7 +74,7 @@ struct alignas(16) Aabb {
                  -std::numeric_limits<float>::infinity(),
                  -std::numeric_limits<float>::infinity(), 0.0f};
 
-  // Lane-wise as one four-float min and max (segmatch/core/simd.h); the 4th lane is unused.
+  // Lane-wise as one four-float min and max (segmatch/core/detail/simd.h); the 4th lane is unused.
   void grow(const Aabb& o) {
     simd::store(lo, simd::min(simd::load(lo), simd::load(o.lo)));
     simd::store(hi, simd::max(simd::load(hi), simd::load(o.hi)));

@@ -1,7 +1,7 @@
 #include "segmatch/sim/keyframes.h"
 
-#include "segmatch/core/preprocess.h"
-#include "segmatch/core/random.h"
+#include "segmatch/core/preprocess/preprocess.h"
+#include "segmatch/core/detail/random.h"
 #include "segmatch/io/cloud_io.h"
 #include "segmatch/io/pose_io.h"
 

@@ -20,7 +20,7 @@
 // sin and cos are involved: bitwise reproducible on machines of the same kind (same libm).
 #include "segmatch/sim/lidar.h"
 
-#include "segmatch/core/random.h"
+#include "segmatch/core/detail/random.h"
 
 #include <algorithm>
 #include <atomic>

@@ -1,6 +1,6 @@
 #include "segmatch/sim/local_clouds.h"
 
-#include "segmatch/core/voxel_accumulator.h"
+#include "segmatch/core/preprocess/voxel_accumulator.h"
 
 #include <algorithm>
 #include <atomic>

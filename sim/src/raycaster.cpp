@@ -4,7 +4,7 @@
 // over the primitives' tight world-space AABBs gives a binary tree, which is collapsed into
 // 8-wide nodes (repeatedly opening the child with the largest surface area) flattened
 // depth-first into one array. A node stores its children's AABBs structure-of-arrays, so
-// four-lane SIMD (segmatch/core/simd.h) tests four children at a time. Leaves hold up to kMaxLeafSize primitives,
+// four-lane SIMD (segmatch/core/detail/simd.h) tests four children at a time. Leaves hold up to kMaxLeafSize primitives,
 // stored contiguously in leaf order in a packed, intersection-ready form (precomputed yaw
 // sin/cos, triangle edges, inverse semi-axes, ...). Degenerate primitives (non-finite
 // values, negative or zero size, zero-area triangles) are skipped.
@@ -33,7 +33,7 @@
 #include <cmath>
 #include <limits>
 
-#include <segmatch/core/simd.h>
+#include <segmatch/core/detail/simd.h>
 
 namespace segmatch::sim {
 

@@ -1,7 +1,7 @@
 // World layout: street grid, terrain, and the ground surface (roads, kerbs, sidewalks).
 #include "segmatch/sim/world.h"
 
-#include "segmatch/core/random.h"
+#include "segmatch/core/detail/random.h"
 #include "world_internal.h"
 
 #include <algorithm>

@@ -2,7 +2,7 @@
 // world_changes.cpp.
 #pragma once
 
-#include "segmatch/core/random.h"
+#include "segmatch/core/detail/random.h"
 #include "segmatch/sim/world.h"
 #include "world_parts.h"
 

@@ -1,7 +1,7 @@
 // Private builders of object geometry for the world generator (world_objects.cpp).
 #pragma once
 
-#include "segmatch/core/random.h"
+#include "segmatch/core/detail/random.h"
 #include "segmatch/sim/world.h"
 
 #include <Eigen/Core>

@@ -1,6 +1,6 @@
 #include "packed_blobs.h"
 
-#include <segmatch/core/esf_quantization.h>
+#include <segmatch/core/description/esf_quantization.h>
 #include <segmatch/storage/map_types.h>
 
 #include "segment_codec.h"

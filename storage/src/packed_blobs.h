@@ -9,7 +9,7 @@
 
 #include "bytes.h"
 
-#include <segmatch/core/segment.h>
+#include <segmatch/core/segmentation/segment.h>
 
 #include <cstdint>
 #include <string>

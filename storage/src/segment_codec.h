@@ -2,7 +2,7 @@
 // BLOBs and the XXH64 row checksum. Pure functions; no SQLite.
 #pragma once
 
-#include <segmatch/core/segment.h>
+#include <segmatch/core/segmentation/segment.h>
 #include <segmatch/storage/map_types.h>
 
 #include "bytes.h"

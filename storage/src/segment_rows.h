@@ -3,7 +3,7 @@
 // packed, in segment_points (one row per segment, same row number) with their own checksum.
 #pragma once
 
-#include <segmatch/core/segment.h>
+#include <segmatch/core/segmentation/segment.h>
 
 #include "segment_codec.h"
 #include "sqlite_util.h"

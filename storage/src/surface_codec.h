@@ -3,7 +3,7 @@
 // and the tile row's XXH64 checksum. Pure functions; no SQLite.
 #pragma once
 
-#include <segmatch/core/types.h>
+#include <segmatch/core/common/types.h>
 
 #include "bytes.h"
 

@@ -2,7 +2,7 @@
 // read by MapReader::surfaces() / surface_tile(), inspected by check_integrity().
 #pragma once
 
-#include <segmatch/core/types.h>
+#include <segmatch/core/common/types.h>
 #include <segmatch/storage/map_types.h>
 
 #include "reader_impl.h"

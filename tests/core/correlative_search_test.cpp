@@ -2,7 +2,7 @@
 // generated street (a prior 14 m and 6 degrees off comes back within a cell and a step), a
 // brute-force oracle of its score, a street of identical poles (its peaks a pole spacing apart,
 // scored alike: the ambiguity the localizer refuses), and the search's bounds.
-#include "segmatch/core/correlative_search.h"
+#include "segmatch/core/localization/correlative_search.h"
 #include "support/street_scene.h"
 
 #include <gtest/gtest.h>

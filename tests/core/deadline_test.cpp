@@ -1,9 +1,9 @@
 // A query's deadline (core/deadline.h, a server's --request-timeout-s): a passed deadline stops
 // the localizer at its next stage boundary with a typed refusal; a deadline that does not pass
 // changes nothing.
-#include "segmatch/core/deadline.h"
-#include "segmatch/core/descriptors.h"
-#include "segmatch/core/localizer.h"
+#include "segmatch/core/common/deadline.h"
+#include "segmatch/core/description/descriptors.h"
+#include "segmatch/core/localization/localizer.h"
 #include "support/street_scene.h"
 
 #include <gtest/gtest.h>

@@ -1,7 +1,7 @@
 // Tests of the segment descriptors (SegMatch section III-C): Weinmann eigenvalue features and
 // the Ensemble of Shape Functions.
-#include "segmatch/core/descriptors.h"
-#include "segmatch/core/random.h"
+#include "segmatch/core/description/descriptors.h"
+#include "segmatch/core/detail/random.h"
 
 #include <gtest/gtest.h>
 

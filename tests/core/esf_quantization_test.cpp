@@ -1,6 +1,6 @@
 // core/esf_quantization.h: the error bound, exactness of the round trip from the integers on,
 // and the edge cases (all zero, negative or NaN bins, a bin too large for the range).
-#include <segmatch/core/esf_quantization.h>
+#include <segmatch/core/description/esf_quantization.h>
 
 #include <gtest/gtest.h>
 

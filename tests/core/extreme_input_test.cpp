@@ -1,8 +1,8 @@
 // Valid but extreme inputs: an empty cloud, a million points in one voxel, a city
 // 10,000 km from the origin, a segment of one point. Each gets an answer (a pose or a typed
 // refusal) with finite numbers; nothing throws, crashes or hangs.
-#include "segmatch/core/descriptors.h"
-#include "segmatch/core/localizer.h"
+#include "segmatch/core/description/descriptors.h"
+#include "segmatch/core/localization/localizer.h"
 #include "support/street_scene.h"
 
 #include <gtest/gtest.h>

@@ -1,7 +1,7 @@
 // The input profile's neighbour searches (a cell grid, neighbour cells pruned by their distance,
 // the agreement probe stopping at its first hit) against brute force over every point pair:
 // random clouds with points on the cell boundaries, duplicates and non-finite points.
-#include "segmatch/core/input_profile.h"
+#include "segmatch/core/profile/input_profile.h"
 
 #include <gtest/gtest.h>
 

@@ -1,7 +1,7 @@
 // The auto profile's measurements on generated scans of known geometry: a 360-degree spinning
 // scan (raw and voxel-downsampled) and a 70-degree forward cone.
-#include "segmatch/core/input_profile.h"
-#include "segmatch/core/preprocess.h"
+#include "segmatch/core/profile/input_profile.h"
+#include "segmatch/core/preprocess/preprocess.h"
 
 #include <gtest/gtest.h>
 

@@ -1,4 +1,4 @@
-#include "segmatch/core/local_cloud.h"
+#include "segmatch/core/localization/local_cloud.h"
 
 #include <gtest/gtest.h>
 
@@ -6,7 +6,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "segmatch/core/random.h"
+#include "segmatch/core/detail/random.h"
 
 namespace segmatch {
 namespace {

@@ -1,8 +1,8 @@
 // The Localizer on synthetic scenes with exact answers: a street of distinct objects is
 // localized at the true pose; a street of identical, evenly spaced poles is refused as
 // ambiguous (any shift by the spacing explains it as well); bad input is refused, not thrown.
-#include "segmatch/core/localizer.h"
-#include "segmatch/core/random.h"
+#include "segmatch/core/localization/localizer.h"
+#include "segmatch/core/detail/random.h"
 #include "support/street_scene.h"
 
 #include <gtest/gtest.h>

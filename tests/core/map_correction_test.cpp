@@ -1,7 +1,7 @@
 // The segment map follows a corrected trajectory (core/map_correction.h): each segment moves
 // with the keyframe it was seen from, and two views of one object that drift had kept apart
 // are merged once moved, keeping the larger view.
-#include "segmatch/core/map_correction.h"
+#include "segmatch/core/mapping/map_correction.h"
 
 #include <gtest/gtest.h>
 

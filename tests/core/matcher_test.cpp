@@ -1,7 +1,7 @@
 // Segment matching (paper III-D): pair features, L2 baseline, random forest.
-#include "segmatch/core/matcher.h"
-#include "segmatch/core/random.h"
-#include "segmatch/core/retrieval.h"
+#include "segmatch/core/matching/matcher.h"
+#include "segmatch/core/detail/random.h"
+#include "segmatch/core/matching/retrieval.h"
 
 #include <gtest/gtest.h>
 

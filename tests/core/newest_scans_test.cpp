@@ -2,7 +2,7 @@
 // NewestScansConfig): an answer a little off is brought to the truth by scans that agree with
 // the map, and left as it is by scans that do not, by an answer that is not localized, or when
 // the stage is off.
-#include "segmatch/core/localizer.h"
+#include "segmatch/core/localization/localizer.h"
 #include "support/street_scene.h"
 
 #include <gtest/gtest.h>

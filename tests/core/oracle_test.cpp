@@ -3,10 +3,10 @@
 // a std::map of floor(v / leaf) keys, on random clouds and where fast paths are fragile (points
 // exactly on cell boundaries, lattices at exactly the clustering distance, coordinates near
 // +-1e6 m); and one segment's ESF descriptor pinned bit for bit.
-#include "segmatch/core/descriptors.h"
-#include "segmatch/core/preprocess.h"
-#include "segmatch/core/random.h"
-#include "segmatch/core/segmenter.h"
+#include "segmatch/core/description/descriptors.h"
+#include "segmatch/core/preprocess/preprocess.h"
+#include "segmatch/core/detail/random.h"
+#include "segmatch/core/segmentation/segmenter.h"
 
 #include <gtest/gtest.h>
 

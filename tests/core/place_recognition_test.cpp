@@ -1,8 +1,8 @@
 // Cold start (place_recognition.h, Localizer::recognize_place): Scan Context descriptors of a
 // generated street, the places of a map along its trajectory, and a query without a prior
 // localized by the place it resembles, or refused.
-#include "segmatch/core/localizer.h"
-#include "segmatch/core/place_recognition.h"
+#include "segmatch/core/localization/localizer.h"
+#include "segmatch/core/localization/place_recognition.h"
 #include "support/street_scene.h"
 
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-#include "segmatch/core/preprocess.h"
+#include "segmatch/core/preprocess/preprocess.h"
 
 #include <gtest/gtest.h>
 
@@ -7,7 +7,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "segmatch/core/random.h"
+#include "segmatch/core/detail/random.h"
 
 namespace segmatch {
 namespace {

@@ -1,8 +1,8 @@
 // Registration to the map around a prior (registration.h): known answers on generated scenes,
 // the gates (a far prior, a wide prior, a corridor), and the covariance against the spread of
 // poses over noise draws.
-#include "segmatch/core/registration.h"
-#include "segmatch/core/random.h"
+#include "segmatch/core/localization/registration.h"
+#include "segmatch/core/detail/random.h"
 
 #include <gtest/gtest.h>
 

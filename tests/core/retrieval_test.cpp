@@ -1,6 +1,6 @@
 // Candidate retrieval (paper III-D): exact kNN in z-scored eigen-feature space.
-#include "segmatch/core/random.h"
-#include "segmatch/core/retrieval.h"
+#include "segmatch/core/detail/random.h"
+#include "segmatch/core/matching/retrieval.h"
 
 #include <gtest/gtest.h>
 

@@ -1,7 +1,7 @@
 // SegmentMap keeps one segment per object: a fuller view replaces the nearest one, and when the
 // replacement's centroid lands within the duplicate distance of another segment, the one with
 // more points is kept, with the grid index consistent afterwards.
-#include "segmatch/core/segment_map.h"
+#include "segmatch/core/mapping/segment_map.h"
 
 #include <gtest/gtest.h>
 

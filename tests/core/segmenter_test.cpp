@@ -1,4 +1,4 @@
-#include "segmatch/core/segmenter.h"
+#include "segmatch/core/segmentation/segmenter.h"
 
 #include <gtest/gtest.h>
 
@@ -8,7 +8,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "segmatch/core/random.h"
+#include "segmatch/core/detail/random.h"
 
 namespace segmatch {
 namespace {

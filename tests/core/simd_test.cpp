@@ -1,8 +1,8 @@
-// segmatch/core/simd.h: every four-lane operation against the scalar model of one lane (the
+// segmatch/core/detail/simd.h: every four-lane operation against the scalar model of one lane (the
 // SSE2 instruction's semantics), bit for bit, on ordinary values and on the ones where
 // implementations differ: NaN, infinities, signed zeros, denormals. Run in the SSE2 build it
 // checks the intrinsics; in a -DSEGMATCH_SIMD=OFF build, the scalar lanes.
-#include "segmatch/core/simd.h"
+#include "segmatch/core/detail/simd.h"
 
 #include <gtest/gtest.h>
 

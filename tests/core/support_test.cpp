@@ -1,10 +1,10 @@
 // Hypothesis ranking beyond the paper: distinct verified hypotheses, support of a pose, and
 // labelled training pairs.
-#include "segmatch/core/random.h"
-#include "segmatch/core/retrieval.h"
-#include "segmatch/core/support.h"
-#include "segmatch/core/training.h"
-#include "segmatch/core/verification.h"
+#include "segmatch/core/detail/random.h"
+#include "segmatch/core/matching/retrieval.h"
+#include "segmatch/core/verification/support.h"
+#include "segmatch/core/training/training.h"
+#include "segmatch/core/verification/verification.h"
 
 #include <gtest/gtest.h>
 

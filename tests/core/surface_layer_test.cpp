@@ -1,8 +1,8 @@
 // The map's surface layer (SurfaceAccumulator): one point per occupied voxel, in the world
 // frame, each scan cut at max_range_m; the same scan added twice does not grow the layer.
-#include "segmatch/core/surface_layer.h"
+#include "segmatch/core/mapping/surface_layer.h"
 
-#include "segmatch/core/preprocess.h"
+#include "segmatch/core/preprocess/preprocess.h"
 
 #include <gtest/gtest.h>
 

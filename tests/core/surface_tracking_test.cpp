@@ -1,7 +1,7 @@
 // Tracking on the surface layer (Localizer::track, SurfaceTrackingConfig): the newest scans
 // registered onto the layer around a tracker's prior, checked against the query's segments
 // (centroids and features only: a tracking request carries no segment points).
-#include "segmatch/core/localizer.h"
+#include "segmatch/core/localization/localizer.h"
 #include "support/street_scene.h"
 
 #include <gtest/gtest.h>

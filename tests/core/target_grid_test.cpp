@@ -1,9 +1,9 @@
-// Refinement's nearest-neighbour grid (core/src/target_grid.h) against brute force: the
+// Refinement's nearest-neighbour grid (core/src/detail/target_grid.h) against brute force: the
 // nearest point within the bound (ties to the smaller index) and the k nearest, on random
 // clouds, on points sitting on cell boundaries, with and without a hint.
-#include "target_grid.h"
+#include "detail/target_grid.h"
 
-#include "segmatch/core/random.h"
+#include "segmatch/core/detail/random.h"
 
 #include <gtest/gtest.h>
 

@@ -1,6 +1,6 @@
 // Geometric verification (paper III-E) and ICP refinement.
-#include "segmatch/core/random.h"
-#include "segmatch/core/verification.h"
+#include "segmatch/core/detail/random.h"
+#include "segmatch/core/verification/verification.h"
 
 #include <gtest/gtest.h>
 

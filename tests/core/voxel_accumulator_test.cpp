@@ -2,10 +2,10 @@
 // the same order, centroids and intensities up to float summation order, same majority labels,
 // including crops after scans left the cylinder (and were subtracted) and voxels cut by the
 // cylinder's boundary (the crop is by raw point, not by voxel centroid).
-#include "segmatch/core/voxel_accumulator.h"
+#include "segmatch/core/preprocess/voxel_accumulator.h"
 
-#include "segmatch/core/local_cloud.h"
-#include "segmatch/core/preprocess.h"
+#include "segmatch/core/localization/local_cloud.h"
+#include "segmatch/core/preprocess/preprocess.h"
 
 #include <gtest/gtest.h>
 

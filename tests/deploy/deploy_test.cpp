@@ -4,7 +4,7 @@
 // killed with SIGKILL with requests in flight and started again.
 #include "deploy_test_util.h"
 
-#include <segmatch/core/preprocess.h>
+#include <segmatch/core/preprocess/preprocess.h>
 #include <segmatch/io/cloud_io.h>
 
 #include <atomic>

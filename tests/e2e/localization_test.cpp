@@ -1,9 +1,9 @@
 // End to end on simulated cities: a map from one traversal, queries from the revisit (other
 // scans, another lane, the other direction, moved cars) with the shipped classifier and with one
 // trained here on another city, and queries from a city the map never saw.
-#include "segmatch/core/localizer.h"
-#include "segmatch/core/segment_map.h"
-#include "segmatch/core/training.h"
+#include "segmatch/core/localization/localizer.h"
+#include "segmatch/core/mapping/segment_map.h"
+#include "segmatch/core/training/training.h"
 #include "segmatch/sim/city.h"
 
 #include <gtest/gtest.h>

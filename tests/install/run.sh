@@ -17,7 +17,7 @@ echo "== cmake --install into $work/prefix"
 cmake --install "$build" --prefix "$work/prefix" >"$work/install.log" || { cat "$work/install.log"; fail "cmake --install"; }
 prefix="$work/prefix"
 for f in bin/segmatch-server bin/segmatch-mapbuilder bin/segmatch-query share/segmatch/models/default-rf.yml \
-         include/segmatch/api/client.h include/segmatch/core/types.h lib/libsegmatch_core.a \
+         include/segmatch/api/client.h include/segmatch/core/common/types.h lib/libsegmatch_core.a \
          lib/cmake/segmatch/segmatchConfig.cmake lib/systemd/system/segmatch-server@.service \
          share/segmatch/deploy/haproxy.cfg share/doc/segmatch/README.md share/doc/segmatch/LICENSE \
          share/doc/segmatch/docs/protocol.md share/doc/segmatch/docs/measurements.md; do

@@ -3,7 +3,7 @@
 #pragma once
 
 #include <gtest/gtest.h>
-#include <segmatch/core/types.h>
+#include <segmatch/core/common/types.h>
 #include <segmatch/io/error.h>
 
 #include <cstdint>

@@ -2,7 +2,7 @@
 // Avia, 314 keyframes on a 64 m loop; keyframes ~274-313 revisit 0-43 within 0.1-0.4 m,
 // ../shared/data/README.md) and hku-mb (the same sensor, 95 m without a revisit), with their
 // odometry-only poses as the vehicle's odometry and the loop-closed poses as ground truth.
-#include "segmatch/core/loop_closure.h"
+#include "segmatch/core/loop/loop_closure.h"
 #include "segmatch/io/auto_profile.h"
 #include "segmatch/io/pipeline_config.h"
 #include "segmatch/io/pose_io.h"

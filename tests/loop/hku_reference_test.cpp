@@ -5,7 +5,7 @@
 // which is locally consistent), from either pose set's relative pose as the guess. The scans
 // side with the odometry to about a centimetre and put poses.txt about 0.3 m off there, so
 // poses.txt cannot judge a loop correction of this revisit to better than that.
-#include "segmatch/core/verification.h"
+#include "segmatch/core/verification/verification.h"
 #include "segmatch/io/sequence.h"
 
 #include <gtest/gtest.h>

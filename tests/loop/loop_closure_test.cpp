@@ -2,7 +2,7 @@
 // tiny city (about 590 m) and on along its first streets again. The detector sees the scans
 // with the true poses as odometry, and with a drifted odometry; the prefix of the route that
 // never comes back is a route without revisits.
-#include "segmatch/core/loop_closure.h"
+#include "segmatch/core/loop/loop_closure.h"
 #include "segmatch/sim/dataset.h"
 #include "segmatch/sim/keyframes.h"
 #include "segmatch/sim/lidar.h"

@@ -1,7 +1,7 @@
 // segmatch-mapbuilder and segmatch-mapinfo as a user runs them, on a tiny simulated dataset
 // generated once for the suite.
-#include "segmatch/core/matcher.h"
-#include "segmatch/core/random.h"
+#include "segmatch/core/matching/matcher.h"
+#include "segmatch/core/detail/random.h"
 #include "segmatch/io/cloud_io.h"
 #include "segmatch/io/sequence.h"
 #include "segmatch/storage/map_reader.h"

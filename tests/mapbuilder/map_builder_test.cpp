@@ -1,6 +1,6 @@
 // MapBuilder on a simulated tiny city, in process: the map holds the objects along the route,
 // one segment each, and every segment knows the local cloud it came from.
-#include "segmatch/core/map_builder.h"
+#include "segmatch/core/mapping/map_builder.h"
 #include "segmatch/sim/dataset.h"
 #include "segmatch/sim/lidar.h"
 #include "segmatch/sim/raycaster.h"

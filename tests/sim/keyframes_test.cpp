@@ -4,7 +4,7 @@
 #include "segmatch/sim/dataset.h"
 #include "segmatch/sim/keyframes.h"
 
-#include "segmatch/core/preprocess.h"
+#include "segmatch/core/preprocess/preprocess.h"
 #include "segmatch/io/pose_io.h"
 #include "segmatch/io/sequence.h"
 #include "support/run_command.h"

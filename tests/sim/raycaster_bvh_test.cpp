@@ -1,6 +1,6 @@
 // The BVH ray caster against brute force (one caster per primitive, nearest t, ties to the lower
 // index) on random, coincident and clustered scenes, and a large scene.
-#include "segmatch/core/random.h"
+#include "segmatch/core/detail/random.h"
 #include "segmatch/sim/raycaster.h"
 #include "segmatch/sim/scene.h"
 

@@ -1,6 +1,6 @@
 // Tests of the BVH ray caster: exact hits and normals per primitive type, range limits and
 // robustness against degenerate input (raycaster_bvh_test.cpp: the BVH against brute force).
-#include "segmatch/core/random.h"
+#include "segmatch/core/detail/random.h"
 #include "segmatch/sim/raycaster.h"
 #include "segmatch/sim/scene.h"
 

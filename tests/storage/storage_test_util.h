@@ -4,7 +4,7 @@
 
 #include <gtest/gtest.h>
 #include <sqlite3.h>
-#include <segmatch/core/esf_quantization.h>
+#include <segmatch/core/description/esf_quantization.h>
 #include <segmatch/storage/map_reader.h>
 #include <segmatch/storage/map_writer.h>
 

@@ -1,7 +1,7 @@
 // Poses for tests: a position and a heading, as generated scenes need them.
 #pragma once
 
-#include "segmatch/core/types.h"
+#include "segmatch/core/common/types.h"
 
 #include <cmath>
 

@@ -3,9 +3,9 @@
 // street with objects localizes at the true pose, the poles alone are ambiguous.
 #pragma once
 
-#include <segmatch/core/localizer.h>
-#include <segmatch/core/segment.h>
-#include <segmatch/core/types.h>
+#include <segmatch/core/localization/localizer.h>
+#include <segmatch/core/segmentation/segment.h>
+#include <segmatch/core/common/types.h>
 
 #include <cmath>
 

@@ -7,8 +7,8 @@
 // the output was filled.
 #pragma once
 
-#include <segmatch/core/segment.h>
-#include <segmatch/core/types.h>
+#include <segmatch/core/segmentation/segment.h>
+#include <segmatch/core/common/types.h>
 
 #include <array>
 #include <cstddef>

@@ -9,7 +9,7 @@
 // A query needs >= verification.min_inliers classified true pairs to have a chance.
 #pragma once
 
-#include <segmatch/core/localizer.h>
+#include <segmatch/core/localization/localizer.h>
 #include <segmatch/eval/localization_run.h>
 
 #include <string>

@@ -8,7 +8,7 @@
 // street the map never saw cannot be localized and says nothing about the method.
 #pragma once
 
-#include <segmatch/core/types.h>
+#include <segmatch/core/common/types.h>
 
 #include <cstddef>
 #include <map>

@@ -8,7 +8,7 @@
 // rather than one cut, so both sides see every kind of street of the drive).
 #pragma once
 
-#include "segmatch/core/training.h"
+#include "segmatch/core/training/training.h"
 #include "segmatch/io/pipeline_config.h"
 
 #include <memory>

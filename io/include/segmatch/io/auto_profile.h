@@ -16,7 +16,7 @@
 //                   chosen on hku-loop1, checked on hku-mb.
 #pragma once
 
-#include <segmatch/core/input_profile.h>
+#include <segmatch/core/profile/input_profile.h>
 #include <segmatch/io/pipeline_config.h>
 #include <segmatch/io/sequence.h>
 

@@ -14,7 +14,7 @@
 // "cdr"): other topics are listed, and data() refuses their messages by topic name.
 #pragma once
 
-#include <segmatch/core/types.h>
+#include <segmatch/core/common/types.h>
 #include <segmatch/io/cloud_io.h>
 #include <segmatch/io/error.h>
 

@@ -5,7 +5,7 @@
 // dropped (with their labels) so that they never reach the pipeline.
 #pragma once
 
-#include <segmatch/core/types.h>
+#include <segmatch/core/common/types.h>
 #include <segmatch/io/error.h>
 
 #include <cstddef>

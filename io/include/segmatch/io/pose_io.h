@@ -5,7 +5,7 @@
 // Tr = T_cam0_velo:  T_velo0_veloi = Tr^-1 * T_cam00_cam0i * Tr.
 #pragma once
 
-#include <segmatch/core/types.h>
+#include <segmatch/core/common/types.h>
 #include <segmatch/io/error.h>
 
 #include <string>

@@ -5,8 +5,8 @@
 // finding T_map_odom is the localizer's job.
 #pragma once
 
-#include <segmatch/core/local_cloud.h>
-#include <segmatch/core/preprocess.h>
+#include <segmatch/core/localization/local_cloud.h>
+#include <segmatch/core/preprocess/preprocess.h>
 #include <segmatch/io/sequence.h>
 
 #include <cstddef>

@@ -12,7 +12,7 @@
 // read lazily by scan(i).
 #pragma once
 
-#include <segmatch/core/types.h>
+#include <segmatch/core/common/types.h>
 #include <segmatch/io/bag.h>
 #include <segmatch/io/cloud_io.h>
 #include <segmatch/io/error.h>

@@ -5,8 +5,8 @@
 // (core/map_correction.h). Used by segmatch-loop and segmatch-mapbuilder --close-loops.
 #pragma once
 
-#include "segmatch/core/loop_closure.h"
-#include "segmatch/core/map_correction.h"
+#include "segmatch/core/loop/loop_closure.h"
+#include "segmatch/core/mapping/map_correction.h"
 #include "segmatch/io/sequence.h"
 #include "segmatch/posegraph/pose_graph.h"
 #include "segmatch/posegraph/scan_edges.h"

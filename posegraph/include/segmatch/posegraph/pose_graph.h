@@ -17,7 +17,7 @@
 // Knows no files: segmatch-loop and segmatch-mapbuilder feed it.
 #pragma once
 
-#include "segmatch/core/types.h"
+#include "segmatch/core/common/types.h"
 
 #include <cstddef>
 #include <string>

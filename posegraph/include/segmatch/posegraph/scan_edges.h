@@ -10,9 +10,9 @@
 // slides along it). The edge still carries the graph's robust loss.
 #pragma once
 
-#include "segmatch/core/preprocess.h"
-#include "segmatch/core/types.h"
-#include "segmatch/core/verification.h"
+#include "segmatch/core/preprocess/preprocess.h"
+#include "segmatch/core/common/types.h"
+#include "segmatch/core/verification/verification.h"
 
 #include <deque>
 #include <optional>

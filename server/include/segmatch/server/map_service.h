@@ -10,7 +10,7 @@
 #pragma once
 
 #include <segmatch/api/protocol.h>
-#include <segmatch/core/localizer.h>
+#include <segmatch/core/localization/localizer.h>
 #include <segmatch/io/pipeline_config.h>
 #include <segmatch/storage/lazy_points.h>
 #include <segmatch/storage/lazy_surfaces.h>

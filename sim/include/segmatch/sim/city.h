@@ -4,9 +4,9 @@
 // with the ground-truth instance, as training and tests need them.
 #pragma once
 
-#include "segmatch/core/localizer.h"
-#include "segmatch/core/segment_map.h"
-#include "segmatch/core/training.h"
+#include "segmatch/core/localization/localizer.h"
+#include "segmatch/core/mapping/segment_map.h"
+#include "segmatch/core/training/training.h"
 #include "segmatch/sim/dataset.h"
 #include "segmatch/sim/local_clouds.h"
 

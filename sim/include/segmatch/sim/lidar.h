@@ -2,7 +2,7 @@
 // simulation.
 #pragma once
 
-#include "segmatch/core/types.h"
+#include "segmatch/core/common/types.h"
 #include "segmatch/sim/raycaster.h"
 
 #include <cstdint>

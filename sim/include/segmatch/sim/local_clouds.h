@@ -2,8 +2,8 @@
 // accumulated in the world frame, one every metre travelled, cropped to a cylinder.
 #pragma once
 
-#include "segmatch/core/local_cloud.h"
-#include "segmatch/core/preprocess.h"
+#include "segmatch/core/localization/local_cloud.h"
+#include "segmatch/core/preprocess/preprocess.h"
 #include "segmatch/sim/lidar.h"
 #include "segmatch/sim/traversal.h"
 

@@ -2,8 +2,8 @@
 // lane with rounded corners, a speed profile, and one sensor pose every scan period.
 #pragma once
 
-#include "segmatch/core/random.h"
-#include "segmatch/core/types.h"
+#include "segmatch/core/detail/random.h"
+#include "segmatch/core/common/types.h"
 #include "segmatch/sim/world.h"
 
 #include <vector>

@@ -9,7 +9,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
-#include "segmatch/core/types.h"
+#include "segmatch/core/common/types.h"
 
 #include <cstdint>
 #include <string>

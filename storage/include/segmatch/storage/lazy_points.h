@@ -3,7 +3,7 @@
 // holds in memory only what retrieval, classification and verification need.
 #pragma once
 
-#include <segmatch/core/localizer.h>
+#include <segmatch/core/localization/localizer.h>
 #include <segmatch/storage/map_reader.h>
 
 #include <cstdint>

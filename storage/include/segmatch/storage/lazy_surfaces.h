@@ -3,7 +3,7 @@
 // shared by every query, as LazyPoints does for segment points.
 #pragma once
 
-#include <segmatch/core/localizer.h>
+#include <segmatch/core/localization/localizer.h>
 #include <segmatch/storage/map_reader.h>
 
 #include <cstdint>

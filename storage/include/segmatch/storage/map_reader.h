@@ -14,7 +14,7 @@
 // own MapReader.
 #pragma once
 
-#include <segmatch/core/segment.h>
+#include <segmatch/core/segmentation/segment.h>
 #include <segmatch/storage/map_types.h>
 
 #include <Eigen/Core>

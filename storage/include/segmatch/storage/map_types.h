@@ -6,7 +6,7 @@
 // message names the file and the problem.
 #pragma once
 
-#include <segmatch/core/types.h>
+#include <segmatch/core/common/types.h>
 
 #include <cstddef>
 #include <cstdint>

@@ -65,7 +65,7 @@
 // has none (nor does one upgraded from them: the file holds no scans to make one from).
 #pragma once
 
-#include <segmatch/core/segment.h>
+#include <segmatch/core/segmentation/segment.h>
 #include <segmatch/storage/map_types.h>
 
 #include <memory>

@@ -8,7 +8,7 @@
 #pragma once
 
 #include <segmatch/api/protocol.h>
-#include <segmatch/core/localizer.h>
+#include <segmatch/core/localization/localizer.h>
 #include <segmatch/io/pipeline_config.h>
 
 #include <cstdint>

@@ -1,0 +1,44 @@
+// Evidence for a pose hypothesis beyond its matches (beyond the paper). Verification on
+// centroids (paper III-E) accepts the largest consistent cluster of matches; in streets with
+// evenly spaced poles, trees or windows a shifted copy of the true cluster is consistent too.
+// Under the true pose, however, most query segments land on a map segment, not only the
+// matched ones; under a shifted pose only the repeated objects do. The support of a hypothesis
+// is the number of query segments whose transformed centroid has a map centroid nearby.
+#pragma once
+
+#include "segmatch/core/segmentation/segment.h"
+#include "segmatch/core/common/types.h"
+
+#include <cstdint>
+#include <unordered_map>
+#include <vector>
+
+namespace segmatch {
+
+// Hash grid over segment centroids for fixed-radius nearest queries.
+class CentroidIndex {
+ public:
+  CentroidIndex() = default;
+  // cell_m: grid cell edge, at least the largest radius later queried.
+  CentroidIndex(const Segments& segments, float cell_m);
+  // Index of the segment whose centroid is nearest to p within radius_m, or -1.
+  int nearest_within(const Eigen::Vector3f& p, float radius_m) const;
+  size_t size() const { return centroids_.size(); }
+
+ private:
+  uint64_t key(int x, int y, int z) const;
+  float cell_m_ = 1.0f;
+  std::vector<Eigen::Vector3f> centroids_;
+  std::unordered_multimap<uint64_t, int> cells_;
+};
+
+struct Support {
+  Matches pairs;  // query segment -> map segment within the radius (one per query segment)
+  size_t count() const { return pairs.size(); }
+};
+
+// Query segments (query frame) that, moved by T_map_query, have a map centroid within radius_m.
+Support support_of(const Segments& query, const CentroidIndex& map, const Pose3d& T_map_query,
+                   float radius_m);
+
+}  // namespace segmatch
