@@ -51,16 +51,17 @@ int main(int argc, char** argv) {
     size_t points = 0;
     const double folder_s = median_of(sequence, repeat, &points);
     std::printf("%-22s %8.2f s  %7.1f scans/s\n", "folder", folder_s, seq.size() / folder_s);
-    const std::pair<const char*, io::McapCompression> kinds[] = {
-        {"mcap zstd", io::McapCompression::kZstd}, {"mcap lz4", io::McapCompression::kLz4}, {"mcap none", io::McapCompression::kNone}};
+    const std::pair<const char*, io::McapCompression> kinds[] = {{"mcap zstd", io::McapCompression::kZstd},
+                                                                 {"mcap lz4", io::McapCompression::kLz4},
+                                                                 {"mcap none", io::McapCompression::kNone}};
     for (const auto& [name, compression] : kinds) {
       io::SequenceBagOptions o;
       o.mcap.compression = compression;
       const std::string bag = (fs::path(work) / (std::string(name).substr(5) + ".mcap")).string();
       io::write_sequence_bag(seq, bag, o);
       const double s = median_of(bag, repeat, &points);
-      std::printf("%-22s %8.2f s  %7.1f scans/s  %.2fx the folder's time  (%.0f MB)\n", name, s, seq.size() / s, s / folder_s,
-                  static_cast<double>(fs::file_size(bag)) / 1e6);
+      std::printf("%-22s %8.2f s  %7.1f scans/s  %.2fx the folder's time  (%.0f MB)\n", name, s, seq.size() / s,
+                  s / folder_s, static_cast<double>(fs::file_size(bag)) / 1e6);
       fs::remove(bag);
     }
     std::printf("(%zu points read in all)\n", points);

@@ -36,8 +36,12 @@ int main(int argc, char** argv) {
   double every_m = 10.0;
   size_t max_queries = 60;
   app.add_option("--map", map_path, "map file (segmatch-mapbuilder)")->required();
-  app.add_option("--sequence", sequence, "the scans: a sequence folder or bag in the map's frame (e.g. OUT/sequences/00 of segmatch-sim)")->required();
-  app.add_option("--every-m", every_m, "one query every this many metres")->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--sequence", sequence,
+                 "the scans: a sequence folder or bag in the map's frame (e.g. OUT/sequences/00 of segmatch-sim)")
+      ->required();
+  app.add_option("--every-m", every_m, "one query every this many metres")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
   app.add_option("--max-queries", max_queries, "at most this many queries")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   try {
@@ -73,11 +77,13 @@ int main(int argc, char** argv) {
       server_ms.push_back(reply.timings.server_total);
       if (reply.status != api::LocalizeStatus::kLocalized) continue;
       ++localized;
-      ++by_method[reply.detail && reply.detail->estimate ? api::to_string(static_cast<api::ReplyMethod>(reply.detail->estimate->method))
-                                                         : "unknown"];
+      ++by_method[reply.detail && reply.detail->estimate
+                      ? api::to_string(static_cast<api::ReplyMethod>(reply.detail->estimate->method))
+                      : "unknown"];
     }
-    std::printf("%zu single-scan queries without a prior, %zu localized (not scored: see segmatch-eval localize --single-scan)",
-                server_ms.size(), localized);
+    std::printf(
+        "%zu single-scan queries without a prior, %zu localized (not scored: see segmatch-eval localize --single-scan)",
+        server_ms.size(), localized);
     for (const auto& [method, n] : by_method) std::printf(", %s %zu", method.c_str(), n);
     std::printf("\nserver time per query: median %.1f ms, p90 %.1f ms (the target: <= 50 ms median on one core)\n",
                 quantile(server_ms, 0.5), quantile(server_ms, 0.9));

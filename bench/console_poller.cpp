@@ -72,7 +72,8 @@ void ConsolePoller::run() {
     }
     get("/api/stats", body);
     get("/api/tiles/4/" + std::to_string(round % 4 - 2) + "/" + std::to_string(round / 4 % 4 - 2), body);
-    while (!stop_ && std::chrono::steady_clock::now() < next) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    while (!stop_ && std::chrono::steady_clock::now() < next)
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
 }
 
@@ -85,7 +86,8 @@ double median(std::vector<double> v) {
 
 }  // namespace
 
-int compare_console_poll(uint16_t console_port, int rounds, const std::string& json_path, const std::function<double()>& level) {
+int compare_console_poll(uint16_t console_port, int rounds, const std::string& json_path,
+                         const std::function<double()>& level) {
   std::printf("  warm-up:");  // the first run fills the point cache: counted in neither
   level();
   std::vector<double> without, with;
@@ -102,12 +104,19 @@ int compare_console_poll(uint16_t console_port, int rounds, const std::string& j
     polls += poller.requests(), failures += poller.failures();
   }
   const double a = median(without), b = median(with);
-  std::printf("console poll: median %.3f queries/s without, %.3f with the page polled every second: ratio %.3f "
-              "(%llu HTTP requests, %llu failed)\n", a, b, b / a, static_cast<unsigned long long>(polls),
-              static_cast<unsigned long long>(failures));
+  std::printf(
+      "console poll: median %.3f queries/s without, %.3f with the page polled every second: ratio %.3f "
+      "(%llu HTTP requests, %llu failed)\n",
+      a, b, b / a, static_cast<unsigned long long>(polls), static_cast<unsigned long long>(failures));
   if (!json_path.empty())
-    std::ofstream(json_path) << nlohmann::json{{"console_poll", {{"without_qps", without}, {"with_qps", with}, {"median_without_qps", a},
-                                                                {"median_with_qps", b}, {"ratio", b / a}}}}.dump(2) << "\n";
+    std::ofstream(json_path) << nlohmann::json{{"console_poll",
+                                                {{"without_qps", without},
+                                                 {"with_qps", with},
+                                                 {"median_without_qps", a},
+                                                 {"median_with_qps", b},
+                                                 {"ratio", b / a}}}}
+                                    .dump(2)
+                             << "\n";
   return failures == 0 ? 0 : 1;
 }
 

@@ -37,6 +37,7 @@ class ConsolePoller {
 // alone and with a ConsolePoller on `console_port` each second, in the order ABBA BAAB ... so
 // that a drift of the machine weighs on both alike; prints each run, the medians and their
 // ratio (and writes them to `json_path` unless empty). Exit code: 1 if an HTTP request failed.
-int compare_console_poll(uint16_t console_port, int rounds, const std::string& json_path, const std::function<double()>& level);
+int compare_console_poll(uint16_t console_port, int rounds, const std::string& json_path,
+                         const std::function<double()>& level);
 
 }  // namespace segmatch::bench

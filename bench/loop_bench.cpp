@@ -65,7 +65,8 @@ int main(int argc, char** argv) {
     LoopDetector detector(config);
     std::vector<size_t> frames;  // a scan every metre (the local cloud keeps no others)
     for (size_t i = 0; i < t.size(); ++i)
-      if (frames.empty() || (t.T_world_lidar[i].translation() - t.T_world_lidar[frames.back()].translation()).norm() >= 1.0)
+      if (frames.empty() ||
+          (t.T_world_lidar[i].translation() - t.T_world_lidar[frames.back()].translation()).norm() >= 1.0)
         frames.push_back(i);
     std::vector<double> wall, cpu, accumulate, segment, match;
     size_t loops = 0;

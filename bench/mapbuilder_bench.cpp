@@ -27,9 +27,7 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
-double seconds_since(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
+double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
 
 // CPU time of the calling thread: the mapping's own cost, whatever else loads the machine.
 double thread_cpu_s() {
@@ -49,7 +47,8 @@ double median(std::vector<double> v) {
 std::vector<size_t> kept_frames(const sim::Traversal& t, double route_m, double step_m) {
   std::vector<size_t> frames;
   for (size_t i = 0; i < t.size() && t.odometer_m[i] <= route_m; ++i)
-    if (frames.empty() || (t.T_world_lidar[i].translation() - t.T_world_lidar[frames.back()].translation()).norm() >= step_m)
+    if (frames.empty() ||
+        (t.T_world_lidar[i].translation() - t.T_world_lidar[frames.back()].translation()).norm() >= step_m)
       frames.push_back(i);
   return frames;
 }
@@ -85,8 +84,10 @@ int compare_voxels(const MapBuilderConfig& config, const sim::Traversal& t, cons
       label_mismatches += got_labels[i] != expected_labels[i];
     }
   }
-  std::printf("voxel check:      %zu local clouds, %zu voxels: %zu with another voxel count, max |diff| %.2g m, "
-              "%zu labels differ\n", clouds, voxels, size_mismatches, max_diff_m, label_mismatches);
+  std::printf(
+      "voxel check:      %zu local clouds, %zu voxels: %zu with another voxel count, max |diff| %.2g m, "
+      "%zu labels differ\n",
+      clouds, voxels, size_mismatches, max_diff_m, label_mismatches);
   return size_mismatches == 0 && label_mismatches == 0 && max_diff_m < 1e-4 ? 0 : 1;
 }
 
@@ -113,8 +114,8 @@ int main(int argc, char** argv) {
   const sim::DatasetConfig c = sim::dataset_preset(preset, seed);
   const sim::World world = sim::generate_world(c.world);
   Rng rng(mix_seed(seed, 0x7a5e));
-  const sim::Traversal t = sim::drive(world, sim::plan_route(world.streets, std::max(route_m, c.first_length_m), rng),
-                                      c.drive_first);
+  const sim::Traversal t =
+      sim::drive(world, sim::plan_route(world.streets, std::max(route_m, c.first_length_m), rng), c.drive_first);
   MapBuilderConfig config;
   config.local_cloud.subsample_leaf_m = subsample_leaf_m;
   const std::vector<size_t> frames = kept_frames(t, route_m, config.local_cloud.min_travel_between_scans_m);
@@ -156,9 +157,10 @@ int main(int argc, char** argv) {
   std::printf("local clouds:     %zu, median %.0f ms each\n", builder.local_clouds(), median(cloud_ms));
   // Wall clock per stage: on a loaded machine these include waiting; the CPU-second figure
   // above does not. Voxels are summed in accumulate and cropped in crop (voxel stays 0).
-  std::printf("stages (sum):     accumulate %.0f, crop %.0f, voxel %.0f, ground %.0f, segment %.0f, describe %.0f, "
-              "merge %.0f ms (wall)\n", tm.accumulate_ms, tm.crop_ms, tm.voxel_ms, tm.ground_ms, tm.segment_ms,
-              tm.describe_ms, tm.merge_ms);
+  std::printf(
+      "stages (sum):     accumulate %.0f, crop %.0f, voxel %.0f, ground %.0f, segment %.0f, describe %.0f, "
+      "merge %.0f ms (wall)\n",
+      tm.accumulate_ms, tm.crop_ms, tm.voxel_ms, tm.ground_ms, tm.segment_ms, tm.describe_ms, tm.merge_ms);
   rusage usage{};
   getrusage(RUSAGE_SELF, &usage);
   std::printf("peak memory:      %.0f MB resident (scans held in memory for the run included)\n",

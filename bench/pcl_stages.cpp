@@ -127,8 +127,8 @@ void StageComparison::run(const PointCloud& cloud, const Eigen::Vector3f& sensor
   const Segments segments = segment_cloud(foreground, c.segmenter);
   cluster_ours_.push_back(ms_since(t0));
   clusters_ours_.push_back(static_cast<double>(segments.size()));
-  const PclTiming pc =
-      pcl_euclidean_clusters(foreground, c.segmenter.cluster_distance_m, c.segmenter.min_points, c.segmenter.max_points);
+  const PclTiming pc = pcl_euclidean_clusters(foreground, c.segmenter.cluster_distance_m, c.segmenter.min_points,
+                                              c.segmenter.max_points);
   cluster_pcl_.push_back(pc.ms);
   clusters_pcl_.push_back(static_cast<double>(pc.outputs));
 
@@ -161,8 +161,8 @@ void StageComparison::print(const char* title, const SegmentationConfig& c) cons
   std::printf("  %-48s %9s %9s %9s   %s\n", "stage", "ours", "PCL", "PCL/ours", "output (median) ours / PCL");
   const auto row = [](const std::string& name, const std::vector<double>& ours, const std::vector<double>& pcl,
                       const std::string& output) {
-    std::printf("  %-48s %9.1f %9.1f %9.2f   %s\n", name.c_str(), median(ours), median(pcl),
-                median(pcl) / median(ours), output.c_str());
+    std::printf("  %-48s %9.1f %9.1f %9.2f   %s\n", name.c_str(), median(ours), median(pcl), median(pcl) / median(ours),
+                output.c_str());
   };
   char name[128], out[128];
   std::snprintf(name, sizeof name, "VoxelGrid (leaf %.2f m, >= %d points)", c.voxel.leaf_m,

@@ -4,9 +4,9 @@
 // excludes the conversion to pcl::PointCloud<pcl::PointXYZ>.
 #pragma once
 
+#include "segmatch/core/common/types.h"
 #include "segmatch/core/localization/localizer.h"
 #include "segmatch/core/segmentation/segment.h"
-#include "segmatch/core/common/types.h"
 
 #include <chrono>
 #include <cstddef>
@@ -21,9 +21,9 @@ double quantile(std::vector<double> values, double q);
 inline double median(const std::vector<double>& values) { return quantile(values, 0.5); }
 
 struct PclTiming {
-  double ms = 0;          // wall-clock time of the PCL call(s)
-  size_t outputs = 0;     // points kept / clusters found / segments described
-  bool refused = false;   // PCL declined the input (e.g. voxel indices would overflow)
+  double ms = 0;         // wall-clock time of the PCL call(s)
+  size_t outputs = 0;    // points kept / clusters found / segments described
+  bool refused = false;  // PCL declined the input (e.g. voxel indices would overflow)
 };
 
 // pcl::VoxelGrid<PointXYZ> with setLeafSize(leaf) and setMinimumPointsNumberPerVoxel(min_points).

@@ -14,12 +14,11 @@ struct ModuleField {
   const char* name;
   double ModuleTimings::*ms;
 };
-const ModuleField kModules[] = {
-    {"voxel", &ModuleTimings::voxel_ms},       {"ground", &ModuleTimings::ground_ms},
-    {"segment", &ModuleTimings::segment_ms},   {"describe", &ModuleTimings::describe_ms},
-    {"retrieve", &ModuleTimings::retrieve_ms}, {"classify", &ModuleTimings::classify_ms},
-    {"verify", &ModuleTimings::verify_ms},     {"refine", &ModuleTimings::refine_ms},
-    {"total", &ModuleTimings::total_ms}};
+const ModuleField kModules[] = {{"voxel", &ModuleTimings::voxel_ms},       {"ground", &ModuleTimings::ground_ms},
+                                {"segment", &ModuleTimings::segment_ms},   {"describe", &ModuleTimings::describe_ms},
+                                {"retrieve", &ModuleTimings::retrieve_ms}, {"classify", &ModuleTimings::classify_ms},
+                                {"verify", &ModuleTimings::verify_ms},     {"refine", &ModuleTimings::refine_ms},
+                                {"total", &ModuleTimings::total_ms}};
 
 }  // namespace
 
@@ -57,11 +56,12 @@ void QueryLog::print(const char* title) const {
   }
   std::printf("  %-10s %10.1f %10.1f   (process CPU time; > total means more than one core)\n", "total CPU",
               median(cpu), quantile(cpu, 0.9));
-  std::printf("  per query (median / p90): %.0f / %.0f points, %.0f / %.0f segments, %.0f / %.0f candidates, "
-              "%.0f / %.0f matches (at most %.0f: the size of verification's consistency graph)\n",
-              median(points), quantile(points, 0.9), median(segments), quantile(segments, 0.9), median(candidates),
-              quantile(candidates, 0.9), median(matches), quantile(matches, 0.9),
-              matches.empty() ? 0.0 : *std::max_element(matches.begin(), matches.end()));
+  std::printf(
+      "  per query (median / p90): %.0f / %.0f points, %.0f / %.0f segments, %.0f / %.0f candidates, "
+      "%.0f / %.0f matches (at most %.0f: the size of verification's consistency graph)\n",
+      median(points), quantile(points, 0.9), median(segments), quantile(segments, 0.9), median(candidates),
+      quantile(candidates, 0.9), median(matches), quantile(matches, 0.9),
+      matches.empty() ? 0.0 : *std::max_element(matches.begin(), matches.end()));
   std::printf("  localized %zu / %zu (%zu within 0.2 m and 1 deg of the reference pose, %zu off by > 1 m or > 3 deg)\n",
               localized, timings.size(), accurate, wrong);
 }

@@ -56,9 +56,10 @@ QueryPlan plan_queries(const sim::City& city, int queries, int pcl_clouds, uint6
   const std::vector<size_t> picks = spread(eligible.size(), static_cast<size_t>(queries));
   for (size_t i : picks) plan.selected.insert(eligible[i]);
   for (size_t i : spread(picks.size(), static_cast<size_t>(pcl_clouds))) plan.compared.insert(eligible[picks[i]]);
-  std::printf("queries: %zu local clouds of the second traversal within 5 m of the first (%.0f m of it), one "
-              "every %.1f m after >= %.0f m of driving (%zu candidates), in the odometry frame of its first pose\n",
-              plan.selected.size(), revisit_m, plan.schedule.every_m, kQueryWarmupM, eligible.size());
+  std::printf(
+      "queries: %zu local clouds of the second traversal within 5 m of the first (%.0f m of it), one "
+      "every %.1f m after >= %.0f m of driving (%zu candidates), in the odometry frame of its first pose\n",
+      plan.selected.size(), revisit_m, plan.schedule.every_m, kQueryWarmupM, eligible.size());
   if (plan.selected.size() < static_cast<size_t>(queries))
     std::printf("note: fewer queries than the %d requested: the second traversal is too short\n", queries);
   return plan;

@@ -8,8 +8,8 @@
 // Usage: segmatch-bench-raycast [--scans N] [--details N] [--seed N]
 //   --details  facade detail boxes per street-facing building (default 36: ~100k
 //              primitives in total; 90 gives ~200k, 150 ~300k)
-#include "segmatch/core/detail/random.h"
 #include "segmatch/core/common/types.h"
+#include "segmatch/core/detail/random.h"
 #include "segmatch/sim/lidar.h"
 #include "segmatch/sim/raycaster.h"
 #include "segmatch/sim/scene.h"
@@ -28,22 +28,19 @@
 
 namespace {
 
-using segmatch::Rng;
 using segmatch::encode_label;
+using segmatch::Rng;
 using segmatch::sim::Primitive;
 using segmatch::sim::Scene;
 using Clock = std::chrono::steady_clock;
 
-constexpr uint16_t kRoad = 40, kSidewalk = 48, kBuilding = 50, kCar = 10, kVegetation = 70,
-                   kTrunk = 71, kPole = 80;
+constexpr uint16_t kRoad = 40, kSidewalk = 48, kBuilding = 50, kCar = 10, kVegetation = 70, kTrunk = 71, kPole = 80;
 constexpr float kHalfSize = 200.0f;   // world spans [-200, 200]^2
 constexpr float kBlockPitch = 40.0f;  // street centre lines every 40 m
 constexpr float kRoadHalfWidth = 6.0f;
 constexpr float kPi = 3.14159265f;
 
-float ground_height(float x, float y) {
-  return 0.4f * std::sin(x / 37.0f) * std::cos(y / 53.0f) + 0.002f * x;
-}
+float ground_height(float x, float y) { return 0.4f * std::sin(x / 37.0f) * std::cos(y / 53.0f) + 0.002f * x; }
 
 // Distance from the nearest street centre line (x or y direction).
 bool on_road(float x, float y) {
@@ -85,23 +82,38 @@ void add_block_buildings(Rng& rng, float bx0, float by0, float side, int details
       float cx = 0, cy = 0, yaw = 0;
       Eigen::Vector3f normal;
       switch (s) {
-        case 0: cx = bx0 + along; cy = by0 + depth; normal = {0, -1, 0}; break;
-        case 1: cx = bx0 + along; cy = by0 + side - depth; normal = {0, 1, 0}; break;
-        case 2: cx = bx0 + depth; cy = by0 + along; normal = {-1, 0, 0}; break;
-        default: cx = bx0 + side - depth; cy = by0 + along; normal = {1, 0, 0}; break;
+        case 0:
+          cx = bx0 + along;
+          cy = by0 + depth;
+          normal = {0, -1, 0};
+          break;
+        case 1:
+          cx = bx0 + along;
+          cy = by0 + side - depth;
+          normal = {0, 1, 0};
+          break;
+        case 2:
+          cx = bx0 + depth;
+          cy = by0 + along;
+          normal = {-1, 0, 0};
+          break;
+        default:
+          cx = bx0 + side - depth;
+          cy = by0 + along;
+          normal = {1, 0, 0};
+          break;
       }
       if (rng.bernoulli(0.15)) yaw = static_cast<float>(rng.uniform(-0.15, 0.15));
-      Eigen::Vector3f half = (s < 2) ? Eigen::Vector3f(front, depth, height / 2)
-                                     : Eigen::Vector3f(depth, front, height / 2);
+      Eigen::Vector3f half =
+          (s < 2) ? Eigen::Vector3f(front, depth, height / 2) : Eigen::Vector3f(depth, front, height / 2);
       const float gz = ground_height(cx, cy);
       const uint32_t label = encode_label(kBuilding, (*instance)++);
-      scene->push_back(Primitive::box({cx, cy, gz + height / 2}, half, yaw, label,
-                                     static_cast<float>(rng.uniform(0.2, 0.6))));
+      scene->push_back(
+          Primitive::box({cx, cy, gz + height / 2}, half, yaw, label, static_cast<float>(rng.uniform(0.2, 0.6))));
       ++*buildings;
       // Roof structure.
-      scene->push_back(Primitive::box({cx, cy, gz + height + 1.0f},
-                                     {half.x() * 0.5f, half.y() * 0.5f, 1.0f}, yaw, label,
-                                     0.4f));
+      scene->push_back(
+          Primitive::box({cx, cy, gz + height + 1.0f}, {half.x() * 0.5f, half.y() * 0.5f, 1.0f}, yaw, label, 0.4f));
       // Facade details (sills, balconies, pillars) on the street-facing facade.
       const Eigen::Vector3f tangent(-normal.y(), normal.x(), 0.0f);
       const float face_off = (s < 2) ? half.y() : half.x();
@@ -112,10 +124,8 @@ void add_block_buildings(Rng& rng, float bx0, float by0, float side, int details
         const float w = static_cast<float>(rng.uniform(0.3, 1.2));
         const float dh = static_cast<float>(rng.uniform(0.05, 0.6));
         const float proj = static_cast<float>(rng.uniform(0.05, 0.8));
-        const Eigen::Vector3f c = Eigen::Vector3f(cx, cy, gz + z) +
-                                  normal * (face_off + proj) + tangent * u;
-        const Eigen::Vector3f h = (s < 2) ? Eigen::Vector3f(w, proj, dh)
-                                          : Eigen::Vector3f(proj, w, dh);
+        const Eigen::Vector3f c = Eigen::Vector3f(cx, cy, gz + z) + normal * (face_off + proj) + tangent * u;
+        const Eigen::Vector3f h = (s < 2) ? Eigen::Vector3f(w, proj, dh) : Eigen::Vector3f(proj, w, dh);
         scene->push_back(Primitive::box(c, h, yaw, label, 0.5f));
       }
     }
@@ -124,41 +134,37 @@ void add_block_buildings(Rng& rng, float bx0, float by0, float side, int details
 
 // Curbs along the four block edges, a few long, thin, arbitrarily rotated fences and walls
 // (large, loose AABBs: the hard case for a BVH) and annexes and sheds in the courtyard.
-void add_block_extras(Rng& rng, float bx0, float by0, float side, Scene* scene, uint16_t* instance,
-                      int* buildings) {
+void add_block_extras(Rng& rng, float bx0, float by0, float side, Scene* scene, uint16_t* instance, int* buildings) {
   // Curbs along the four block edges and a few long, thin, arbitrarily rotated fences
   // and walls (large, loose AABBs: the hard case for a BVH).
   const float edge = side + 4.0f;  // curb at the road edge, around the sidewalk
   const float mx = bx0 + side / 2, my = by0 + side / 2;
   const uint32_t curb = encode_label(kSidewalk, 0);
   scene->push_back(Primitive::box({mx, my - edge / 2, ground_height(mx, my - edge / 2) + 0.07f},
-                                 {edge / 2, 0.1f, 0.07f}, 0.0f, curb, 0.3f));
+                                  {edge / 2, 0.1f, 0.07f}, 0.0f, curb, 0.3f));
   scene->push_back(Primitive::box({mx, my + edge / 2, ground_height(mx, my + edge / 2) + 0.07f},
-                                 {edge / 2, 0.1f, 0.07f}, 0.0f, curb, 0.3f));
+                                  {edge / 2, 0.1f, 0.07f}, 0.0f, curb, 0.3f));
   scene->push_back(Primitive::box({mx - edge / 2, my, ground_height(mx - edge / 2, my) + 0.07f},
-                                 {0.1f, edge / 2, 0.07f}, 0.0f, curb, 0.3f));
+                                  {0.1f, edge / 2, 0.07f}, 0.0f, curb, 0.3f));
   scene->push_back(Primitive::box({mx + edge / 2, my, ground_height(mx + edge / 2, my) + 0.07f},
-                                 {0.1f, edge / 2, 0.07f}, 0.0f, curb, 0.3f));
+                                  {0.1f, edge / 2, 0.07f}, 0.0f, curb, 0.3f));
   for (int k = 0; k < 3; ++k) {
     const float cx = mx + static_cast<float>(rng.uniform(-6.0, 6.0));
     const float cy = my + static_cast<float>(rng.uniform(-6.0, 6.0));
     const float h = static_cast<float>(rng.uniform(1.0, 2.5));
-    scene->push_back(Primitive::box({cx, cy, ground_height(cx, cy) + h / 2},
-                                   {static_cast<float>(rng.uniform(5.0, 12.0)), 0.05f, h / 2},
-                                   static_cast<float>(rng.uniform(0.0, kPi)),
-                                   encode_label(51 /* fence */, (*instance)++), 0.35f));
+    scene->push_back(Primitive::box(
+        {cx, cy, ground_height(cx, cy) + h / 2}, {static_cast<float>(rng.uniform(5.0, 12.0)), 0.05f, h / 2},
+        static_cast<float>(rng.uniform(0.0, kPi)), encode_label(51 /* fence */, (*instance)++), 0.35f));
   }
   // Annexes and sheds in the courtyard.
   for (int k = 0; k < 14; ++k) {
     const float cx = bx0 + static_cast<float>(rng.uniform(8.0, side - 8.0));
     const float cy = by0 + static_cast<float>(rng.uniform(8.0, side - 8.0));
     const float h = static_cast<float>(rng.uniform(2.0, 6.0));
-    scene->push_back(Primitive::box(
-        {cx, cy, ground_height(cx, cy) + h / 2},
-        {static_cast<float>(rng.uniform(0.8, 2.5)), static_cast<float>(rng.uniform(0.8, 2.5)),
-         h / 2},
-        static_cast<float>(rng.uniform(0.0, kPi)), encode_label(kBuilding, (*instance)++),
-        0.4f));
+    scene->push_back(
+        Primitive::box({cx, cy, ground_height(cx, cy) + h / 2},
+                       {static_cast<float>(rng.uniform(0.8, 2.5)), static_cast<float>(rng.uniform(0.8, 2.5)), h / 2},
+                       static_cast<float>(rng.uniform(0.0, kPi)), encode_label(kBuilding, (*instance)++), 0.4f));
     ++*buildings;
   }
 }
@@ -177,29 +183,25 @@ void add_street_objects(Rng& rng, int blocks, Scene* scene, uint16_t* instance, 
           const double r = rng.uniform();
           const float gz = ground_height(x, y);
           if (r < 0.17) {  // street light / sign pole
-            scene->push_back(Primitive::cylinder({x, y, gz},
-                                                static_cast<float>(rng.uniform(0.06, 0.15)),
-                                                static_cast<float>(rng.uniform(2.5, 8.0)),
-                                                encode_label(kPole, (*instance)++), 0.6f));
+            scene->push_back(Primitive::cylinder({x, y, gz}, static_cast<float>(rng.uniform(0.06, 0.15)),
+                                                 static_cast<float>(rng.uniform(2.5, 8.0)),
+                                                 encode_label(kPole, (*instance)++), 0.6f));
             ++*poles;
           } else if (r < 0.42) {  // tree: trunk + crown
             const float th = static_cast<float>(rng.uniform(2.0, 4.0));
             const uint16_t id = (*instance)++;
-            scene->push_back(Primitive::cylinder({x, y, gz},
-                                                static_cast<float>(rng.uniform(0.1, 0.3)), th,
-                                                encode_label(kTrunk, id), 0.3f));
+            scene->push_back(Primitive::cylinder({x, y, gz}, static_cast<float>(rng.uniform(0.1, 0.3)), th,
+                                                 encode_label(kTrunk, id), 0.3f));
             const float cr = static_cast<float>(rng.uniform(1.5, 3.5));
             scene->push_back(Primitive::ellipsoid(
                 {x, y, gz + th + cr * 0.8f},
-                {cr, cr * static_cast<float>(rng.uniform(0.8, 1.2)),
-                 cr * static_cast<float>(rng.uniform(0.9, 1.5))},
+                {cr, cr * static_cast<float>(rng.uniform(0.8, 1.2)), cr * static_cast<float>(rng.uniform(0.9, 1.5))},
                 encode_label(kVegetation, id), 0.45f));
             ++*trees;
           }
         }
         // Parked cars in the parking lane (|offset| 4..6 m from the centre line).
-        for (float a = -kHalfSize + 4.0f; a < kHalfSize - 4.0f;
-             a += static_cast<float>(rng.uniform(4.8, 7.0))) {
+        for (float a = -kHalfSize + 4.0f; a < kHalfSize - 4.0f; a += static_cast<float>(rng.uniform(4.8, 7.0))) {
           if (!rng.bernoulli(0.8)) continue;
           const float off = line + side * 5.0f;
           const float x = dir == 0 ? a : off, y = dir == 0 ? off : a;
@@ -211,7 +213,7 @@ void add_street_objects(Rng& rng, int blocks, Scene* scene, uint16_t* instance, 
           const float gz = ground_height(x, y);
           const uint32_t label = encode_label(kCar, (*instance)++);
           scene->push_back(Primitive::box({x, y, gz + 0.75f}, {2.2f, 0.9f, 0.45f}, yaw, label,
-                                         static_cast<float>(rng.uniform(0.3, 0.9))));
+                                          static_cast<float>(rng.uniform(0.3, 0.9))));
           scene->push_back(Primitive::box({x, y, gz + 1.45f}, {1.2f, 0.8f, 0.3f}, yaw, label, 0.2f));
           ++*cars;
         }
@@ -245,9 +247,7 @@ Scene make_city(uint64_t seed, int details_per_building, int* n_buildings) {
   return scene;
 }
 
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 // CPU time of this thread: unaffected by other processes taking the core away.
 double thread_cpu_seconds() {
@@ -295,8 +295,8 @@ int main(int argc, char** argv) {
   t0 = Clock::now();
   const segmatch::sim::RayCaster caster(scene);
   const double build_s = seconds_since(t0);
-  std::printf("primitives: %zu (valid %zu), generation %.1f ms, BVH build %.1f ms\n",
-              scene.size(), caster.primitive_count(), gen_s * 1e3, build_s * 1e3);
+  std::printf("primitives: %zu (valid %zu), generation %.1f ms, BVH build %.1f ms\n", scene.size(),
+              caster.primitive_count(), gen_s * 1e3, build_s * 1e3);
 
   const segmatch::sim::LidarModel model = segmatch::sim::hdl64e();
   std::vector<double> times, cpu_times;
@@ -326,15 +326,14 @@ int main(int argc, char** argv) {
   const double wall = median(times);
   const double cpu = median(cpu_times);
   const double rays = static_cast<double>(model.rays_per_scan());
-  std::printf("HDL-64E: %d scans, %zu rays/scan, %.0f returns/scan\n", scans,
-              model.rays_per_scan(), static_cast<double>(points) / scans);
-  std::printf("scan time: median %.1f ms, min %.1f ms, max %.1f ms (wall); median %.1f ms "
-              "(thread CPU)\n",
-              wall * 1e3, sorted.front() * 1e3, sorted.back() * 1e3, cpu * 1e3);
-  std::printf("median: %.2f scans/s, %.2f Mrays/s (one thread, wall clock)\n", 1.0 / wall,
-              rays / wall / 1e6);
-  std::printf("median: %.2f scans/s, %.2f Mrays/s (one thread, CPU time)\n", 1.0 / cpu,
-              rays / cpu / 1e6);
+  std::printf("HDL-64E: %d scans, %zu rays/scan, %.0f returns/scan\n", scans, model.rays_per_scan(),
+              static_cast<double>(points) / scans);
+  std::printf(
+      "scan time: median %.1f ms, min %.1f ms, max %.1f ms (wall); median %.1f ms "
+      "(thread CPU)\n",
+      wall * 1e3, sorted.front() * 1e3, sorted.back() * 1e3, cpu * 1e3);
+  std::printf("median: %.2f scans/s, %.2f Mrays/s (one thread, wall clock)\n", 1.0 / wall, rays / wall / 1e6);
+  std::printf("median: %.2f scans/s, %.2f Mrays/s (one thread, CPU time)\n", 1.0 / cpu, rays / cpu / 1e6);
   std::printf("checksum: %016llx\n", static_cast<unsigned long long>(checksum));
   return 0;
 }

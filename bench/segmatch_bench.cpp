@@ -11,8 +11,8 @@
 #include "segmatch/cli/progress.h"
 #include "segmatch/core/localization/localizer.h"
 #include "segmatch/core/mapping/segment_map.h"
-#include "segmatch/core/training/training.h"
 #include "segmatch/core/preprocess/voxel_accumulator.h"
+#include "segmatch/core/training/training.h"
 #include "segmatch/io/sequence.h"
 #include "segmatch/sim/city.h"
 #include "segmatch/sim/dataset.h"
@@ -39,11 +39,11 @@
 
 using namespace segmatch;
 using Clock = std::chrono::steady_clock;
+using bench::kQueryWarmupM;
 using bench::median;
 using bench::ms_since;
 using bench::quantile;
 using bench::QueryLog;
-using bench::kQueryWarmupM;
 using bench::spread;
 
 namespace {
@@ -105,8 +105,10 @@ Segments segments_along(const sim::World& world, const sim::Traversal& t, double
                             [&](const sim::SimulatedLocalCloud& lc) {
                               Segments s = extract_segments(lc.cloud, lc.T_world_sensor.translation().cast<float>(),
                                                             config, labels ? &lc.labels : nullptr);
-                              if (merge) map.add(std::move(s));
-                              else std::move(s.begin(), s.end(), std::back_inserter(all));
+                              if (merge)
+                                map.add(std::move(s));
+                              else
+                                std::move(s.begin(), s.end(), std::back_inserter(all));
                               bar.update(lc.frame + 1);
                             });
   bar.update(t.size());
@@ -120,8 +122,8 @@ std::shared_ptr<RandomForestMatcher> train_classifier(uint64_t seed, const Local
   const sim::City city = sim::make_city(sim::dataset_preset("tiny", seed));
   const Segments targets =
       segments_along(city.world, city.first, 5.0, config.segmentation, 11, true, true, threads, "training map");
-  const Segments queries =
-      segments_along(city.changed, city.second, 10.0, config.segmentation, 12, false, true, threads, "training queries");
+  const Segments queries = segments_along(city.changed, city.second, 10.0, config.segmentation, 12, false, true,
+                                          threads, "training queries");
   FeatureIndex index;
   index.build(targets);
   const TrainingPairs p = label_pairs_by_instance(queries, targets, index, TrainingPairConfig{});
@@ -154,10 +156,10 @@ double run_sim(const Options& o, double* voxelized_ms) {
   const auto classifier = train_classifier(o.seed + 100, config, o.threads);
 
   start = Clock::now();
-  Segments map = segments_along(city.world, city.first, o.map_every_m, config.segmentation, mix_seed(o.seed, 21),
-                                true, false, o.threads, "map");
-  std::printf("map: %zu segments from local clouds every %.1f m along %.2f km (%.1f s)\n", map.size(),
-              o.map_every_m, city.first.length_m() / 1000.0, ms_since(start) / 1000.0);
+  Segments map = segments_along(city.world, city.first, o.map_every_m, config.segmentation, mix_seed(o.seed, 21), true,
+                                false, o.threads, "map");
+  std::printf("map: %zu segments from local clouds every %.1f m along %.2f km (%.1f s)\n", map.size(), o.map_every_m,
+              city.first.length_m() / 1000.0, ms_since(start) / 1000.0);
   const Localizer localizer(config, std::move(map), classifier);
 
   // Queries: local clouds of the revisit (changed world, other lane) on mapped streets.
@@ -171,7 +173,8 @@ double run_sim(const Options& o, double* voxelized_ms) {
   // The vehicle's odometry, as a LiDAR-inertial one drifts (sim::KeyframeConfig's defaults): the
   // local clouds are built with it, the answers scored against the truth.
   Poses truth_query;
-  for (const Pose3d& T : city.second.T_world_lidar) truth_query.push_back(city.second.T_world_lidar.front().inverse() * T);
+  for (const Pose3d& T : city.second.T_world_lidar)
+    truth_query.push_back(city.second.T_world_lidar.front().inverse() * T);
   sim::KeyframeConfig drift;
   drift.odom_seed = o.seed;
   const Poses odometry = sim::drifted_odometry(truth_query, drift);
@@ -183,46 +186,51 @@ double run_sim(const Options& o, double* voxelized_ms) {
   LocalCloud raw(LocalCloudConfig{});
   VoxelAccumulator voxels(LocalCloudConfig{}, config.segmentation.voxel);
   cli::Progress bar("queries", city.second.size(), "scans");
-  sim::for_each_kept_scan(caster, sim::hdl64e(), city.second, LocalCloudConfig{}, plan.schedule,
-                          [&](size_t frame, const sim::SimulatedScan& scan) {
-    bar.update(frame + 1);
-    const Pose3d T_world_sensor = city.second.T_world_lidar[frame];
-    const Pose3d& T_query_sensor = odometry[frame];
-    raw.add_scan(scan.points, T_query_sensor);
-    const auto t0 = Clock::now();
-    voxels.add_scan(scan.points, T_query_sensor);
-    voxels.evict(T_query_sensor);
-    upkeep_ms.push_back(ms_since(t0));
-    if (!selected.count(frame)) return;
-    const Eigen::Vector3f sensor = T_query_sensor.translation().cast<float>();
-    const PointCloud cloud = raw.crop(T_query_sensor);
-    const double cpu0 = cpu_ms();
-    const LocalizationResult r = localizer.localize(cloud, sensor);
-    log.add(r, cpu_ms() - cpu0, cloud.size(), T_query_sensor, T_world_sensor);
-    const double cpu1 = cpu_ms();
-    const auto t1 = Clock::now();
-    const PointCloud cropped = voxels.crop(T_query_sensor);
-    const double crop_ms = ms_since(t1), crop_cpu_ms = cpu_ms() - cpu1;
-    for (int rep = 0; rep < o.repeat; ++rep) {
-      const double cpu2 = cpu_ms();
-      LocalizationResult rv = localizer.localize(cropped, sensor, CloudKind::kVoxelized);
-      rv.timings.voxel_ms = crop_ms;  // the incremental grid's crop stands in for the voxel grid
-      rv.timings.total_ms += crop_ms;
-      voxel_log.add(rv, cpu_ms() - cpu2 + crop_cpu_ms, cropped.size(), T_query_sensor, T_world_sensor);
-    }
-    if (compared.count(frame)) comparison.run(cloud, sensor, config.segmentation);
-  });
+  sim::for_each_kept_scan(
+      caster, sim::hdl64e(), city.second, LocalCloudConfig{}, plan.schedule,
+      [&](size_t frame, const sim::SimulatedScan& scan) {
+        bar.update(frame + 1);
+        const Pose3d T_world_sensor = city.second.T_world_lidar[frame];
+        const Pose3d& T_query_sensor = odometry[frame];
+        raw.add_scan(scan.points, T_query_sensor);
+        const auto t0 = Clock::now();
+        voxels.add_scan(scan.points, T_query_sensor);
+        voxels.evict(T_query_sensor);
+        upkeep_ms.push_back(ms_since(t0));
+        if (!selected.count(frame)) return;
+        const Eigen::Vector3f sensor = T_query_sensor.translation().cast<float>();
+        const PointCloud cloud = raw.crop(T_query_sensor);
+        const double cpu0 = cpu_ms();
+        const LocalizationResult r = localizer.localize(cloud, sensor);
+        log.add(r, cpu_ms() - cpu0, cloud.size(), T_query_sensor, T_world_sensor);
+        const double cpu1 = cpu_ms();
+        const auto t1 = Clock::now();
+        const PointCloud cropped = voxels.crop(T_query_sensor);
+        const double crop_ms = ms_since(t1), crop_cpu_ms = cpu_ms() - cpu1;
+        for (int rep = 0; rep < o.repeat; ++rep) {
+          const double cpu2 = cpu_ms();
+          LocalizationResult rv = localizer.localize(cropped, sensor, CloudKind::kVoxelized);
+          rv.timings.voxel_ms = crop_ms;  // the incremental grid's crop stands in for the voxel grid
+          rv.timings.total_ms += crop_ms;
+          voxel_log.add(rv, cpu_ms() - cpu2 + crop_cpu_ms, cropped.size(), T_query_sensor, T_world_sensor);
+        }
+        if (compared.count(frame)) comparison.run(cloud, sensor, config.segmentation);
+      });
   bar.update(city.second.size());
   bar.finish();
   if (log.timings.size() != selected.size())
     std::printf("warning: %zu of %zu selected local clouds were produced (schedule mismatch)\n", log.timings.size(),
                 selected.size());
-  log.print("simulated (random forest matcher, classifier trained in-process), raw local cloud from drifting "
-            "simulated odometry");
-  voxel_log.print("simulated, the same queries from the vehicle's incremental voxel grid (VoxelAccumulator; "
-                  "voxel = its crop; the server path of protocol flag bit 1)");
-  std::printf("  voxel grid upkeep per kept scan (add_scan + evict, every 1 m driven, between queries): "
-              "median %.1f ms, p90 %.1f ms\n", median(upkeep_ms), quantile(upkeep_ms, 0.9));
+  log.print(
+      "simulated (random forest matcher, classifier trained in-process), raw local cloud from drifting "
+      "simulated odometry");
+  voxel_log.print(
+      "simulated, the same queries from the vehicle's incremental voxel grid (VoxelAccumulator; "
+      "voxel = its crop; the server path of protocol flag bit 1)");
+  std::printf(
+      "  voxel grid upkeep per kept scan (add_scan + evict, every 1 m driven, between queries): "
+      "median %.1f ms, p90 %.1f ms\n",
+      median(upkeep_ms), quantile(upkeep_ms, 0.9));
   if (!o.skip_pcl) comparison.print("simulated", config.segmentation);
   if (voxelized_ms) *voxelized_ms = voxel_log.timings.empty() ? NAN : voxel_log.total_median();
   return log.timings.empty() ? NAN : log.total_median();
@@ -250,11 +258,11 @@ double run_real(const Options& o, const io::Sequence& seq) {
   const LocalCloudConfig lc_config;
   std::printf("\n== real: %s, %zu keyframes; map from even keyframes, queries from odd ones\n", dir.c_str(),
               seq.size());
-  std::printf("parameters: voxel %.1f m (>= %d point), cluster distance %.1f m, >= %d points, L2 matcher on "
-              "eigen features (ESF still computed), local cloud radius %.0f m\n",
-              config.segmentation.voxel.leaf_m, config.segmentation.voxel.min_points_per_voxel,
-              config.segmentation.segmenter.cluster_distance_m, config.segmentation.segmenter.min_points,
-              lc_config.radius_m);
+  std::printf(
+      "parameters: voxel %.1f m (>= %d point), cluster distance %.1f m, >= %d points, L2 matcher on "
+      "eigen features (ESF still computed), local cloud radius %.0f m\n",
+      config.segmentation.voxel.leaf_m, config.segmentation.voxel.min_points_per_voxel,
+      config.segmentation.segmenter.cluster_distance_m, config.segmentation.segmenter.min_points, lc_config.radius_m);
 
   auto start = Clock::now();
   LocalCloud map_cloud(without_age_limit(lc_config));  // a map's clouds hold every scan (MapBuilder)
@@ -305,8 +313,9 @@ double run_real(const Options& o, const io::Sequence& seq) {
   }
   bar.update(last / 2 + 1);
   bar.finish();
-  log.print(has_odometry ? "real riverside02 (L2 matcher; local clouds from odom_poses.txt, reference = poses.txt)"
-                         : "real riverside02 (L2 matcher; no odom_poses.txt: local clouds from the reference poses.txt)");
+  log.print(has_odometry
+                ? "real riverside02 (L2 matcher; local clouds from odom_poses.txt, reference = poses.txt)"
+                : "real riverside02 (L2 matcher; no odom_poses.txt: local clouds from the reference poses.txt)");
   if (!o.skip_pcl) comparison.print("real riverside02", config.segmentation);
   return log.timings.empty() ? NAN : log.total_median();
 }
@@ -357,17 +366,20 @@ int main(int argc, char** argv) {
     // Open the real sequence first: a broken folder fails before minutes of simulation.
     std::optional<io::Sequence> real;
     if (!o.skip_real && std::filesystem::is_directory(o.real_dir)) real = io::Sequence::open(o.real_dir);
-    std::printf("segmatch-bench on %s, %u hardware threads; target: whole query <= %.0f ms median on one core "
-                "(paper: 0.8-1.2 s per query)\n",
-                cpu_model().c_str(), std::thread::hardware_concurrency(), kTargetMs);
+    std::printf(
+        "segmatch-bench on %s, %u hardware threads; target: whole query <= %.0f ms median on one core "
+        "(paper: 0.8-1.2 s per query)\n",
+        cpu_model().c_str(), std::thread::hardware_concurrency(), kTargetMs);
     double sim_voxelized_ms = NAN;
     const double sim_ms = run_sim(o, &sim_voxelized_ms);
     double real_ms = NAN;
-    if (o.skip_real) std::printf("\n== real: skipped (--skip-real)\n");
+    if (o.skip_real)
+      std::printf("\n== real: skipped (--skip-real)\n");
     else if (!real)
       std::printf("\n== real: skipped, %s not found (the shared data is not part of a fresh clone)\n",
                   o.real_dir.c_str());
-    else real_ms = run_real(o, *real);
+    else
+      real_ms = run_real(o, *real);
     std::printf("\n");
     verdict("simulated HDL-64E, raw local cloud", sim_ms);
     verdict("simulated HDL-64E, from the incremental voxel grid (crop + localize)", sim_voxelized_ms);

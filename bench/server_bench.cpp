@@ -1,8 +1,8 @@
 // segmatch-bench-server: throughput and latency of segmatch-server over loopback with 1, 4
-// and 16 concurrent clients (and tracked levels: the same queries with a tracker's prior, as full requests and as tracking requests), on a simulated tiny city mapped by its first traversal and
-// queried with the revisit's voxelized local clouds (HDL-64E, 60 m cylinder), with the shipped
-// RF model (or --l2). Both request kinds in the same run: LOCALIZE (the cloud) and
-// LOCALIZE_SEGMENTS (the vehicle's segments, made beforehand by segmatch_vehicle and timed
+// and 16 concurrent clients (and tracked levels: the same queries with a tracker's prior, as full requests and as
+// tracking requests), on a simulated tiny city mapped by its first traversal and queried with the revisit's voxelized
+// local clouds (HDL-64E, 60 m cylinder), with the shipped RF model (or --l2). Both request kinds in the same run:
+// LOCALIZE (the cloud) and LOCALIZE_SEGMENTS (the vehicle's segments, made beforehand by segmatch_vehicle and timed
 // apart as the client's own work). Each query encodes its request inside the timed loop.
 // Closed loop (clients back to back) and open loop (a fleet on fixed schedules at an offered
 // rate). Prints figures (and --json FILE), asserts nothing.
@@ -64,8 +64,10 @@ struct LevelResult {
   double queries_per_s = 0, p50_ms = 0, p99_ms = 0, server_p50_ms = 0, work_p50_ms = 0;
   int errors = 0, localized = 0, answered = 0;
   nlohmann::json to_json() const {
-    return {{"clients", clients}, {"queries_per_s", queries_per_s}, {"p50_ms", p50_ms}, {"p99_ms", p99_ms},
-            {"errors", errors}, {"localized", localized}, {"answered", answered}, {"server_p50_ms", server_p50_ms},
+    return {{"clients", clients},        {"queries_per_s", queries_per_s},
+            {"p50_ms", p50_ms},          {"p99_ms", p99_ms},
+            {"errors", errors},          {"localized", localized},
+            {"answered", answered},      {"server_p50_ms", server_p50_ms},
             {"work_p50_ms", work_p50_ms}};
   }
 };
@@ -103,10 +105,12 @@ struct Tally {
     r.server_p50_ms = percentile(server_ms, 0.5);
     r.work_p50_ms = percentile(work_ms, 0.5);
     r.errors = errors.load(), r.localized = localized.load();
-    std::printf("%4d queries in %6.1f s = %6.2f queries/s, latency p50 %7.1f ms p99 %7.1f ms, server p50 %6.1f ms, "
-                "work p50 %5.1f ms (retrieve %.1f classify %.1f verify %.1f refine %.1f), %d localized, %d errors\n",
-                r.answered, seconds, r.queries_per_s, r.p50_ms, r.p99_ms, r.server_p50_ms, r.work_p50_ms, percentile(retrieve_ms, 0.5),
-                percentile(classify_ms, 0.5), percentile(verify_ms, 0.5), percentile(refine_ms, 0.5), r.localized, r.errors);
+    std::printf(
+        "%4d queries in %6.1f s = %6.2f queries/s, latency p50 %7.1f ms p99 %7.1f ms, server p50 %6.1f ms, "
+        "work p50 %5.1f ms (retrieve %.1f classify %.1f verify %.1f refine %.1f), %d localized, %d errors\n",
+        r.answered, seconds, r.queries_per_s, r.p50_ms, r.p99_ms, r.server_p50_ms, r.work_p50_ms,
+        percentile(retrieve_ms, 0.5), percentile(classify_ms, 0.5), percentile(verify_ms, 0.5),
+        percentile(refine_ms, 0.5), r.localized, r.errors);
     return r;
   }
 };
@@ -145,7 +149,8 @@ LevelResult run_fleet(uint16_t port, const Kind& kind, int clients, double rate,
   for (int c = 0; c < clients; ++c)
     threads.emplace_back([&, c] {
       api::Client client = connect(port);
-      const auto first = start + std::chrono::duration_cast<Clock::duration>(period * (static_cast<double>(c) / clients));
+      const auto first =
+          start + std::chrono::duration_cast<Clock::duration>(period * (static_cast<double>(c) / clients));
       for (int i = 0; i < per_client; ++i) {
         const auto due = first + std::chrono::duration_cast<Clock::duration>(period * static_cast<double>(i));
         std::this_thread::sleep_until(due);
@@ -159,7 +164,8 @@ LevelResult run_fleet(uint16_t port, const Kind& kind, int clients, double rate,
 
 // The vehicle's own work, apart: every cloud segmented as a car would, with the map's
 // parameters (INFO), timed per query on this thread.
-std::vector<api::LocalizeSegmentsRequest> segment_like_a_vehicle(uint16_t port, const std::vector<api::LocalizeRequest>& requests,
+std::vector<api::LocalizeSegmentsRequest> segment_like_a_vehicle(uint16_t port,
+                                                                 const std::vector<api::LocalizeRequest>& requests,
                                                                  std::vector<double>& client_ms) {
   const vehicle::SegmentQuery vehicle_side = vehicle::SegmentQuery::from_info(connect(port).info());
   std::vector<api::LocalizeSegmentsRequest> out;
@@ -173,9 +179,10 @@ std::vector<api::LocalizeSegmentsRequest> segment_like_a_vehicle(uint16_t port, 
     for (const Segment& s : out.back().segments) n += static_cast<double>(s.points.size());
     points.push_back(n);
   }
-  std::printf("vehicle side (segmentation and description, one thread): median %.1f ms per query; %.0f segments and "
-              "%.0f of their points sent per query (medians)\n",
-              percentile(client_ms, 0.5), percentile(segments, 0.5), percentile(points, 0.5));
+  std::printf(
+      "vehicle side (segmentation and description, one thread): median %.1f ms per query; %.0f segments and "
+      "%.0f of their points sent per query (medians)\n",
+      percentile(client_ms, 0.5), percentile(segments, 0.5), percentile(points, 0.5));
   return out;
 }
 
@@ -219,29 +226,38 @@ struct Options {
 
 void add_options(CLI::App& app, Options& o) {
   app.add_option("--workers", o.workers, "server localization threads (0 = cores)");
-  app.add_option("--queries", o.bench.queries_per_level, "queries per level, spread over its clients (at least one each)");
+  app.add_option("--queries", o.bench.queries_per_level,
+                 "queries per level, spread over its clients (at least one each)");
   app.add_option("--seed", o.seed, "city seed");
   app.add_option("--subsample-leaf-m", o.subsample_leaf_m, "per-scan subsampling of the local cloud (0 = full scans)");
   app.add_flag("--raw", o.raw, "send raw points (60-230 MB clouds: use with --subsample-leaf-m 0.1) instead of voxels");
   app.add_flag("--l2", o.l2, "L2 matcher on eigen features instead of the shipped RF_eigen+shapes");
   app.add_option("--model", o.model_path, "RF model file");
   app.add_option("--fleet-rate", o.bench.fleet_rate, "fleet level: queries/s offered in total (0: skip the level)");
-  app.add_option("--fleet-vehicles", o.bench.fleet_vehicles, "fleet level: vehicles, each on its own schedule")->check(CLI::Range(1, 256));
+  app.add_option("--fleet-vehicles", o.bench.fleet_vehicles, "fleet level: vehicles, each on its own schedule")
+      ->check(CLI::Range(1, 256));
   app.add_option("--fleet-seconds", o.bench.fleet_seconds, "fleet level: duration")->check(CLI::Range(1.0, 3600.0));
   app.add_option("--map-points", o.map_points, "the server's map points: lazy (read on demand) or memory")
       ->capture_default_str()
       ->check(CLI::IsMember({"lazy", "memory"}));
   app.add_flag("--soak", o.soak, "soak run: segmatch-server as its own process, clients x queries, its RSS watched");
-  app.add_option("--soak-clients", o.soak_config.clients, "soak: concurrent clients")->capture_default_str()->check(CLI::Range(1, 64));
+  app.add_option("--soak-clients", o.soak_config.clients, "soak: concurrent clients")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 64));
   app.add_option("--soak-queries", o.soak_config.queries_per_client, "soak: queries per client")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000000));
-  app.add_option("--server-binary", o.soak_config.server_binary, "soak: segmatch-server to run (default: next to this program)");
+  app.add_option("--server-binary", o.soak_config.server_binary,
+                 "soak: segmatch-server to run (default: next to this program)");
   app.add_flag("--console-poll", o.console_poll,
                "instead: closed-loop cloud queries with and without a browser's polling of the operator's page (each "
                "second), alternately, and the ratio of the median queries/s");
-  app.add_option("--console-rounds", o.console_rounds, "--console-poll: runs of each kind")->capture_default_str()->check(CLI::Range(1, 50));
-  app.add_option("--console-clients", o.console_clients, "--console-poll: concurrent clients")->capture_default_str()->check(CLI::Range(1, 64));
+  app.add_option("--console-rounds", o.console_rounds, "--console-poll: runs of each kind")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 50));
+  app.add_option("--console-clients", o.console_clients, "--console-poll: concurrent clients")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 64));
   app.add_option("--json", o.json_path, "write the figures as JSON: {\"cloud\": {...}, \"segments\": {...}}");
 }
 
@@ -268,10 +284,11 @@ int soak(Options o, const std::string& map_path, const std::vector<api::Localize
 int console_poll(const server::Server& server, const Kind& kind, const Options& o) {
   const server::Console console({}, server);
   const int per_client = std::max(1, o.bench.queries_per_level / o.console_clients);
-  std::printf("console on %s; %d clients x %d queries per run, %d runs of each\n", console.url().c_str(), o.console_clients,
-              per_client, o.console_rounds);
-  return bench::compare_console_poll(console.port(), o.console_rounds, o.json_path,
-                                     [&] { return run_level(server.port(), kind, o.console_clients, per_client).queries_per_s; });
+  std::printf("console on %s; %d clients x %d queries per run, %d runs of each\n", console.url().c_str(),
+              o.console_clients, per_client, o.console_rounds);
+  return bench::compare_console_poll(console.port(), o.console_rounds, o.json_path, [&] {
+    return run_level(server.port(), kind, o.console_clients, per_client).queries_per_s;
+  });
 }
 
 }  // namespace
@@ -305,7 +322,8 @@ int main(int argc, char** argv) {
   size_t points = 0;
   for (const auto& r : requests) points += r.points.size();
   std::printf("set-up %.0f s: %zu revisit local clouds (from drifting simulated odometry), %.0f points on average\n",
-              std::chrono::duration<double>(Clock::now() - t0).count(), requests.size(), double(points) / requests.size());
+              std::chrono::duration<double>(Clock::now() - t0).count(), requests.size(),
+              double(points) / requests.size());
   server::ServerConfig sc;
   sc.port = 0;
   sc.workers = o.workers;
@@ -318,7 +336,8 @@ int main(int argc, char** argv) {
   server.start();
   std::printf("server on %s, %u cores\n", server.address().c_str(), std::thread::hardware_concurrency());
   if (o.console_poll) {
-    const Kind cloud{"cloud (LOCALIZE)", [&](api::Client& c, size_t i) { return c.localize(requests[i]); }, requests.size()};
+    const Kind cloud{"cloud (LOCALIZE)", [&](api::Client& c, size_t i) { return c.localize(requests[i]); },
+                     requests.size()};
     const int rc = console_poll(server, cloud, o);
     server.stop();
     std::filesystem::remove(map_path);
@@ -326,7 +345,8 @@ int main(int argc, char** argv) {
   }
 
   std::vector<double> client_ms;
-  const std::vector<api::LocalizeSegmentsRequest> segment_requests = segment_like_a_vehicle(server.port(), requests, client_ms);
+  const std::vector<api::LocalizeSegmentsRequest> segment_requests =
+      segment_like_a_vehicle(server.port(), requests, client_ms);
   const double client_ms_median = percentile(client_ms, 0.5);
   if (o.soak) {
     server.stop();
@@ -334,7 +354,8 @@ int main(int argc, char** argv) {
   }
 
   std::printf("closed loop: each client sends its next query as soon as it has the answer\n");
-  const Kind cloud{"cloud (LOCALIZE)", [&](api::Client& c, size_t i) { return c.localize(requests[i]); }, requests.size()};
+  const Kind cloud{"cloud (LOCALIZE)", [&](api::Client& c, size_t i) { return c.localize(requests[i]); },
+                   requests.size()};
   const Kind segments{"segments (LOCALIZE_SEGMENTS)",
                       [&](api::Client& c, size_t i) { return c.localize_segments(segment_requests[i]); },
                       segment_requests.size()};
@@ -348,13 +369,16 @@ int main(int argc, char** argv) {
   std::vector<api::LocalizeRequest> tracked = requests;
   for (api::LocalizeRequest& r : tracked) r.flags |= api::kFlagHasPrior, r.prior_radius_m = 3.0;
   std::vector<double> tracked_client_ms;
-  const std::vector<api::LocalizeSegmentsRequest> tracked_segments = segment_like_a_vehicle(server.port(), tracked, tracked_client_ms);
-  const Kind tracked_cloud{"tracked cloud (LOCALIZE, 3 m prior)", [&](api::Client& c, size_t i) { return c.localize(tracked[i]); },
-                           tracked.size()};
+  const std::vector<api::LocalizeSegmentsRequest> tracked_segments =
+      segment_like_a_vehicle(server.port(), tracked, tracked_client_ms);
+  const Kind tracked_cloud{"tracked cloud (LOCALIZE, 3 m prior)",
+                           [&](api::Client& c, size_t i) { return c.localize(tracked[i]); }, tracked.size()};
   const Kind tracked_segs{"tracked segments (LOCALIZE_SEGMENTS, 3 m prior)",
-                          [&](api::Client& c, size_t i) { return c.localize_segments(tracked_segments[i]); }, tracked_segments.size()};
+                          [&](api::Client& c, size_t i) { return c.localize_segments(tracked_segments[i]); },
+                          tracked_segments.size()};
   out["tracked_cloud"] = run_kind(server.port(), tracked_cloud, median_bytes(tracked), o.bench, {1, 4}, false);
-  out["tracked_segments"] = run_kind(server.port(), tracked_segs, median_bytes(tracked_segments), o.bench, {1, 4}, false);
+  out["tracked_segments"] =
+      run_kind(server.port(), tracked_segs, median_bytes(tracked_segments), o.bench, {1, 4}, false);
   // Tracking on the surface layer (protocol revision 11): the same queries as tracking requests,
   // the segments within track.window_m without points and at most track.max_points of the
   // newest scans (the last 10 m of kept scans, placed by the drifting odometry).
@@ -369,8 +393,10 @@ int main(int argc, char** argv) {
   const Kind tracking_kind{"tracking requests (LOCALIZE_SEGMENTS bit 5, 3 m prior)",
                            [&](api::Client& c, size_t i) { return c.localize_segments(tracking[i]); }, tracking.size()};
   out["tracking_requests"] = run_kind(server.port(), tracking_kind, median_bytes(tracking), o.bench, {1, 4}, false);
-  out["setup"] = {{"queries", requests.size()}, {"points_mean", double(points) / requests.size()},
-                  {"cores", std::thread::hardware_concurrency()}, {"matcher", o.l2 ? "L2" : "RF_eigen+shapes"}};
+  out["setup"] = {{"queries", requests.size()},
+                  {"points_mean", double(points) / requests.size()},
+                  {"cores", std::thread::hardware_concurrency()},
+                  {"matcher", o.l2 ? "L2" : "RF_eigen+shapes"}};
   server.stop();
   std::filesystem::remove(map_path);
   if (!o.json_path.empty()) {

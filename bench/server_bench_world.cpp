@@ -1,7 +1,7 @@
 #include "server_bench_world.h"
 
-#include <segmatch/core/preprocess/preprocess.h>
 #include <segmatch/core/mapping/surface_layer.h>
+#include <segmatch/core/preprocess/preprocess.h>
 #include <segmatch/sim/keyframes.h>
 #include <segmatch/sim/local_clouds.h>
 #include <segmatch/storage/map_writer.h>
@@ -20,7 +20,8 @@ std::vector<api::LocalizeRequest> revisit_requests(const sim::City& city, const 
   const sim::RayCaster caster(city.changed.scene());
   // The vehicle's local frame and odometry: drifting as sim::KeyframeConfig's defaults.
   Poses truth_local;
-  for (const Pose3d& T : city.second.T_world_lidar) truth_local.push_back(city.second.T_world_lidar.front().inverse() * T);
+  for (const Pose3d& T : city.second.T_world_lidar)
+    truth_local.push_back(city.second.T_world_lidar.front().inverse() * T);
   const Poses odometry = sim::drifted_odometry(truth_local, sim::KeyframeConfig{});
   sim::LocalCloudSchedule schedule;
   schedule.every_m = every_m;
@@ -46,41 +47,47 @@ std::vector<api::LocalizeRequest> revisit_requests(const sim::City& city, const 
         query_frames.erase(query_frames.begin());
       }
     };
-    sim::for_each_kept_scan(caster, sim::hdl64e(), city.second, local_cloud, schedule, [&](size_t frame, const sim::SimulatedScan& scan) {
-      if (frame > 0) emit_before(frame - 1);
-      PointCloud placed = scan.points;
-      for (Point& p : placed) {
-        const Eigen::Vector3f q = odometry[frame].cast<float>() * p.xyz();
-        p.x = q.x(), p.y = q.y(), p.z = q.z();
-      }
-      recent.emplace_back(frame, voxel_filter(placed, thin));
-      while (city.second.odometer_m[frame] - city.second.odometer_m[recent.front().first] > kNewestM) recent.pop_front();
-      emit_before(frame);
-    });
+    sim::for_each_kept_scan(
+        caster, sim::hdl64e(), city.second, local_cloud, schedule, [&](size_t frame, const sim::SimulatedScan& scan) {
+          if (frame > 0) emit_before(frame - 1);
+          PointCloud placed = scan.points;
+          for (Point& p : placed) {
+            const Eigen::Vector3f q = odometry[frame].cast<float>() * p.xyz();
+            p.x = q.x(), p.y = q.y(), p.z = q.z();
+          }
+          recent.emplace_back(frame, voxel_filter(placed, thin));
+          while (city.second.odometer_m[frame] - city.second.odometer_m[recent.front().first] > kNewestM)
+            recent.pop_front();
+          emit_before(frame);
+        });
     emit_before(SIZE_MAX);
   }
   sim::for_each_local_cloud(caster, sim::hdl64e(), city.second, local_cloud, schedule,
                             [&](const sim::SimulatedLocalCloud& lc) {
-    api::LocalizeRequest r;
-    r.request_id = lc.frame;
-    r.sensor_position_local = lc.T_cloud_sensor.translation();
-    // The truth's T_map_local at the sensor (map frame = world frame), for the tracked level's
-    // priors; not sent without kFlagHasPrior.
-    r.T_map_local_prior = lc.T_world_sensor * lc.T_cloud_sensor.inverse();
-    r.points = lc.cloud;
-    if (const auto n = newest_at.find(lc.frame); n != newest_at.end()) r.newest_points = n->second;  // sent with bit 5 only
-    // What a vehicle sends (docs/protocol.md 5.4): its local cloud voxelized with the map's grid.
-    if (voxel) {
-      r.points = voxel_filter(r.points, *voxel);
-      r.flags |= api::kFlagVoxelized;
-    }
-    out.push_back(std::move(r));
-  });
+                              api::LocalizeRequest r;
+                              r.request_id = lc.frame;
+                              r.sensor_position_local = lc.T_cloud_sensor.translation();
+                              // The truth's T_map_local at the sensor (map frame = world frame), for the tracked
+                              // level's priors; not sent without kFlagHasPrior.
+                              r.T_map_local_prior = lc.T_world_sensor * lc.T_cloud_sensor.inverse();
+                              r.points = lc.cloud;
+                              if (const auto n = newest_at.find(lc.frame); n != newest_at.end())
+                                r.newest_points = n->second;  // sent with bit 5 only
+                              // What a vehicle sends (docs/protocol.md 5.4): its local cloud voxelized with the map's
+                              // grid.
+                              if (voxel) {
+                                r.points = voxel_filter(r.points, *voxel);
+                                r.flags |= api::kFlagVoxelized;
+                              }
+                              out.push_back(std::move(r));
+                            });
   return out;
 }
 
 std::string build_map(const sim::City& city, const io::PipelineConfig& config, const std::string& model) {
-  const std::string path = (std::filesystem::temp_directory_path() / ("segmatch_bench_server_" + std::to_string(::getpid()) + ".sqlite")).string();
+  const std::string path =
+      (std::filesystem::temp_directory_path() / ("segmatch_bench_server_" + std::to_string(::getpid()) + ".sqlite"))
+          .string();
   sim::SegmentsAlongConfig along;
   along.schedule.every_m = 5.0;
   along.segmentation = config.localizer.segmentation;
@@ -94,7 +101,9 @@ std::string build_map(const sim::City& city, const io::PipelineConfig& config, c
   SurfaceAccumulator surfaces(config.surfaces);
   const sim::RayCaster caster(city.world.scene());
   sim::for_each_kept_scan(caster, sim::hdl64e(), city.first, config.local_cloud, sim::LocalCloudSchedule{},
-                          [&](size_t frame, const sim::SimulatedScan& scan) { surfaces.add_scan(scan.points, city.first.T_world_lidar[frame]); });
+                          [&](size_t frame, const sim::SimulatedScan& scan) {
+                            surfaces.add_scan(scan.points, city.first.T_world_lidar[frame]);
+                          });
   writer.set_surfaces(surfaces.points(), config.surfaces.leaf_m, config.surfaces.tile_m);
   if (!model.empty()) writer.set_classifier({storage::kClassifierFormatRTreesYaml, model});
   writer.commit();

@@ -102,12 +102,18 @@ class ServerProcess {
 }  // namespace
 
 bool SoakResult::passed(const SoakConfig& c) const {
-  return errors == 0 && server_exit == 0 && rss_baseline_mb > 0 && rss_end_mb <= rss_baseline_mb * (1.0 + c.max_rss_growth);
+  return errors == 0 && server_exit == 0 && rss_baseline_mb > 0 &&
+         rss_end_mb <= rss_baseline_mb * (1.0 + c.max_rss_growth);
 }
 
 nlohmann::json SoakResult::to_json() const {
-  return {{"answered", answered}, {"localized", localized}, {"errors", errors}, {"seconds", seconds},
-          {"rss_baseline_mb", rss_baseline_mb}, {"rss_end_mb", rss_end_mb}, {"rss_peak_mb", rss_peak_mb},
+  return {{"answered", answered},
+          {"localized", localized},
+          {"errors", errors},
+          {"seconds", seconds},
+          {"rss_baseline_mb", rss_baseline_mb},
+          {"rss_end_mb", rss_end_mb},
+          {"rss_peak_mb", rss_peak_mb},
           {"server_exit", server_exit}};
 }
 
@@ -144,7 +150,8 @@ SoakResult run_soak(const SoakConfig& c, const SoakQuery& query) {
       for (int i = 0; i < c.queries_per_client; ++i) {
         try {
           if (!client) client = std::make_unique<api::Client>("127.0.0.1", server.port(), options);
-          localized += query(*client, static_cast<size_t>(k), static_cast<size_t>(i)).status == api::LocalizeStatus::kLocalized;
+          localized +=
+              query(*client, static_cast<size_t>(k), static_cast<size_t>(i)).status == api::LocalizeStatus::kLocalized;
         } catch (const std::exception& e) {
           if (++errors <= 5) {
             std::lock_guard<std::mutex> lock(print);
@@ -166,13 +173,16 @@ SoakResult run_soak(const SoakConfig& c, const SoakQuery& query) {
   r.rss_peak_mb = proc_status_mb(server.pid(), "VmHWM");
   r.server_exit = server.stop();
   const double growth = r.rss_baseline_mb > 0 ? 100.0 * (r.rss_end_mb / r.rss_baseline_mb - 1.0) : 0.0;
-  std::printf("soak: %zu queries in %.0f s (%.1f queries/s), %zu localized, %zu errors; server RSS after %zu queries "
-              "%.1f MB, at the end %.1f MB (%+.1f %%), peak %.1f MB; server exit %d after SIGTERM: %s\n",
-              r.answered + r.errors, r.seconds, static_cast<double>(r.answered) / r.seconds, r.localized, r.errors,
-              c.baseline_after, r.rss_baseline_mb, r.rss_end_mb, growth, r.rss_peak_mb, r.server_exit,
-              r.passed(c) ? "PASS" : "FAIL");
-  if (r.passed(c)) std::remove(log_path.c_str());
-  else std::printf("soak: the server's log is kept: %s\n", log_path.c_str());
+  std::printf(
+      "soak: %zu queries in %.0f s (%.1f queries/s), %zu localized, %zu errors; server RSS after %zu queries "
+      "%.1f MB, at the end %.1f MB (%+.1f %%), peak %.1f MB; server exit %d after SIGTERM: %s\n",
+      r.answered + r.errors, r.seconds, static_cast<double>(r.answered) / r.seconds, r.localized, r.errors,
+      c.baseline_after, r.rss_baseline_mb, r.rss_end_mb, growth, r.rss_peak_mb, r.server_exit,
+      r.passed(c) ? "PASS" : "FAIL");
+  if (r.passed(c))
+    std::remove(log_path.c_str());
+  else
+    std::printf("soak: the server's log is kept: %s\n", log_path.c_str());
   return r;
 }
 

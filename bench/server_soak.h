@@ -15,10 +15,10 @@ namespace segmatch::bench {
 struct SoakConfig {
   std::string server_binary;  // segmatch-server
   std::string map_path;
-  int workers = 0;            // the server's --workers (0: its default, the cores)
+  int workers = 0;  // the server's --workers (0: its default, the cores)
   int clients = 16;
   int queries_per_client = 1000;
-  size_t baseline_after = 100;  // queries answered in total when the baseline RSS is taken
+  size_t baseline_after = 100;   // queries answered in total when the baseline RSS is taken
   double max_rss_growth = 0.05;  // the end RSS may exceed the baseline by this fraction
 };
 

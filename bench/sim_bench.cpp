@@ -43,10 +43,10 @@ int main(int argc, char** argv) {
   const sim::RayCaster caster(scene);
   const double bvh_s = seconds_since(t0);
   std::printf("world %s: %.1f km of streets, %zu objects, %zu primitives; generation %.2f s, BVH build %.3f s\n",
-              preset.c_str(), world.streets.total_length_m() / 1000.0, world.objects.size(), scene.size(),
-              world_s, bvh_s);
-  std::printf("%-8s %8s %10s %12s %12s %12s %10s\n", "sensor", "scans", "rays/scan", "median ms", "p90 ms",
-              "scans/s", "Mrays/s");
+              preset.c_str(), world.streets.total_length_m() / 1000.0, world.objects.size(), scene.size(), world_s,
+              bvh_s);
+  std::printf("%-8s %8s %10s %12s %12s %12s %10s\n", "sensor", "scans", "rays/scan", "median ms", "p90 ms", "scans/s",
+              "Mrays/s");
   for (const std::string& name : sensors) {
     const sim::LidarModel model = sim::lidar_model_by_name(name);
     std::vector<double> ms;

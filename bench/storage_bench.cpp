@@ -13,10 +13,9 @@
 #include <segmatch/storage/map_reader.h>
 #include <segmatch/storage/map_writer.h>
 
-
 #include <fstream>
-#include <optional>
 #include <iterator>
+#include <optional>
 
 #include <CLI/CLI.hpp>
 
@@ -36,9 +35,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-double seconds_since(Clock::time_point t) {
-  return std::chrono::duration<double>(Clock::now() - t).count();
-}
+double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
 // User + system CPU time of the whole process: unlike wall time, barely affected by other
 // programs competing for the cores.
@@ -129,7 +126,7 @@ std::vector<storage::Keyframe> tiled_trajectory(const Tiles& tiles, int segments
 
 struct WriteResult {
   double seconds = 0;
-  double commit_seconds = 0;  // COMMIT + fsync + rename, part of seconds
+  double commit_seconds = 0;   // COMMIT + fsync + rename, part of seconds
   double surface_seconds = 0;  // set_surfaces, part of seconds
   size_t points = 0;
   double route_km = 0;  // without the jumps between tiled copies
@@ -151,7 +148,8 @@ std::vector<storage::Keyframe> bench_trajectory(int segments, const Tiles* tiles
 double route_km(const std::vector<storage::Keyframe>& trajectory) {
   double m = 0;
   for (size_t k = 1; k < trajectory.size(); ++k) {
-    const double step = (trajectory[k].T_map_sensor.translation() - trajectory[k - 1].T_map_sensor.translation()).norm();
+    const double step =
+        (trajectory[k].T_map_sensor.translation() - trajectory[k - 1].T_map_sensor.translation()).norm();
     if (step <= 50.0) m += step;
   }
   return m / 1000.0;
@@ -202,8 +200,8 @@ WriteResult write_map(const std::string& path, int segments, float area_m, const
 }
 
 void print(const char* set, const bench::QueryFigures& q) {
-  std::printf("; %d %s queries: median %.1f ms, p90 %.1f ms, %d localized (%d within 5 cm)", q.queries, set, q.median_ms,
-              q.p90_ms, q.localized, q.correct);
+  std::printf("; %d %s queries: median %.1f ms, p90 %.1f ms, %d localized (%d within 5 cm)", q.queries, set,
+              q.median_ms, q.p90_ms, q.localized, q.correct);
   if (q.point_reads + q.cache_hits)
     std::printf(", %llu segments' points read, %llu from the cache", q.point_reads, q.cache_hits);
 }
@@ -242,12 +240,12 @@ void report_serving(const std::string& path, bool drop_caches) {
       lazy_random.push_back(lazy.random.median_ms), memory_random.push_back(memory.random.median_ms);
     }
     if (lazy_open.empty()) continue;
-    std::printf("open for serving, %s cache, median of %zu: lazy %.3f s, memory %.3f s; lazy point reads add %+.1f ms "
-                "a route query (%.1f vs %.1f ms), %+.1f ms a random-place query (%.1f vs %.1f ms); answers %s\n",
-                cache, lazy_open.size(), median(lazy_open), median(memory_open),
-                median(lazy_route) - median(memory_route), median(lazy_route), median(memory_route),
-                median(lazy_random) - median(memory_random), median(lazy_random), median(memory_random),
-                same_answers ? "identical" : "DIFFER");
+    std::printf(
+        "open for serving, %s cache, median of %zu: lazy %.3f s, memory %.3f s; lazy point reads add %+.1f ms "
+        "a route query (%.1f vs %.1f ms), %+.1f ms a random-place query (%.1f vs %.1f ms); answers %s\n",
+        cache, lazy_open.size(), median(lazy_open), median(memory_open), median(lazy_route) - median(memory_route),
+        median(lazy_route), median(memory_route), median(lazy_random) - median(memory_random), median(lazy_random),
+        median(memory_random), same_answers ? "identical" : "DIFFER");
   }
 }
 
@@ -277,8 +275,8 @@ bool time_reads(const std::string& path, const WriteResult& written, int segment
               median(load_s), runs, *std::min_element(load_s.begin(), load_s.end()),
               *std::max_element(load_s.begin(), load_s.end()));
   std::printf("full load CPU time (all threads): median %.3f s\n", median(load_cpu_s));
-  std::printf("segments_near(r = %.0f m): median %.2f ms, %zu segments on median\n", radius_m,
-              median(near_s) * 1e3, size_t(median(std::vector<double>(near_counts.begin(), near_counts.end()))));
+  std::printf("segments_near(r = %.0f m): median %.2f ms, %zu segments on median\n", radius_m, median(near_s) * 1e3,
+              size_t(median(std::vector<double>(near_counts.begin(), near_counts.end()))));
   return true;
 }
 
@@ -299,8 +297,9 @@ int main(int argc, char** argv) {
   app.add_option("--dir", folder, "scratch folder (removed afterwards unless --keep)");
   bool keep = false;
   std::string from;
-  app.add_option("--from", from, "tile the city with this map's real segments (e.g. the demo's) instead of "
-                                 "synthetic ones (random points and descriptors: incompressible, the worst case)");
+  app.add_option("--from", from,
+                 "tile the city with this map's real segments (e.g. the demo's) instead of "
+                 "synthetic ones (random points and descriptors: incompressible, the worst case)");
   app.add_flag("--keep", keep, "keep the map (DIR/bench.segmap)");
   std::string existing;
   app.add_option("--map", existing, "measure this map instead of writing one (no write, no segments_near timing)")
@@ -327,18 +326,19 @@ int main(int argc, char** argv) {
   if (!from.empty()) tiles = read_tiles(from);
   const WriteResult written = write_map(path, segments, area_m, tiles ? &*tiles : nullptr, surface_tile_m);
   const double size_mb = double(fs::file_size(path)) / 1e6;
-  std::printf("map: %d segments, %zu points (%.0f per segment), %.0f x %.0f m\n", segments,
-              written.points, double(written.points) / segments, area_m, area_m);
-  std::printf("file size: %.1f MB (%.1f MB per 100k segments, %.2f bytes per point all-in)\n",
-              size_mb, size_mb * 1e5 / segments, size_mb * 1e6 / double(written.points));
+  std::printf("map: %d segments, %zu points (%.0f per segment), %.0f x %.0f m\n", segments, written.points,
+              double(written.points) / segments, area_m, area_m);
+  std::printf("file size: %.1f MB (%.1f MB per 100k segments, %.2f bytes per point all-in)\n", size_mb,
+              size_mb * 1e5 / segments, size_mb * 1e6 / double(written.points));
   if (tiles) {
     const double km = tiles->km * double(segments) / double(tiles->segments.size());
     std::printf("tiled from %s: %zu segments and %.3f km a copy: %.1f MB per km\n", from.c_str(),
                 tiles->segments.size(), tiles->km, size_mb / km);
   }
-  std::printf("write (add_segments + surfaces + trajectory + classifier + commit): %.2f s, of which set_surfaces "
-              "%.2f s, commit (COMMIT + fsync + rename) %.2f s\n",
-              written.seconds, written.surface_seconds, written.commit_seconds);
+  std::printf(
+      "write (add_segments + surfaces + trajectory + classifier + commit): %.2f s, of which set_surfaces "
+      "%.2f s, commit (COMMIT + fsync + rename) %.2f s\n",
+      written.seconds, written.surface_seconds, written.commit_seconds);
 
   if (!time_reads(path, written, segments, runs, radius_m)) return 1;
   if (surface_tile_m > 0.f) bench::report_surfaces(path, written.route_km, runs, radius_m);

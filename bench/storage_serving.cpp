@@ -83,7 +83,8 @@ std::vector<Eigen::Vector3f> route_points(const std::vector<storage::Keyframe>& 
   std::vector<Eigen::Vector3f> out;
   double to_next = 0.0;
   for (size_t k = 1; k < trajectory.size() && int(out.size()) < count; ++k) {
-    const Eigen::Vector3d a = trajectory[k - 1].T_map_sensor.translation(), b = trajectory[k].T_map_sensor.translation();
+    const Eigen::Vector3d a = trajectory[k - 1].T_map_sensor.translation(),
+                          b = trajectory[k].T_map_sensor.translation();
     const double length = (b - a).norm();
     if (length > 50.0) continue;  // the jump between two copies of a tiled city
     for (; to_next <= length && int(out.size()) < count; to_next += 5.0)

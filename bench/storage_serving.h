@@ -14,7 +14,7 @@ namespace bench {
 struct QueryFigures {
   int queries = 0, localized = 0, correct = 0;  // correct: within 5 cm of the known pose
   double median_ms = 0, p90_ms = 0;
-  double pose_sum = 0;                          // sum of the localized translations: the same answers?
+  double pose_sum = 0;                                 // sum of the localized translations: the same answers?
   unsigned long long point_reads = 0, cache_hits = 0;  // lazy mode: LazyPoints' counters
 };
 
@@ -22,8 +22,8 @@ struct ServingFigures {
   bool ok = false;
   double open_s = 0, heap_mb = 0, file_mb = 0;  // after the open
   double heap_after_mb = 0, file_after_mb = 0;  // after the queries
-  QueryFigures route;   // a query every 5 m along the map's trajectory (a vehicle driving)
-  QueryFigures random;  // then 100 at random places of the map (every one misses the cache)
+  QueryFigures route;                           // a query every 5 m along the map's trajectory (a vehicle driving)
+  QueryFigures random;                          // then 100 at random places of the map (every one misses the cache)
 };
 
 // Runs in a child process and returns what it measured. With drop_caches the page cache is

@@ -110,16 +110,18 @@ void report_surfaces(const std::string& path, double route_km, int runs, double 
   }
   const storage::SurfaceLayer layer = *storage::MapReader::open(path).surfaces();
   const double mb = double(layer.stored_bytes) / 1e6;
-  std::printf("surface layer: leaf %.2f m, %.0f m tiles: %llu tiles, %llu points, %.1f MB = %.2f MB per km of route "
-              "(%.2f bytes a point)\n",
-              layer.leaf_m, layer.tile_m, static_cast<unsigned long long>(layer.tile_count),
-              static_cast<unsigned long long>(layer.point_count), mb, mb / route_km,
-              double(layer.stored_bytes) / double(std::max<uint64_t>(layer.point_count, 1)));
-  std::printf("surface layer: open the map %.2f ms, + tile index %.2f ms (medians of %d); near(r = %.0f m) at a "
-              "route place: %.2f ms with its tiles read from the file (%zu tiles, %zu points on the last), %.2f ms "
-              "from the cache (medians of %zu)\n",
-              median(open_ms), median(index_ms), runs, radius_m, median(cold_ms), tiles_read, points, median(warm_ms),
-              cold_ms.size());
+  std::printf(
+      "surface layer: leaf %.2f m, %.0f m tiles: %llu tiles, %llu points, %.1f MB = %.2f MB per km of route "
+      "(%.2f bytes a point)\n",
+      layer.leaf_m, layer.tile_m, static_cast<unsigned long long>(layer.tile_count),
+      static_cast<unsigned long long>(layer.point_count), mb, mb / route_km,
+      double(layer.stored_bytes) / double(std::max<uint64_t>(layer.point_count, 1)));
+  std::printf(
+      "surface layer: open the map %.2f ms, + tile index %.2f ms (medians of %d); near(r = %.0f m) at a "
+      "route place: %.2f ms with its tiles read from the file (%zu tiles, %zu points on the last), %.2f ms "
+      "from the cache (medians of %zu)\n",
+      median(open_ms), median(index_ms), runs, radius_m, median(cold_ms), tiles_read, points, median(warm_ms),
+      cold_ms.size());
 }
 
 }  // namespace bench

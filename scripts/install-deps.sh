@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Installs every Debian package the project needs (`fuzz`: also what scripts/fuzz.sh needs). Idempotent: packages already present are
+# Installs every Debian package the project needs (`fuzz`, `cross`, `format`: also what those scripts need). Idempotent: packages already present are
 # skipped, so a second run costs only the dpkg query.
 set -euo pipefail
 
@@ -20,6 +20,9 @@ PACKAGES=(
 if [ "${1:-}" = "fuzz" ]; then PACKAGES+=(clang libclang-rt-14-dev); fi
 # `install-deps.sh cross`: also the aarch64 cross compiler (scripts/cross-aarch64.sh).
 if [ "${1:-}" = "cross" ]; then PACKAGES+=(g++-aarch64-linux-gnu); fi
+# `install-deps.sh format`: also clang-format (scripts/format.sh; Debian 12's is version 14, whose
+# output .clang-format was checked with).
+if [ "${1:-}" = "format" ]; then PACKAGES+=(clang-format); fi
 
 # Node.js runs the independent ROS 2 bag writer of the tests (tests/tools/bagwriter). A node and
 # npm already on the PATH (e.g. from NodeSource) are used as they are: Debian's npm package would

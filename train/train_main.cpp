@@ -9,8 +9,8 @@
 #include "segmatch/cli/progress.h"
 #include "segmatch/core/training/training.h"
 #include "segmatch/eval/real_pairs.h"
-#include "segmatch/io/error.h"
 #include "segmatch/io/auto_profile.h"
+#include "segmatch/io/error.h"
 #include "segmatch/io/pipeline_config.h"
 #include "segmatch/sim/city.h"
 
@@ -30,8 +30,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::unique_ptr<sim::LabelledCity> city_pairs(const std::string& preset, uint64_t seed, const io::PipelineConfig& config,
-                                              const std::string& sensor) {
+std::unique_ptr<sim::LabelledCity> city_pairs(const std::string& preset, uint64_t seed,
+                                              const io::PipelineConfig& config, const std::string& sensor) {
   sim::SegmentsAlongConfig along;
   along.local_cloud = config.local_cloud;
   along.segmentation = config.localizer.segmentation;
@@ -104,16 +104,18 @@ struct TrainOptions {
 void add_options(CLI::App& app, TrainOptions& o) {
   cli::add_output_option(app, o.out, "model file to write (e.g. maps/models/default-rf.yml), required");
   app.add_option("--config", o.config_path, "pipeline config JSON (default: the kitti-hdl64 preset)");
-  app.add_option("--preset", o.preset, "simulated city size: tiny, demo, city")->check(CLI::IsMember(sim::dataset_preset_names()));
+  app.add_option("--preset", o.preset, "simulated city size: tiny, demo, city")
+      ->check(CLI::IsMember(sim::dataset_preset_names()));
   app.add_option("--seeds", o.seeds, "city seeds to train on")->delimiter(',');
   app.add_option("--holdout-seed", o.holdout, "city seed to report TPR / FPR on (0: none)");
   app.add_option("--sensor", o.sensor, "hdl64e, vlp16, os1-64");
   app.add_flag("--eigen-only", o.eigen_only, "train RF_eigen (21 pair features) instead of RF_eigen+shapes (31)");
   app.add_option("--eigen-out", o.eigen_out, "also train RF_eigen on the same pairs and write it here");
-  app.add_option("--real", o.real_dir,
-                 "train on a real keyframe folder instead (e.g. ../shared/data/real/riverside02): map side from the even "
-                 "keyframes, queries from the odd ones, labels by centroid distance; every 3rd 300 m stretch of the drive "
-                 "is held out (default config: the auto profile measured from that folder)");
+  app.add_option(
+      "--real", o.real_dir,
+      "train on a real keyframe folder instead (e.g. ../shared/data/real/riverside02): map side from the even "
+      "keyframes, queries from the odd ones, labels by centroid distance; every 3rd 300 m stretch of the drive "
+      "is held out (default config: the auto profile measured from that folder)");
   app.add_option("--baseline", o.baselines, "also report these existing model files on the same held-out pairs");
 }
 
@@ -121,8 +123,9 @@ void add_options(CLI::App& app, TrainOptions& o) {
 // kitti-hdl64 values, so only a real folder is measured.
 io::PipelineConfig training_config(const TrainOptions& o) {
   io::PipelineConfig config = !o.config_path.empty() ? io::read_pipeline_config(o.config_path)
-                              : o.real_dir.empty()   ? io::pipeline_preset("kitti-hdl64")
-                                                     : io::auto_pipeline_config(io::measure_sequence(io::Sequence::open(o.real_dir)));
+                              : o.real_dir.empty()
+                                  ? io::pipeline_preset("kitti-hdl64")
+                                  : io::auto_pipeline_config(io::measure_sequence(io::Sequence::open(o.real_dir)));
   if (config.measured) std::printf("%s\n", io::describe_profile(config).c_str());
   config.localizer.matcher.use_shapes = !o.eigen_only;
   if (o.eigen_only) config.localizer.matcher.rf_threshold = 0.81f;  // paper Table I
@@ -162,8 +165,8 @@ int train(TrainOptions o) {
     real = eval::real_pairs(o.real_dir, config, rc);
     pairs = real->train.pairs;
     same = real->train.same_object;
-    std::printf("real drive %.0f m: training stretch %zu map / %zu query segments, held out %zu / %zu\n",
-                real->drive_m, real->targets_train.size(), real->queries_train.size(), real->targets_held_out.size(),
+    std::printf("real drive %.0f m: training stretch %zu map / %zu query segments, held out %zu / %zu\n", real->drive_m,
+                real->targets_train.size(), real->queries_train.size(), real->targets_held_out.size(),
                 real->queries_held_out.size());
     o.seeds.clear();
   }

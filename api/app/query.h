@@ -9,15 +9,15 @@
 namespace segmatch::query {
 
 struct ReplayOptions {
-  std::string folder;        // a sequence folder or a ROS 2 bag
-  io::BagOptions bag;        // which topics of a bag
-  double every_m = 10.0;     // one query each time the vehicle drove this far
-  size_t first = 0;          // first scan index
-  size_t last = SIZE_MAX;    // last scan index (inclusive)
-  bool track = false;        // api::Tracker: the last fix is the next query's prior
-  std::string odometry;      // poses file to accumulate with (default: odom_poses.txt, else poses.txt)
-  bool segments = false;     // LOCALIZE_SEGMENTS: segment here, send the segments
-  double newest_m = 10.0;    // LOCALIZE: also send the scans of the last this many metres (0: none)
+  std::string folder;      // a sequence folder or a ROS 2 bag
+  io::BagOptions bag;      // which topics of a bag
+  double every_m = 10.0;   // one query each time the vehicle drove this far
+  size_t first = 0;        // first scan index
+  size_t last = SIZE_MAX;  // last scan index (inclusive)
+  bool track = false;      // api::Tracker: the last fix is the next query's prior
+  std::string odometry;    // poses file to accumulate with (default: odom_poses.txt, else poses.txt)
+  bool segments = false;   // LOCALIZE_SEGMENTS: segment here, send the segments
+  double newest_m = 10.0;  // LOCALIZE: also send the scans of the last this many metres (0: none)
 };
 
 // Replays a recorded sequence like a vehicle: accumulates its scans into a local cloud from

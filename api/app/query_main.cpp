@@ -31,10 +31,12 @@ Eigen::Vector3d parse_xyz(const std::string& text) {
 }
 
 void print_info(const api::InfoReply& info) {
-  std::printf("map:       %s\nsegments:  %llu\nextent:    (%.1f %.1f %.1f) .. (%.1f %.1f %.1f)\nprotocol:  %u\nparameters:\n%s\n",
-              info.map_name.c_str(), static_cast<unsigned long long>(info.segment_count), info.extent_min.x(),
-              info.extent_min.y(), info.extent_min.z(), info.extent_max.x(), info.extent_max.y(), info.extent_max.z(),
-              info.protocol_version, info.parameters_json.c_str());
+  std::printf(
+      "map:       %s\nsegments:  %llu\nextent:    (%.1f %.1f %.1f) .. (%.1f %.1f %.1f)\nprotocol:  "
+      "%u\nparameters:\n%s\n",
+      info.map_name.c_str(), static_cast<unsigned long long>(info.segment_count), info.extent_min.x(),
+      info.extent_min.y(), info.extent_min.z(), info.extent_max.x(), info.extent_max.y(), info.extent_max.z(),
+      info.protocol_version, info.parameters_json.c_str());
 }
 
 }  // namespace
@@ -57,15 +59,20 @@ int main(int argc, char** argv) {
   CLI::App* localize = app.add_subcommand("localize", "localize one cloud (.bin/.pcd/.ply, local frame)");
   localize->add_option("cloud", cloud_path, "point cloud file")->required();
   localize->add_option("--sensor", sensor, "sensor position x,y,z in the cloud's frame")->capture_default_str();
-  localize->add_flag("--refusal-code",
-                     "ask for the reply's typed refusal code (the default since revision 5; a server older than "
-                     "revision 5 is asked again without it)")
+  localize
+      ->add_flag("--refusal-code",
+                 "ask for the reply's typed refusal code (the default since revision 5; a server older than "
+                 "revision 5 is asked again without it)")
       ->group("");
   CLI::App* rep = app.add_subcommand("replay", "replay a sequence folder like a vehicle");
-  rep->add_option("sequence", replay.folder, "KITTI sequence folder, PCD keyframe folder, or a ROS 2 bag (.mcap, .db3, folder)")
+  rep->add_option("sequence", replay.folder,
+                  "KITTI sequence folder, PCD keyframe folder, or a ROS 2 bag (.mcap, .db3, folder)")
       ->required();
-  cli::add_bag_options(*rep, replay.bag.points_topic, replay.bag.pose_topic, replay.bag.map_frame, replay.bag.sensor_frame);
-  rep->add_option("--every-m", replay.every_m, "query every this many metres")->capture_default_str()->check(CLI::PositiveNumber);
+  cli::add_bag_options(*rep, replay.bag.points_topic, replay.bag.pose_topic, replay.bag.map_frame,
+                       replay.bag.sensor_frame);
+  rep->add_option("--every-m", replay.every_m, "query every this many metres")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
   rep->add_option("--first", replay.first, "first scan index");
   rep->add_option("--last", replay.last, "last scan index (inclusive)");
   rep->add_flag("--track", replay.track,
@@ -74,9 +81,11 @@ int main(int argc, char** argv) {
   rep->add_option("--odometry", replay.odometry,
                   "the vehicle's odometry poses file, KITTI or TUM (default: the sequence's odom_poses.txt, else its "
                   "poses.txt, said on the first line)");
-  rep->add_option("--newest-m", replay.newest_m,
-                  "with each cloud also send the scans of the last this many metres, thinned, so that the server answers "
-                  "the sensor's pose now rather than the odometry-warped cloud's (protocol revision 8; with --segments revision 10; 0: none)")
+  rep->add_option(
+         "--newest-m", replay.newest_m,
+         "with each cloud also send the scans of the last this many metres, thinned, so that the server answers "
+         "the sensor's pose now rather than the odometry-warped cloud's (protocol revision 8; with --segments revision "
+         "10; 0: none)")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
   rep->add_flag("--segments", replay.segments,

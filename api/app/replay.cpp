@@ -39,12 +39,16 @@ std::string warp_of(const api::LocalizeReply& r) {
 void print_reply(const api::LocalizeReply& r, double round_trip_ms) {
   const Eigen::Quaterniond q(r.T_map_local.linear());
   const Eigen::Vector3d t = r.T_map_local.translation();
-  std::printf("%-13s inliers %3u support %3u conf %.2f  T_map_local t=(%.3f %.3f %.3f) q=(%.5f %.5f %.5f %.5f)  "
-              "%.1f ms (server %.1f)%s%s%s%s%s\n",
-              api::to_string(r.status), r.inliers, r.support, r.confidence, t.x(), t.y(), t.z(), q.w(), q.x(), q.y(),
-              q.z(), round_trip_ms, r.timings.server_total, r.refusal == api::RefusalCode::kNone ? "" : "  ",
-              r.refusal == api::RefusalCode::kNone ? "" : api::to_string(r.refusal), r.reason.empty() ? "" : r.refusal == api::RefusalCode::kNone ? "  " : ": ",
-              r.reason.c_str(), warp_of(r).c_str());
+  std::printf(
+      "%-13s inliers %3u support %3u conf %.2f  T_map_local t=(%.3f %.3f %.3f) q=(%.5f %.5f %.5f %.5f)  "
+      "%.1f ms (server %.1f)%s%s%s%s%s\n",
+      api::to_string(r.status), r.inliers, r.support, r.confidence, t.x(), t.y(), t.z(), q.w(), q.x(), q.y(), q.z(),
+      round_trip_ms, r.timings.server_total, r.refusal == api::RefusalCode::kNone ? "" : "  ",
+      r.refusal == api::RefusalCode::kNone ? "" : api::to_string(r.refusal),
+      r.reason.empty()                       ? ""
+      : r.refusal == api::RefusalCode::kNone ? "  "
+                                             : ": ",
+      r.reason.c_str(), warp_of(r).c_str());
 }
 
 namespace {
@@ -73,10 +77,11 @@ int replay(api::Client& client, const ReplayOptions& options) {
   so.poses_path = options.odometry;
   so.bag = options.bag;
   const bool bag = io::BagReader::is_bag(options.folder);
-  if (!bag && so.poses_path.empty() && std::filesystem::is_regular_file(std::filesystem::path(options.folder) / "odom_poses.txt"))
+  if (!bag && so.poses_path.empty() &&
+      std::filesystem::is_regular_file(std::filesystem::path(options.folder) / "odom_poses.txt"))
     so.poses_path = (std::filesystem::path(options.folder) / "odom_poses.txt").string();
   const io::Sequence seq = io::Sequence::open(options.folder, so);
-  std::printf("local clouds from %s\n", bag                    ? seq.source_note().c_str()
+  std::printf("local clouds from %s\n", bag                     ? seq.source_note().c_str()
                                         : so.poses_path.empty() ? "the sequence's poses.txt (it has no odom_poses.txt)"
                                                                 : so.poses_path.c_str());
   io::ReplayConfig config;
@@ -110,9 +115,11 @@ int replay(api::Client& client, const ReplayOptions& options) {
     ++queries;
     const api::TrackMode mode = options.track ? tracker.prepare(request, q.odometer_m) : api::TrackMode::kGlobal;
     // Tracked with the newest scans: the server tracks on the surface layer first (revision 11).
-    if (mode == api::TrackMode::kTracked) api::ask_to_track_first(request, max_tracked_radius_m(map_parameters.localizer));
+    if (mode == api::TrackMode::kTracked)
+      api::ask_to_track_first(request, max_tracked_radius_m(map_parameters.localizer));
     tracked += mode == api::TrackMode::kTracked;
-    std::printf("frame %6zu  %7.1f m  %7zu points  %-7s ", q.frame, q.odometer_m, request.points.size(), api::to_string(mode));
+    std::printf("frame %6zu  %7.1f m  %7zu points  %-7s ", q.frame, q.odometer_m, request.points.size(),
+                api::to_string(mode));
     const auto start = std::chrono::steady_clock::now();
     try {
       api::LocalizeReply r;
@@ -122,8 +129,8 @@ int replay(api::Client& client, const ReplayOptions& options) {
         vehicle_ms.push_back(t.total_ms);
         // Tracked, with the newest scans: the tracking request first (revision 11), the full one
         // after TRACKING_LOST.
-        const vehicle::SegmentQuery::TrackedReply tr =
-            segmenter->localize_tracking_first(s, [&](const api::LocalizeSegmentsRequest& m) { return client.localize_segments(m); });
+        const vehicle::SegmentQuery::TrackedReply tr = segmenter->localize_tracking_first(
+            s, [&](const api::LocalizeSegmentsRequest& m) { return client.localize_segments(m); });
         request_kb.push_back(static_cast<double>(tr.request_bytes) / 1024.0);
         r = tr.reply;
       } else {
@@ -142,8 +149,8 @@ int replay(api::Client& client, const ReplayOptions& options) {
     }
     return true;
   });
-  std::printf("summary: %zu queries (%zu tracked), %zu localized, %zu errors, latency p50 %.1f ms p99 %.1f ms\n", queries,
-              tracked, localized, errors, percentile(latencies_ms, 0.5), percentile(latencies_ms, 0.99));
+  std::printf("summary: %zu queries (%zu tracked), %zu localized, %zu errors, latency p50 %.1f ms p99 %.1f ms\n",
+              queries, tracked, localized, errors, percentile(latencies_ms, 0.5), percentile(latencies_ms, 0.99));
   if (segmenter)
     std::printf("segments: vehicle side p50 %.1f ms per query (segmenting, describing), request p50 %.0f KB\n",
                 percentile(vehicle_ms, 0.5), percentile(request_kb, 0.5));

@@ -9,13 +9,15 @@ namespace api {
 Client::Client(const std::string& host, uint16_t port, const ClientOptions& options)
     : options_(options), host_(host), port_(port), where_(host + ":" + std::to_string(port)) {
   if (options_.retries < 0) throw std::invalid_argument("ClientOptions::retries must be >= 0");
-  if (!(options_.reconnect_window_s >= 0)) throw std::invalid_argument("ClientOptions::reconnect_window_s must be >= 0");
+  if (!(options_.reconnect_window_s >= 0))
+    throw std::invalid_argument("ClientOptions::reconnect_window_s must be >= 0");
   connect();
 }
 
 void Client::connect() {
   try {
-    socket_ = connect_tcp(host_, port_, std::chrono::milliseconds(static_cast<int64_t>(options_.connect_timeout_s * 1000)));
+    socket_ =
+        connect_tcp(host_, port_, std::chrono::milliseconds(static_cast<int64_t>(options_.connect_timeout_s * 1000)));
   } catch (const std::exception& e) {
     throw ClientError(ClientError::Kind::kConnect, e.what());
   }
@@ -32,7 +34,8 @@ void Client::reconnect() {
   std::chrono::milliseconds pause(50);
   for (;;) {
     try {
-      socket_ = connect_tcp(host_, port_, std::chrono::milliseconds(static_cast<int64_t>(options_.connect_timeout_s * 1000)));
+      socket_ =
+          connect_tcp(host_, port_, std::chrono::milliseconds(static_cast<int64_t>(options_.connect_timeout_s * 1000)));
       broken_ = false;
       send_raw(encode(HelloRequest{options_.token}));
       expect<HelloOkReply>(MessageType::kHelloOk);
@@ -86,7 +89,8 @@ void Client::send_raw(const std::vector<uint8_t>& bytes) {
 void Client::rethrow_pending_error() {
   Frame f;
   const FrameRead r = try_read_frame(deadline_after(0.5), f);
-  if (r.io != IoResult::kOk || r.header != DecodeStatus::kOk || f.header.type != static_cast<uint16_t>(MessageType::kError))
+  if (r.io != IoResult::kOk || r.header != DecodeStatus::kOk ||
+      f.header.type != static_cast<uint16_t>(MessageType::kError))
     return;
   ErrorReply e;
   if (decode(f.payload.data(), f.payload.size(), options_.limits, e) != DecodeStatus::kOk) return;
@@ -106,17 +110,19 @@ Client::FrameRead Client::try_read_frame(Clock::time_point deadline, Frame& f) {
 }
 
 void Client::throw_server_error(const ErrorReply& e) const {
-  throw ClientError(ClientError::Kind::kServer, where_ + ": server error " +
-                    std::to_string(static_cast<int>(e.code)) + ": " + e.message, e.code);
+  throw ClientError(ClientError::Kind::kServer,
+                    where_ + ": server error " + std::to_string(static_cast<int>(e.code)) + ": " + e.message, e.code);
 }
 
 Frame Client::read_frame() {
   if (broken_) throw ClientError(ClientError::Kind::kClosed, where_ + ": connection is closed");
   Frame f;
   const FrameRead r = try_read_frame(deadline_after(options_.reply_timeout_s), f);
-  if (r.io == IoResult::kTimeout) fail(ClientError::Kind::kTimeout, "no reply within " + std::to_string(options_.reply_timeout_s) + " s");
+  if (r.io == IoResult::kTimeout)
+    fail(ClientError::Kind::kTimeout, "no reply within " + std::to_string(options_.reply_timeout_s) + " s");
   if (r.io != IoResult::kOk) fail(ClientError::Kind::kClosed, std::string("reading the reply: ") + to_string(r.io));
-  if (r.header != DecodeStatus::kOk) fail(ClientError::Kind::kProtocol, std::string("bad reply header: ") + to_string(r.header));
+  if (r.header != DecodeStatus::kOk)
+    fail(ClientError::Kind::kProtocol, std::string("bad reply header: ") + to_string(r.header));
   return f;
 }
 
@@ -130,11 +136,12 @@ Reply Client::expect(MessageType type) {
     throw_server_error(e);
   }
   if (f.header.type != static_cast<uint16_t>(type))
-    fail(ClientError::Kind::kProtocol, std::string("expected ") + to_string(type) + ", got type " +
-                                           std::to_string(f.header.type));
+    fail(ClientError::Kind::kProtocol,
+         std::string("expected ") + to_string(type) + ", got type " + std::to_string(f.header.type));
   Reply reply;
   const DecodeStatus s = decode(f.payload.data(), f.payload.size(), options_.limits, reply);
-  if (s != DecodeStatus::kOk) fail(ClientError::Kind::kProtocol, std::string("bad ") + to_string(type) + ": " + to_string(s));
+  if (s != DecodeStatus::kOk)
+    fail(ClientError::Kind::kProtocol, std::string("bad ") + to_string(type) + ": " + to_string(s));
   return reply;
 }
 
@@ -157,8 +164,8 @@ InfoReply Client::info() {
 LocalizeReply Client::localize_reply(uint64_t request_id) {
   LocalizeReply reply = expect<LocalizeReply>(MessageType::kLocalizeReply);
   if (reply.request_id != request_id)
-    fail(ClientError::Kind::kProtocol, "reply for request " + std::to_string(reply.request_id) + ", expected " +
-                                           std::to_string(request_id));
+    fail(ClientError::Kind::kProtocol,
+         "reply for request " + std::to_string(reply.request_id) + ", expected " + std::to_string(request_id));
   return reply;
 }
 

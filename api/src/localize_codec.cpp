@@ -92,8 +92,8 @@ DecodeStatus detail::get_points(wire::Reader& r, uint32_t count, uint32_t stride
 namespace {
 
 std::array<float*, kTimingCount> timing_fields(ModuleTimingsMs& t) {
-  return {&t.voxel, &t.ground, &t.segment, &t.describe, &t.retrieve, &t.classify,
-          &t.verify, &t.refine, &t.total, &t.server_total};
+  return {&t.voxel,    &t.ground, &t.segment, &t.describe, &t.retrieve,
+          &t.classify, &t.verify, &t.refine,  &t.total,    &t.server_total};
 }
 
 }  // namespace

@@ -11,10 +11,16 @@ namespace api {
 
 bool is_known_type(uint16_t type) {
   switch (static_cast<MessageType>(type)) {
-    case MessageType::kHello: case MessageType::kPing: case MessageType::kInfo:
-    case MessageType::kLocalize: case MessageType::kLocalizeSegments: case MessageType::kHelloOk: case MessageType::kPong:
-    case MessageType::kInfoReply: case MessageType::kLocalizeReply: case MessageType::kError:
-      return true;
+    case MessageType::kHello:
+    case MessageType::kPing:
+    case MessageType::kInfo:
+    case MessageType::kLocalize:
+    case MessageType::kLocalizeSegments:
+    case MessageType::kHelloOk:
+    case MessageType::kPong:
+    case MessageType::kInfoReply:
+    case MessageType::kLocalizeReply:
+    case MessageType::kError: return true;
   }
   return false;
 }
@@ -113,7 +119,8 @@ ErrorCode error_code_for(DecodeStatus status) {
     case DecodeStatus::kBadVersion: return ErrorCode::kUnsupportedVersion;
     case DecodeStatus::kUnknownType: return ErrorCode::kUnknownType;
     case DecodeStatus::kTooLarge: return ErrorCode::kFrameTooLarge;
-    case DecodeStatus::kBadPointCount: case DecodeStatus::kBadStride: return ErrorCode::kBadPointCount;
+    case DecodeStatus::kBadPointCount:
+    case DecodeStatus::kBadStride: return ErrorCode::kBadPointCount;
     case DecodeStatus::kNonFinite: return ErrorCode::kNonFinite;
     case DecodeStatus::kBadQuaternion: return ErrorCode::kBadQuaternion;
     default: return ErrorCode::kMalformed;

@@ -73,7 +73,8 @@ bool all_finite(const float* v, size_t n) {
 DecodeStatus get_segment(wire::Reader& r, bool esf, uint64_t index, Segment& s) {
   s.id = index;
   if (!r.f32s(s.centroid.data(), 3) || !r.f32s(s.eigen.data(), kEigenFeatureCount)) return DecodeStatus::kTruncated;
-  if (!all_finite(s.centroid.data(), 3) || !all_finite(s.eigen.data(), kEigenFeatureCount)) return DecodeStatus::kNonFinite;
+  if (!all_finite(s.centroid.data(), 3) || !all_finite(s.eigen.data(), kEigenFeatureCount))
+    return DecodeStatus::kNonFinite;
   s.has_eigen = true;
   const uint32_t n = r.u32();
   const int step_e = static_cast<int8_t>(r.u8());
@@ -182,7 +183,8 @@ DecodeStatus decode(const uint8_t* payload, size_t size, const Limits&, Localize
   if (!counts_add_up(payload, segments_end, count, points, esf)) return DecodeStatus::kBadPointCount;
   DecodeStatus s = s_head;
   if (s != DecodeStatus::kOk) return s;
-  if (!std::isfinite(m.prior_radius_m) || !std::isfinite(m.prior_heading_tolerance_deg)) return DecodeStatus::kNonFinite;
+  if (!std::isfinite(m.prior_radius_m) || !std::isfinite(m.prior_heading_tolerance_deg))
+    return DecodeStatus::kNonFinite;
   if (m.prior_radius_m < 0.0 || m.prior_heading_tolerance_deg < 0.0) return DecodeStatus::kBadField;
   m.segments.resize(count);
   for (uint32_t i = 0; i < count; ++i) {

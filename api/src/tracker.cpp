@@ -59,8 +59,8 @@ double Tracker::radius_m(double odometer_m) const {
 }
 
 TrackMode Tracker::prepare(LocalizeRequest& request, double odometer_m) {
-  const bool tracked = has_fix_ && radius_m(odometer_m) <= config_.max_radius_m &&
-                       failures_ < config_.failures_before_global;
+  const bool tracked =
+      has_fix_ && radius_m(odometer_m) <= config_.max_radius_m && failures_ < config_.failures_before_global;
   sensor_local_ = request.sensor_position_local;
   request.flags &= ~(kFlagHasPrior | kFlagPriorHeading);
   if (tracked) {
@@ -100,7 +100,8 @@ TrackUpdate Tracker::update(const LocalizeReply& reply, double odometer_m) {
   T_map_odom_ = reply.T_map_local;
   fix_odometer_m_ = odometer_m;
   const Eigen::Matrix2d answer = horizontal_covariance(reply);
-  const double largest = answer.isZero() ? 0.0 : Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(answer).eigenvalues()(1);
+  const double largest =
+      answer.isZero() ? 0.0 : Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(answer).eigenvalues()(1);
   fix_sigma_m_ = std::max(config_.min_fix_sigma_m, std::sqrt(std::max(0.0, largest)));
   failures_ = 0;
   rejections_ = 0;

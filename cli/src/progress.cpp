@@ -7,12 +7,11 @@
 
 namespace segmatch::cli {
 namespace {
-constexpr double kTtyPeriodS = 0.2;   // redraw rate on a terminal
-constexpr double kLogPeriodS = 5.0;   // one line every few seconds in logs
+constexpr double kTtyPeriodS = 0.2;  // redraw rate on a terminal
+constexpr double kLogPeriodS = 5.0;  // one line every few seconds in logs
 constexpr int kBarWidth = 30;
 
-double seconds_between(std::chrono::steady_clock::time_point a,
-                       std::chrono::steady_clock::time_point b) {
+double seconds_between(std::chrono::steady_clock::time_point a, std::chrono::steady_clock::time_point b) {
   return std::chrono::duration<double>(b - a).count();
 }
 }  // namespace
@@ -68,20 +67,18 @@ void Progress::print(bool final_line) {
   const double fraction = total_ > 0 ? static_cast<double>(done_) / total_ : 1.0;
   char tail[160];
   if (final_line) {
-    std::snprintf(tail, sizeof tail, "%zu/%zu %s in %s (%.1f %s/s)", done_, total_,
-                  unit_.c_str(), format_duration(elapsed).c_str(), rate, unit_.c_str());
+    std::snprintf(tail, sizeof tail, "%zu/%zu %s in %s (%.1f %s/s)", done_, total_, unit_.c_str(),
+                  format_duration(elapsed).c_str(), rate, unit_.c_str());
   } else {
     const double eta = rate > 0 ? (total_ - done_) / rate : NAN;
-    std::snprintf(tail, sizeof tail, "%zu/%zu %s %3.0f%%  %.1f %s/s  ETA %s", done_, total_,
-                  unit_.c_str(), 100.0 * fraction, rate, unit_.c_str(),
-                  format_duration(eta).c_str());
+    std::snprintf(tail, sizeof tail, "%zu/%zu %s %3.0f%%  %.1f %s/s  ETA %s", done_, total_, unit_.c_str(),
+                  100.0 * fraction, rate, unit_.c_str(), format_duration(eta).c_str());
   }
   if (tty_) {
     const int filled = static_cast<int>(std::round(fraction * kBarWidth));
     std::string bar(static_cast<size_t>(filled), '#');
     bar.resize(kBarWidth, '.');
-    std::fprintf(out_, "\r\033[K[%s] [%s] %s%s", label_.c_str(), bar.c_str(), tail,
-                 final_line ? "\n" : "");
+    std::fprintf(out_, "\r\033[K[%s] [%s] %s%s", label_.c_str(), bar.c_str(), tail, final_line ? "\n" : "");
   } else {
     std::fprintf(out_, "[%s] %s\n", label_.c_str(), tail);
   }

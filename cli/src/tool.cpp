@@ -7,9 +7,9 @@
 
 #include <cctype>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
-#include <filesystem>
 #include <stdexcept>
 #include <system_error>
 
@@ -19,7 +19,8 @@ std::string version_text(const std::string& tool) {
   const std::string model = shipped_model("default-rf.yml");
   return tool + " " SEGMATCH_VERSION " (map schema " + std::to_string(storage::kSchemaVersion) + ", readable from " +
          std::to_string(storage::kOldestReadableSchemaVersion) + "; protocol version " +
-         std::to_string(api::kProtocolVersion) + ", revision " + std::to_string(api::kProtocolRevision) + ")\nmodels: " +
+         std::to_string(api::kProtocolVersion) + ", revision " + std::to_string(api::kProtocolRevision) +
+         ")\nmodels: " +
          (model.empty() ? std::string("none installed") : std::filesystem::path(model).parent_path().string());
 }
 
@@ -34,12 +35,17 @@ CLI::Option* add_output_option(CLI::App& app, std::string& path, const std::stri
 void add_bag_options(CLI::App& app, std::string& points_topic, std::string& pose_topic, std::string& map_frame,
                      std::string& sensor_frame) {
   const std::string group = "ROS 2 bag input (an .mcap or .db3 file, or a rosbag2 folder)";
-  app.add_option("--points-topic", points_topic, "sensor_msgs/msg/PointCloud2 topic (default: the bag's only one)")->group(group);
-  app.add_option("--pose-topic", pose_topic,
-                 "poses from this nav_msgs/msg/Odometry or geometry_msgs/msg/PoseStamped topic (default: the bag's only one, "
-                 "else /tf)")->group(group);
-  app.add_option("--map-frame", map_frame, "poses from /tf and /tf_static: the sensor's pose in this frame")->group(group);
-  app.add_option("--sensor-frame", sensor_frame, "with --map-frame: the sensor's frame (default: the clouds' frame_id)")->group(group);
+  app.add_option("--points-topic", points_topic, "sensor_msgs/msg/PointCloud2 topic (default: the bag's only one)")
+      ->group(group);
+  app.add_option(
+         "--pose-topic", pose_topic,
+         "poses from this nav_msgs/msg/Odometry or geometry_msgs/msg/PoseStamped topic (default: the bag's only one, "
+         "else /tf)")
+      ->group(group);
+  app.add_option("--map-frame", map_frame, "poses from /tf and /tf_static: the sensor's pose in this frame")
+      ->group(group);
+  app.add_option("--sensor-frame", sensor_frame, "with --map-frame: the sensor's frame (default: the clouds' frame_id)")
+      ->group(group);
 }
 
 int require_output(const std::string& tool, const std::string& path) {

@@ -11,8 +11,8 @@
 #include "segmatch/io/error.h"
 #include "segmatch/io/pipeline_config.h"
 #include "segmatch/server/map_service.h"
-#include "segmatch/vehicle/segment_query.h"
 #include "segmatch/sim/city.h"
+#include "segmatch/vehicle/segment_query.h"
 
 #include <segmatch/cli/tool.h>
 
@@ -63,12 +63,14 @@ struct SegmentsSide {
   }
   void print() const {
     if (!query || vehicle_ms.empty()) return;
-    std::printf("vehicle side (--segments): median %.1f ms segmenting and describing per query, median request %.0f bytes\n",
-                eval::distribution_of(vehicle_ms).median, eval::distribution_of(request_bytes).median);
+    std::printf(
+        "vehicle side (--segments): median %.1f ms segmenting and describing per query, median request %.0f bytes\n",
+        eval::distribution_of(vehicle_ms).median, eval::distribution_of(request_bytes).median);
     if (tracked)
-      std::printf("tracking requests (no segment points, newest scans thinned): %zu sent, median %.0f bytes; %zu came back "
-                  "TRACKING_LOST and were resent in full\n",
-                  tracked, eval::distribution_of(tracking_bytes).median, lost);
+      std::printf(
+          "tracking requests (no segment points, newest scans thinned): %zu sent, median %.0f bytes; %zu came back "
+          "TRACKING_LOST and were resent in full\n",
+          tracked, eval::distribution_of(tracking_bytes).median, lost);
   }
 };
 
@@ -112,7 +114,8 @@ int run_localize(const eval::LocalizationRunConfig& config, const std::string& s
   side.print();
   if (!out_dir.empty()) {
     eval::write_localization_report(run, out_dir);
-    std::printf("report: %s/{localization.json, estimated.tum, reference.tum, trajectory.png, px.png, errors.png}\n", out_dir.c_str());
+    std::printf("report: %s/{localization.json, estimated.tum, reference.tum, trajectory.png, px.png, errors.png}\n",
+                out_dir.c_str());
   }
   return 0;
 }
@@ -145,7 +148,8 @@ int run_classifier(const ClassifierOptions& o) {
     along.local_cloud = config.local_cloud;
     along.segmentation = config.localizer.segmentation;
     along.segment_map = config.segment_map;
-    std::fprintf(stderr, "simulating held-out city %llu (%s)...\n", static_cast<unsigned long long>(o.seed), o.preset.c_str());
+    std::fprintf(stderr, "simulating held-out city %llu (%s)...\n", static_cast<unsigned long long>(o.seed),
+                 o.preset.c_str());
     city = sim::labelled_city(sim::dataset_preset(o.preset, o.seed), sim::lidar_model_by_name(o.sensor), along, pc);
     title = "ROC on held-out city " + std::to_string(o.seed);
   } else {
@@ -160,7 +164,8 @@ int run_classifier(const ClassifierOptions& o) {
   std::vector<std::pair<std::string, std::function<double(const Segment&, const Segment&)>>> scorers = {
       {"L2", [&](const Segment& q, const Segment& t) { return -scaling.distance(q.eigen, t.eigen); }}};
   std::vector<std::unique_ptr<RandomForestMatcher>> models;
-  for (const auto& [name, path] : {std::pair<std::string, std::string>{"RF_eigen", o.model_eigen}, {"RF_eigen+shapes", o.model_shapes}}) {
+  for (const auto& [name, path] :
+       {std::pair<std::string, std::string>{"RF_eigen", o.model_eigen}, {"RF_eigen+shapes", o.model_shapes}}) {
     if (path.empty()) continue;
     models.push_back(std::make_unique<RandomForestMatcher>(load_model(path)));
     const RandomForestMatcher* rf = models.back().get();
@@ -169,16 +174,21 @@ int run_classifier(const ClassifierOptions& o) {
   std::vector<eval::RocCurve> curves;
   nlohmann::json j;
   j["pairs"] = {{"positives", p.positives}, {"negatives", p.negatives}};
-  if (real) j["pairs"]["real"] = o.real_dir;
-  else j["pairs"]["city_seed"] = o.seed, j["pairs"]["preset"] = o.preset;
+  if (real)
+    j["pairs"]["real"] = o.real_dir;
+  else
+    j["pairs"]["city_seed"] = o.seed, j["pairs"]["preset"] = o.preset;
   for (const auto& [name, scorer] : scorers) {
     std::vector<eval::ScoredPair> scored;
-    for (size_t i = 0; i < p.pairs.size(); ++i) scored.push_back({scorer(*p.pairs[i].first, *p.pairs[i].second), p.same_object[i]});
+    for (size_t i = 0; i < p.pairs.size(); ++i)
+      scored.push_back({scorer(*p.pairs[i].first, *p.pairs[i].second), p.same_object[i]});
     curves.push_back(eval::roc_curve(name, std::move(scored), 0.2));
     const eval::RocCurve& c = curves.back();
-    std::printf("%-16s AUC %.3f; at FPR <= 0.2: TPR %.3f (FPR %.3f, threshold %.3f)\n", name.c_str(), c.auc, c.operating_tpr,
-                c.operating_fpr, c.operating_threshold);
-    j["curves"][name] = {{"auc", c.auc}, {"operating_tpr", c.operating_tpr}, {"operating_fpr", c.operating_fpr},
+    std::printf("%-16s AUC %.3f; at FPR <= 0.2: TPR %.3f (FPR %.3f, threshold %.3f)\n", name.c_str(), c.auc,
+                c.operating_tpr, c.operating_fpr, c.operating_threshold);
+    j["curves"][name] = {{"auc", c.auc},
+                         {"operating_tpr", c.operating_tpr},
+                         {"operating_fpr", c.operating_fpr},
                          {"operating_threshold", c.operating_threshold}};
   }
   std::printf("held-out pairs: %zu positives, %zu negatives\n", p.positives, p.negatives);
@@ -210,17 +220,21 @@ int main(int argc, char** argv) {
   loc->add_option("--first", lc.replay.first, "first scan");
   loc->add_option("--last", lc.replay.last, "last scan");
   loc->add_option("--stride", lc.replay.stride, "use every n-th scan");
-  loc->add_flag("--single-scan", lc.replay.single_scan,
-                "cold start: every query is one raw scan alone, as a vehicle that has just woken up has (no accumulation, "
-                "no warm-up; its newest scans are that scan)");
-  loc->add_option("--mapped-radius-m", lc.thresholds.mapped_radius_m, "a street is mapped within this of the map trajectory");
+  loc->add_flag(
+      "--single-scan", lc.replay.single_scan,
+      "cold start: every query is one raw scan alone, as a vehicle that has just woken up has (no accumulation, "
+      "no warm-up; its newest scans are that scan)");
+  loc->add_option("--mapped-radius-m", lc.thresholds.mapped_radius_m,
+                  "a street is mapped within this of the map trajectory");
   loc->add_flag("!--quiet", lc.print_each, "no line per query");
-  loc->add_flag("--track", lc.track,
-                "track between fixes (api::Tracker): each query's prior is the last fix, its radius grows with the distance "
-                "driven since");
-  loc->add_option("--odometry", lc.odometry_path,
-                  "the vehicle's odometry poses (KITTI or TUM) that build every query's local cloud (default: the replayed "
-                  "sequence's odom_poses.txt)");
+  loc->add_flag(
+      "--track", lc.track,
+      "track between fixes (api::Tracker): each query's prior is the last fix, its radius grows with the distance "
+      "driven since");
+  loc->add_option(
+      "--odometry", lc.odometry_path,
+      "the vehicle's odometry poses (KITTI or TUM) that build every query's local cloud (default: the replayed "
+      "sequence's odom_poses.txt)");
   loc->add_option("--reference", lc.reference_path,
                   "score against this poses file of the query sequence (KITTI or TUM) instead of its poses.txt");
   std::string cloud_poses = "odometry";
@@ -240,9 +254,10 @@ int main(int argc, char** argv) {
   cli::add_output_option(*loc, out_dir, "report folder (JSON + PNG)");
   server::MapLoadOptions load;
   float recent_window_m = -1.0f;
-  loc->add_option("--recent-window-m", recent_window_m,
-                  "in-process only: localize with this refine.recent_window_m instead of the map's (0: the whole cloud's "
-                  "pose); a what-if on a stored map");
+  loc->add_option(
+      "--recent-window-m", recent_window_m,
+      "in-process only: localize with this refine.recent_window_m instead of the map's (0: the whole cloud's "
+      "pose); a what-if on a stored map");
   loc->add_option("--max-scan-age-m", lc.max_scan_age_m,
                   "the vehicle's local cloud holds each scan for this many metres of driving instead of the map's "
                   "local_cloud.max_scan_age_m (0: until it leaves the cylinder); a what-if");
@@ -250,21 +265,25 @@ int main(int argc, char** argv) {
                   "each query also carries the scans of the last this many metres, to which the server refines its "
                   "answer (the sensor's pose now; default 10, 0: none)");
   std::string search = "map";
-  loc->add_option("--search", search,
-                  "in-process only: the wide-prior search (search.enabled) on or off instead of as the map says; a what-if")
+  loc->add_option(
+         "--search", search,
+         "in-process only: the wide-prior search (search.enabled) on or off instead of as the map says; a what-if")
       ->check(CLI::IsMember({"map", "on", "off"}));
   bool segments = false;
-  loc->add_flag("--segments", segments,
-                "query by segments (LOCALIZE_SEGMENTS): segment and describe each local cloud here, as a vehicle would, "
-                "and send the segments instead of the cloud");
+  loc->add_flag(
+      "--segments", segments,
+      "query by segments (LOCALIZE_SEGMENTS): segment and describe each local cloud here, as a vehicle would, "
+      "and send the segments instead of the cloud");
   std::string track_surfaces = "on";
-  loc->add_option("--track-surfaces", track_surfaces,
-                  "with a narrow prior and newest scans, track on the surface layer first (protocol revision 11): the cloud "
-                  "path sets LOCALIZE bit 6; --segments sends the tracking request (nearby segments without points, the newest "
-                  "scans thinned) and the full one only after TRACKING_LOST (default on)")
+  loc->add_option(
+         "--track-surfaces", track_surfaces,
+         "with a narrow prior and newest scans, track on the surface layer first (protocol revision 11): the cloud "
+         "path sets LOCALIZE bit 6; --segments sends the tracking request (nearby segments without points, the newest "
+         "scans thinned) and the full one only after TRACKING_LOST (default on)")
       ->check(CLI::IsMember({"on", "off"}));
   eval::LocalizationRunConfig fc;
-  auto* fun = app.add_subcommand("funnel", "where true matches are lost: segments, counterparts, retrieved, classified");
+  auto* fun =
+      app.add_subcommand("funnel", "where true matches are lost: segments, counterparts, retrieved, classified");
   fun->add_option("--map", fc.map_path, "map database")->required();
   fun->add_option("--query", fc.query_folder, "sequence to replay; its poses are the ground truth in the map frame");
   fun->add_option("--sim", fc.sim_dataset, "segmatch-sim folder: sequences/01 with its exact ground truth");
@@ -279,7 +298,8 @@ int main(int argc, char** argv) {
   fun->add_option("--cloud-poses", funnel_cloud_poses, "odometry (default) or reference, as for localize")
       ->check(CLI::IsMember({"odometry", "reference"}));
   ClassifierOptions co;
-  auto* cls = app.add_subcommand("classifier", "ROC curves of the match classifiers on a held-out simulated city or real stretches");
+  auto* cls = app.add_subcommand("classifier",
+                                 "ROC curves of the match classifiers on a held-out simulated city or real stretches");
   cls->add_option("--model", co.model_shapes, "RF_eigen+shapes model file");
   cls->add_option("--model-eigen", co.model_eigen, "RF_eigen model file");
   cls->add_option("--preset", co.preset, "city size: tiny, demo, city");
@@ -294,10 +314,12 @@ int main(int argc, char** argv) {
   if (const int status = cli::check_server("segmatch-eval", server); status >= 0) return status;
   try {
     if (*loc) {
-      if (lc.query_folder.empty() == lc.sim_dataset.empty()) throw std::runtime_error("give exactly one of --query and --sim");
+      if (lc.query_folder.empty() == lc.sim_dataset.empty())
+        throw std::runtime_error("give exactly one of --query and --sim");
       lc.cloud_poses = io::parse_cloud_poses(cloud_poses);
       if (recent_window_m >= 0.0f) {
-        if (!server.empty()) throw std::runtime_error("--recent-window-m is for in-process runs (the server serves its map's)");
+        if (!server.empty())
+          throw std::runtime_error("--recent-window-m is for in-process runs (the server serves its map's)");
         load.recent_window_m = recent_window_m;
       }
       if (search != "map") {
@@ -308,7 +330,8 @@ int main(int argc, char** argv) {
       return run_localize(lc, server, token_file, out_dir, segments, lc.track_surfaces, load);
     }
     if (*fun) {
-      if (fc.query_folder.empty() == fc.sim_dataset.empty()) throw std::runtime_error("give exactly one of --query and --sim");
+      if (fc.query_folder.empty() == fc.sim_dataset.empty())
+        throw std::runtime_error("give exactly one of --query and --sim");
       const auto loaded = server::load_map(fc.map_path);
       fc.replay.local_cloud = loaded->config.local_cloud;
       fc.cloud_poses = io::parse_cloud_poses(funnel_cloud_poses);

@@ -22,8 +22,9 @@ std::vector<FunnelQuery> run_funnel(const LocalizationRunConfig& c, const Locali
   io::SequenceOptions so;
   if (c.cloud_poses == io::CloudPoses::kOdometry) so.poses_path = io::odometry_poses_path(folder, c.odometry_path);
   const io::Sequence sequence = io::Sequence::open(folder, so);
-  std::printf("local clouds: %s\n", c.cloud_poses == io::CloudPoses::kOdometry ? so.poses_path.c_str()
-                                                                             : "the REFERENCE poses (a comparison only)");
+  std::printf("local clouds: %s\n", c.cloud_poses == io::CloudPoses::kOdometry
+                                        ? so.poses_path.c_str()
+                                        : "the REFERENCE poses (a comparison only)");
   const LocalizerConfig& lc = localizer.config();
   const Segments& targets = localizer.targets();
   const CentroidIndex centroids(targets, funnel.counterpart_radius_m);
@@ -73,8 +74,10 @@ void print_funnel(const std::vector<FunnelQuery>& queries, int min_inliers) {
     s += q.segments, c += q.counterpart, r += q.retrieved, k += q.classified;
     if (q.classified >= static_cast<size_t>(min_inliers)) ++enough;
   }
-  std::printf("total: %zu segments, %zu with a counterpart, %zu retrieved, %zu classified; %zu of %zu queries have >= %d true matches\n",
-              s, c, r, k, enough, queries.size(), min_inliers);
+  std::printf(
+      "total: %zu segments, %zu with a counterpart, %zu retrieved, %zu classified; %zu of %zu queries have >= %d true "
+      "matches\n",
+      s, c, r, k, enough, queries.size(), min_inliers);
 }
 
 }  // namespace eval

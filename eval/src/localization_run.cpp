@@ -48,10 +48,11 @@ api::LocalizeRequest request_of(const io::ReplayQuery& q) {
 }
 
 void add_timings(std::map<std::string, std::vector<double>>& t, const api::ModuleTimingsMs& m) {
-  const std::pair<const char*, float> all[] = {{"voxel", m.voxel},       {"ground", m.ground},     {"segment", m.segment},
-                                               {"describe", m.describe}, {"retrieve", m.retrieve}, {"classify", m.classify},
-                                               {"verify", m.verify},     {"refine", m.refine},     {"total", m.total},
-                                               {"server_total", m.server_total}};
+  const std::pair<const char*, float> all[] = {{"voxel", m.voxel},       {"ground", m.ground},
+                                               {"segment", m.segment},   {"describe", m.describe},
+                                               {"retrieve", m.retrieve}, {"classify", m.classify},
+                                               {"verify", m.verify},     {"refine", m.refine},
+                                               {"total", m.total},       {"server_total", m.server_total}};
   for (const auto& [name, ms] : all) t[name].push_back(ms);
 }
 
@@ -92,10 +93,11 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
   for (const storage::Keyframe& k : map.trajectory()) run.map_trajectory.push_back(k.T_map_sensor.translation());
   if (!c.reference_path.empty() && !c.sim_dataset.empty()) throw std::runtime_error("--reference needs --query");
   const Truth truth = open_truth(c);
-  run.reference_file = !c.sim_dataset.empty()        ? "ground_truth/lidar_poses_01.txt"
+  run.reference_file = !c.sim_dataset.empty()      ? "ground_truth/lidar_poses_01.txt"
                        : !c.reference_path.empty() ? c.reference_path
-                       : truth.sequence.layout() == io::SequenceLayout::kBag ? truth.sequence.source_note()
-                                                   : (fs::path(c.query_folder) / "poses.txt").string();
+                       : truth.sequence.layout() == io::SequenceLayout::kBag
+                           ? truth.sequence.source_note()
+                           : (fs::path(c.query_folder) / "poses.txt").string();
   std::optional<io::Sequence> odometry;  // the replayed sequence, its scans placed by the vehicle's odometry
   run.cloud_poses = c.cloud_poses;
   const bool bag = truth.sequence.layout() == io::SequenceLayout::kBag;
@@ -114,8 +116,8 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
     odometry = io::Sequence::open(truth.sequence.folder(), so);
   } else {
     if (!c.odometry_path.empty()) throw std::runtime_error("--odometry and --cloud-poses reference exclude each other");
-    run.cloud_poses_file = c.reference_path.empty() ? (fs::path(truth.sequence.folder()) / "poses.txt").string()
-                                                    : c.reference_path;
+    run.cloud_poses_file =
+        c.reference_path.empty() ? (fs::path(truth.sequence.folder()) / "poses.txt").string() : c.reference_path;
   }
   QueryPriors priors(c, truth.T_map_sensor);
   const double max_track_radius_m = max_tracked_radius_m(parameters.localizer);
@@ -133,7 +135,8 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
         if (c.track_surfaces) api::ask_to_track_first(request, max_track_radius_m);
         const auto start = std::chrono::steady_clock::now();
         const api::LocalizeReply reply = localize(request);
-        const double latency_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+        const double latency_ms =
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
         const bool rejected = priors.update(reply, q);
         if (c.compare_global) comparison.add(request, reply, localize);
         QueryOutcome o;
@@ -162,13 +165,16 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
         }
         add_timings(timings, reply.timings);
         if (c.print_each)
-          std::printf("frame %5zu  %7.1f m  %-8s %-13s %s %-12s inliers %3u support %3u conf %.2f  error %6.3f m %5.2f deg  "
-                      "sigma %5.3f m (%4.1f)  warp %5.2f m %4.2f deg  %6.1f ms%s%s\n",
-                      q.frame, q.odometer_m, mode.c_str(), o.status.c_str(), o.localized ? (o.correct ? "TRUE " : "FALSE") : "     ",
-                      o.localized ? o.method.c_str() : "", reply.inliers, reply.support, reply.confidence, o.error_m,
-                      o.error_deg, o.sigma_h_m, o.mahalanobis_h, o.window_warp_m, o.window_warp_deg, o.latency_ms,
-                      o.mapped ? (rejected ? "  (rejected by the tracker)" : "") : (rejected ? "  (unmapped street; rejected by the tracker)" : "  (unmapped street)"),
-                      reply.reason.empty() ? "" : ("  " + reply.reason).c_str());
+          std::printf(
+              "frame %5zu  %7.1f m  %-8s %-13s %s %-12s inliers %3u support %3u conf %.2f  error %6.3f m %5.2f deg  "
+              "sigma %5.3f m (%4.1f)  warp %5.2f m %4.2f deg  %6.1f ms%s%s\n",
+              q.frame, q.odometer_m, mode.c_str(), o.status.c_str(),
+              o.localized ? (o.correct ? "TRUE " : "FALSE") : "     ", o.localized ? o.method.c_str() : "",
+              reply.inliers, reply.support, reply.confidence, o.error_m, o.error_deg, o.sigma_h_m, o.mahalanobis_h,
+              o.window_warp_m, o.window_warp_deg, o.latency_ms,
+              o.mapped ? (rejected ? "  (rejected by the tracker)" : "")
+                       : (rejected ? "  (unmapped street; rejected by the tracker)" : "  (unmapped street)"),
+              reply.reason.empty() ? "" : ("  " + reply.reason).c_str());
         run.outcomes.push_back(o);
         return true;
       },
@@ -198,42 +204,49 @@ void print_summary(const LocalizationRun& run) {
   if (run.replay.single_scan)
     std::printf("queries: single raw scans (no accumulation), one every %.1f m\n", run.replay.every_m);
   else if (run.cloud_poses == io::CloudPoses::kOdometry)
-    std::printf("local clouds: the vehicle's odometry (%s); the reference (%s) only scores\n", run.cloud_poses_file.c_str(),
-                run.reference_file.c_str());
+    std::printf("local clouds: the vehicle's odometry (%s); the reference (%s) only scores\n",
+                run.cloud_poses_file.c_str(), run.reference_file.c_str());
   else
-    std::printf("local clouds: the REFERENCE poses (%s), a comparison only: no vehicle has them, and they flatter "
-                "every figure below\n", run.cloud_poses_file.c_str());
-  std::printf("queries %zu (%zu on mapped streets): %zu localized, %zu true, %zu false (> %.1f m or %.1f deg)\n", s.queries,
-              s.mapped_queries, s.localized, s.correct, s.false_localizations, Thresholds{}.false_translation_m,
-              Thresholds{}.false_rotation_deg);
+    std::printf(
+        "local clouds: the REFERENCE poses (%s), a comparison only: no vehicle has them, and they flatter "
+        "every figure below\n",
+        run.cloud_poses_file.c_str());
+  std::printf("queries %zu (%zu on mapped streets): %zu localized, %zu true, %zu false (> %.1f m or %.1f deg)\n",
+              s.queries, s.mapped_queries, s.localized, s.correct, s.false_localizations,
+              Thresholds{}.false_translation_m, Thresholds{}.false_rotation_deg);
   std::printf("error of true localizations: median %.3f m / %.2f deg, p90 %.3f m / %.2f deg, max %.3f m / %.2f deg\n",
               s.error_m.median, s.error_deg.median, s.error_m.p90, s.error_deg.p90, s.error_m.max, s.error_deg.max);
   std::printf("P(x): %.0f m driven on mapped streets, 95%% of it within %.0f m of the last true localization\n",
               s.px.total_m, s.px.x95_m);
   std::printf("latency per query: median %.1f ms, p90 %.1f ms, max %.1f ms\n", s.latency_ms.median, s.latency_ms.p90,
               s.latency_ms.max);
-  std::printf("after the first localization: %zu of %zu queries on mapped streets localized (%.1f %%); on unmapped "
-              "streets %zu of %zu\n", run.localized_after_first_fix, run.after_first_fix,
-              run.after_first_fix ? 100.0 * run.localized_after_first_fix / run.after_first_fix : 0.0,
-              run.unmapped_localized_after_first_fix, run.unmapped_after_first_fix);
+  std::printf(
+      "after the first localization: %zu of %zu queries on mapped streets localized (%.1f %%); on unmapped "
+      "streets %zu of %zu\n",
+      run.localized_after_first_fix, run.after_first_fix,
+      run.after_first_fix ? 100.0 * run.localized_after_first_fix / run.after_first_fix : 0.0,
+      run.unmapped_localized_after_first_fix, run.unmapped_after_first_fix);
   if (s.rejected > 0)
-    std::printf("tracker: %zu LOCALIZED answers rejected by its gate, %zu of them false\n", s.rejected, s.rejected_false);
+    std::printf("tracker: %zu LOCALIZED answers rejected by its gate, %zu of them false\n", s.rejected,
+                s.rejected_false);
   std::printf("answered by:");
   for (const auto& [method, n] : s.localized_by_method) std::printf(" %s %zu", method.c_str(), n);
   std::printf("\n");
   if (s.with_covariance > 0)
-    std::printf("covariance: %zu of %zu localized queries have their horizontal error within the reported 3 sigma "
-                "(%.1f %%); reported 1-sigma median %.3f m, p90 %.3f m\n",
-                s.within_3_sigma, s.with_covariance, 100.0 * s.within_3_sigma / s.with_covariance, s.sigma_h_m.median,
-                s.sigma_h_m.p90);
+    std::printf(
+        "covariance: %zu of %zu localized queries have their horizontal error within the reported 3 sigma "
+        "(%.1f %%); reported 1-sigma median %.3f m, p90 %.3f m\n",
+        s.within_3_sigma, s.with_covariance, 100.0 * s.within_3_sigma / s.with_covariance, s.sigma_h_m.median,
+        s.sigma_h_m.p90);
   for (const auto& [mode, d] : run.server_ms_by_mode)
     std::printf("server time, %s queries: %zu, median %.1f ms, p90 %.1f ms\n", mode.c_str(), d.count, d.median, d.p90);
   if (run.ab_prior_server_ms.count > 0)
-    std::printf("same queries with and without their prior (%zu): server %.1f vs %.1f ms median, retrieve+classify+verify "
-                "%.1f vs %.1f ms median (%.0f %%)\n",
-                run.ab_prior_server_ms.count, run.ab_prior_server_ms.median, run.ab_global_server_ms.median,
-                run.ab_prior_match_ms.median, run.ab_global_match_ms.median,
-                run.ab_global_match_ms.median > 0 ? 100.0 * run.ab_prior_match_ms.median / run.ab_global_match_ms.median : 0.0);
+    std::printf(
+        "same queries with and without their prior (%zu): server %.1f vs %.1f ms median, retrieve+classify+verify "
+        "%.1f vs %.1f ms median (%.0f %%)\n",
+        run.ab_prior_server_ms.count, run.ab_prior_server_ms.median, run.ab_global_server_ms.median,
+        run.ab_prior_match_ms.median, run.ab_global_match_ms.median,
+        run.ab_global_match_ms.median > 0 ? 100.0 * run.ab_prior_match_ms.median / run.ab_global_match_ms.median : 0.0);
   std::printf("module medians (ms):");
   for (const auto& [name, d] : run.module_ms) std::printf(" %s %.1f", name.c_str(), d.median);
   std::printf("\n");
@@ -267,8 +280,9 @@ void write_localization_report(const LocalizationRun& run, const std::string& ou
   const Summary& s = run.summary;
   nlohmann::json j;
   j["title"] = run.title;
-  j["replay"] = {{"every_m", run.replay.every_m}, {"warmup_m", run.replay.warmup_m}, {"first", run.replay.first},
-                 {"last", run.replay.last}, {"stride", run.replay.stride}, {"single_scan", run.replay.single_scan}};
+  j["replay"] = {{"every_m", run.replay.every_m}, {"warmup_m", run.replay.warmup_m},
+                 {"first", run.replay.first},     {"last", run.replay.last},
+                 {"stride", run.replay.stride},   {"single_scan", run.replay.single_scan}};
   j["local_clouds"] = {{"poses", io::to_string(run.cloud_poses)}, {"file", run.cloud_poses_file}};
   j["reference"] = run.reference_file;
   j["queries"] = s.queries;
@@ -280,13 +294,14 @@ void write_localization_report(const LocalizationRun& run, const std::string& ou
   j["error_deg"] = dist(s.error_deg);
   j["latency_ms"] = dist(s.latency_ms);
   j["px"] = {{"total_mapped_m", s.px.total_m}, {"x95_m", s.px.x95_m}, {"gaps_m", s.px.gaps_m}};
-  j["after_first_fix"] = {{"queries", run.after_first_fix}, {"localized", run.localized_after_first_fix},
+  j["after_first_fix"] = {{"queries", run.after_first_fix},
+                          {"localized", run.localized_after_first_fix},
                           {"unmapped_queries", run.unmapped_after_first_fix},
                           {"unmapped_localized", run.unmapped_localized_after_first_fix}};
   j["localized_by_method"] = s.localized_by_method;
   j["rejected_by_tracker"] = {{"answers", s.rejected}, {"false", s.rejected_false}};
-  j["calibration"] = {{"with_covariance", s.with_covariance}, {"within_3_sigma", s.within_3_sigma},
-                      {"sigma_h_m", dist(s.sigma_h_m)}};
+  j["calibration"] = {
+      {"with_covariance", s.with_covariance}, {"within_3_sigma", s.within_3_sigma}, {"sigma_h_m", dist(s.sigma_h_m)}};
   for (const auto& [mode, d] : run.server_ms_by_mode) j["server_ms_by_mode"][mode] = dist(d);
   if (run.ab_prior_server_ms.count > 0)
     j["same_queries_with_and_without_prior"] = {{"prior_server_ms", dist(run.ab_prior_server_ms)},
@@ -295,13 +310,24 @@ void write_localization_report(const LocalizationRun& run, const std::string& ou
                                                 {"global_retrieve_classify_verify_ms", dist(run.ab_global_match_ms)}};
   for (const auto& [name, d] : run.module_ms) j["module_ms"][name] = dist(d);
   for (const QueryOutcome& o : run.outcomes) {
-    nlohmann::json q = {{"frame", o.frame},         {"odometer_m", o.odometer_m}, {"mapped", o.mapped},
-                        {"status", o.status},       {"correct", o.correct},       {"error_m", o.error_m},
-                        {"error_deg", o.error_deg}, {"latency_ms", o.latency_ms}, {"inliers", o.inliers},
-                        {"support", o.support},     {"confidence", o.confidence}, {"mode", o.mode},
-                        {"server_ms", o.server_ms},   {"window_warp_m", o.window_warp_m},
-                        {"window_warp_deg", o.window_warp_deg}, {"window_points", o.window_points},
-                        {"method", o.method}, {"rejected_by_tracker", o.rejected}};
+    nlohmann::json q = {{"frame", o.frame},
+                        {"odometer_m", o.odometer_m},
+                        {"mapped", o.mapped},
+                        {"status", o.status},
+                        {"correct", o.correct},
+                        {"error_m", o.error_m},
+                        {"error_deg", o.error_deg},
+                        {"latency_ms", o.latency_ms},
+                        {"inliers", o.inliers},
+                        {"support", o.support},
+                        {"confidence", o.confidence},
+                        {"mode", o.mode},
+                        {"server_ms", o.server_ms},
+                        {"window_warp_m", o.window_warp_m},
+                        {"window_warp_deg", o.window_warp_deg},
+                        {"window_points", o.window_points},
+                        {"method", o.method},
+                        {"rejected_by_tracker", o.rejected}};
     if (o.has_covariance) q["sigma_h_m"] = o.sigma_h_m, q["mahalanobis_h"] = o.mahalanobis_h;
     if (o.localized) {
       const Eigen::Quaterniond r(o.T_map_sensor.linear());

@@ -79,8 +79,8 @@ void plot_trajectory(const std::string& png, const std::vector<Eigen::Vector3d>&
   cv::Mat img(1000, 1000, CV_8UC3, kWhite);
   const Axes ax{cv::Rect(50, 50, static_cast<int>((x1 - x0) * ppm), static_cast<int>((y1 - y0) * ppm)), x0, x1, y0, y1};
   for (size_t i = 1; i < map_trajectory.size(); ++i)
-    cv::line(img, ax(map_trajectory[i - 1].x(), map_trajectory[i - 1].y()), ax(map_trajectory[i].x(), map_trajectory[i].y()),
-             kGrey, 5, cv::LINE_AA);
+    cv::line(img, ax(map_trajectory[i - 1].x(), map_trajectory[i - 1].y()),
+             ax(map_trajectory[i].x(), map_trajectory[i].y()), kGrey, 5, cv::LINE_AA);
   for (size_t i = 1; i < outcomes.size(); ++i)
     cv::line(img, ax(outcomes[i - 1].truth_xy.x(), outcomes[i - 1].truth_xy.y()),
              ax(outcomes[i].truth_xy.x(), outcomes[i].truth_xy.y()), kLightBlue, 2, cv::LINE_AA);
@@ -104,7 +104,9 @@ void plot_trajectory(const std::string& png, const std::vector<Eigen::Vector3d>&
 }
 
 void plot_px(const std::string& png, const PxCurve& c, const std::string& title) {
-  const double xmax = std::max(10.0, std::ceil((c.gaps_m.empty() ? 10.0 : *std::max_element(c.gaps_m.begin(), c.gaps_m.end())) / 10.0) * 10.0 + 10.0);
+  const double xmax = std::max(
+      10.0,
+      std::ceil((c.gaps_m.empty() ? 10.0 : *std::max_element(c.gaps_m.begin(), c.gaps_m.end())) / 10.0) * 10.0 + 10.0);
   cv::Mat img(500, 700, CV_8UC3, kWhite);
   const Axes ax{cv::Rect(80, 70, 580, 355), 0.0, xmax, 0.0, 1.0};
   ax.draw(img, "x: distance travelled without localization (m)", "P(x)");
@@ -137,7 +139,9 @@ void plot_error_histogram(const std::string& png, const std::vector<QueryOutcome
   const Axes ax{cv::Rect(80, 70, 580, 355), 0.0, top, 0.0, static_cast<double>(most)};
   ax.draw(img, "translation error of correct localizations (cm)", "queries");
   for (int b = 0; b < bins; ++b)
-    if (count[b] > 0) cv::rectangle(img, ax(top * b / bins, count[b]), ax(top * (b + 1) / bins, 0) + cv::Point(-1, 0), kPalette[0], cv::FILLED);
+    if (count[b] > 0)
+      cv::rectangle(img, ax(top * b / bins, count[b]), ax(top * (b + 1) / bins, 0) + cv::Point(-1, 0), kPalette[0],
+                    cv::FILLED);
   text(img, title, cv::Point(20, 28), 0.6);
   save(png, img);
 }
@@ -150,7 +154,8 @@ void plot_roc(const std::string& png, const std::vector<RocCurve>& curves, const
   for (size_t k = 0; k < curves.size(); ++k) {
     const RocCurve& c = curves[k];
     const cv::Scalar color = kPalette[k % 4];
-    for (size_t i = 1; i < c.fpr.size(); ++i) cv::line(img, ax(c.fpr[i - 1], c.tpr[i - 1]), ax(c.fpr[i], c.tpr[i]), color, 2, cv::LINE_AA);
+    for (size_t i = 1; i < c.fpr.size(); ++i)
+      cv::line(img, ax(c.fpr[i - 1], c.tpr[i - 1]), ax(c.fpr[i], c.tpr[i]), color, 2, cv::LINE_AA);
     cv::circle(img, ax(c.operating_fpr, c.operating_tpr), 5, color, cv::FILLED, cv::LINE_AA);
     char buf[96];
     std::snprintf(buf, sizeof buf, "%s (TPR %.2f at FPR %.2f)", c.name.c_str(), c.operating_tpr, c.operating_fpr);

@@ -57,7 +57,8 @@ void PriorComparison::add(const api::LocalizeRequest& request, const api::Locali
 
 void PriorComparison::write_to(LocalizationRun& run) const {
   run.ab_prior_server_ms = distribution_of(prior_server_ms), run.ab_prior_match_ms = distribution_of(prior_match_ms);
-  run.ab_global_server_ms = distribution_of(global_server_ms), run.ab_global_match_ms = distribution_of(global_match_ms);
+  run.ab_global_server_ms = distribution_of(global_server_ms),
+  run.ab_global_match_ms = distribution_of(global_match_ms);
 }
 
 }  // namespace eval

@@ -1,9 +1,9 @@
 #include "segmatch/io/auto_profile.h"
 
 #include <algorithm>
-#include <map>
 #include <cmath>
 #include <cstdio>
+#include <map>
 
 namespace segmatch {
 namespace io {
@@ -31,7 +31,8 @@ void fit_segmentation_to_spacing(PipelineConfig& c, const InputMeasurements& m) 
 // A ring field (a ROS 2 PointCloud2's "ring") names each point's beam: the ring count and
 // spacing come from it instead of the elevation histogram, which noise or a tilted mount can
 // blur. Per scan, each ring's median elevation; the scan with the most rings decides.
-void rings_from_field(const std::vector<PointCloud>& scans, const std::vector<std::vector<uint16_t>>& rings, InputMeasurements& m) {
+void rings_from_field(const std::vector<PointCloud>& scans, const std::vector<std::vector<uint16_t>>& rings,
+                      InputMeasurements& m) {
   size_t best = 0;
   double spacing_deg = 0.0;
   for (size_t s = 0; s < scans.size(); ++s) {
@@ -158,13 +159,14 @@ std::string describe_profile(const PipelineConfig& c) {
                   "measured (%zu scans): %.0f points per scan, %.0f%% of the horizon, elevation %.1f..%.1f deg, "
                   "range median %.1f m / p95 %.1f m, point spacing p10 %.3f m / median %.3f m (%.4f per m of range), "
                   "%.2f m between scans\n",
-                  m.scans_measured, m.points_per_scan, 100.0 * m.azimuth_coverage, m.elevation_min_deg, m.elevation_max_deg,
-                  m.range_p50_m, m.range_p95_m, m.spacing_p10_m, m.spacing_p50_m, m.spacing_per_range, m.scan_distance_m);
+                  m.scans_measured, m.points_per_scan, 100.0 * m.azimuth_coverage, m.elevation_min_deg,
+                  m.elevation_max_deg, m.range_p50_m, m.range_p95_m, m.spacing_p10_m, m.spacing_p50_m,
+                  m.spacing_per_range, m.scan_distance_m);
     out += buf;
     out += "sensor class: " + m.sensor_class() + (m.downsampled ? " (already downsampled)" : " (raw scans)") + "\n";
     if (m.ring_count > 0)
-      std::snprintf(buf, sizeof buf, "beam layout: %s, %.0f rings %.2f deg apart\n", m.beam_layout().c_str(), m.ring_count,
-                    m.ring_spacing_deg);
+      std::snprintf(buf, sizeof buf, "beam layout: %s, %.0f rings %.2f deg apart\n", m.beam_layout().c_str(),
+                    m.ring_count, m.ring_spacing_deg);
     else
       std::snprintf(buf, sizeof buf, "beam layout: %s\n", m.beam_layout().c_str());
     out += buf;
@@ -178,12 +180,13 @@ std::string describe_profile(const PipelineConfig& c) {
       for (size_t k = 0; k < m.disagreeing_pairs.size() && k < 12; ++k)
         where += (k ? ", " : "") + std::to_string(m.disagreeing_pairs[k]);
       if (m.disagreeing_pairs.size() > 12) where += ", ...";
-      std::snprintf(buf, sizeof buf,
-                    "WARNING: at %zu pairs the poses disagree with the scans (under %.0f%% of a scan within %.2f m of "
-                    "the previous one): scans %s; segments there are smeared and queries there are unlikely to localize; "
-                    "check the trajectory (e.g. re-run its SLAM) before relying on a map of these stretches\n",
-                    m.pairs_disagreeing, 100.0 * InputMeasurements::kMinAgreement, InputMeasurements::kAgreementRadiusM,
-                    where.c_str());
+      std::snprintf(
+          buf, sizeof buf,
+          "WARNING: at %zu pairs the poses disagree with the scans (under %.0f%% of a scan within %.2f m of "
+          "the previous one): scans %s; segments there are smeared and queries there are unlikely to localize; "
+          "check the trajectory (e.g. re-run its SLAM) before relying on a map of these stretches\n",
+          m.pairs_disagreeing, 100.0 * InputMeasurements::kMinAgreement, InputMeasurements::kAgreementRadiusM,
+          where.c_str());
       out += buf;
     }
   }
@@ -198,12 +201,13 @@ std::string describe_choice(const PipelineConfig& c) {
                 "chose (%s): %.0f m cylinder, a scan every %.1f m; voxels %.2f m with >= %d points; clusters %.2f m, "
                 "%d..%d points; k %d; %s; verification %.2f m, support >= %d, confidence >= %.2f",
                 c.preset.c_str(), c.local_cloud.radius_m, c.local_cloud.min_travel_between_scans_m, s.voxel.leaf_m,
-                s.voxel.min_points_per_voxel, s.segmenter.cluster_distance_m, s.segmenter.min_points, s.segmenter.max_points,
-                l.retrieval.k,
+                s.voxel.min_points_per_voxel, s.segmenter.cluster_distance_m, s.segmenter.min_points,
+                s.segmenter.max_points, l.retrieval.k,
                 l.matcher.type == MatcherType::kL2
                     ? ("L2 matcher < " + std::to_string(l.matcher.l2_threshold).substr(0, 4)).c_str()
                     : ("random forest >= " + std::to_string(l.matcher.rf_threshold).substr(0, 4) +
-                       (l.matcher.use_shapes ? " (eigen+shapes)" : " (eigen)")).c_str(),
+                       (l.matcher.use_shapes ? " (eigen+shapes)" : " (eigen)"))
+                          .c_str(),
                 l.verification.resolution_m, l.min_support, l.min_confidence);
   return buf;
 }

@@ -23,14 +23,12 @@ CdrReader::CdrReader(std::string_view cdr, const char* message) : cdr_(cdr), mes
   }
   const uint8_t kind = static_cast<uint8_t>(cdr[1]);
   if (cdr[0] != 0 || kind > 3) {
-    throw IoError(std::string(message) + ": unknown CDR encapsulation " +
-                  hex_byte(static_cast<uint8_t>(cdr[0])) + " " + hex_byte(kind) +
-                  " at offset 0 (plain CDR is 0x00 0x00 or 0x00 0x01)");
+    throw IoError(std::string(message) + ": unknown CDR encapsulation " + hex_byte(static_cast<uint8_t>(cdr[0])) + " " +
+                  hex_byte(kind) + " at offset 0 (plain CDR is 0x00 0x00 or 0x00 0x01)");
   }
   if (kind >= 2) {
     throw IoError(std::string(message) + ": encapsulation " + hex_byte(kind) + " is PL_CDR (" +
-                  (kind == 3 ? "little" : "big") +
-                  "-endian parameter lists), not plain CDR: not supported");
+                  (kind == 3 ? "little" : "big") + "-endian parameter lists), not plain CDR: not supported");
   }
   swap_ = (kind == 0) != host_is_big_endian();
 }
@@ -42,8 +40,8 @@ void CdrReader::fail(const char* field, const std::string& problem) const {
 void CdrReader::need(size_t n, const char* field) const {
   const size_t left = cdr_.size() - pos_;
   if (n > left) {
-    fail(field, std::to_string(n) + " bytes announced at offset " + std::to_string(pos_) + ", " +
-                    std::to_string(left) + " left");
+    fail(field, std::to_string(n) + " bytes announced at offset " + std::to_string(pos_) + ", " + std::to_string(left) +
+                    " left");
   }
 }
 
@@ -94,9 +92,8 @@ uint32_t CdrReader::sequence_count(const char* field, size_t min_element_bytes) 
   const uint32_t count = u32(field);
   const size_t left = cdr_.size() - pos_;
   if (min_element_bytes > 0 && count > left / min_element_bytes) {
-    fail(field, std::to_string(count) + " elements of at least " +
-                    std::to_string(min_element_bytes) + " bytes announced at offset " +
-                    std::to_string(at) + ", " + std::to_string(left) + " bytes left");
+    fail(field, std::to_string(count) + " elements of at least " + std::to_string(min_element_bytes) +
+                    " bytes announced at offset " + std::to_string(at) + ", " + std::to_string(left) + " bytes left");
   }
   return count;
 }

@@ -85,8 +85,8 @@ void Db3Reader::read_topics() {
   while ((rc = sqlite3_step(q.stmt)) == SQLITE_ROW) {
     const int64_t id = sqlite3_column_int64(q.stmt, 0);
     Topic topic{text(q.stmt, 1), text(q.stmt, 2), text(q.stmt, 3)};
-    const bool repeated = std::any_of(topics_.begin(), topics_.end(),
-                                      [&](const BagTopic& t) { return t.name == topic.name; });
+    const bool repeated =
+        std::any_of(topics_.begin(), topics_.end(), [&](const BagTopic& t) { return t.name == topic.name; });
     if (!repeated) topics_.push_back({topic.name, topic.type, 0});
     topic_by_id_[id] = std::move(topic);
   }
@@ -96,8 +96,8 @@ void Db3Reader::read_topics() {
 void Db3Reader::read_messages() {
   Statement q;
   // Ties in time keep the order of insertion (the row id), as the recorder received them.
-  const std::string sql =
-      "SELECT id, topic_id, timestamp, substr(data, 1, " + std::to_string(kBagHeadBytes) + ") FROM messages ORDER BY timestamp, id";
+  const std::string sql = "SELECT id, topic_id, timestamp, substr(data, 1, " + std::to_string(kBagHeadBytes) +
+                          ") FROM messages ORDER BY timestamp, id";
   prepare(sql.c_str(), &q.stmt, "messages");
   int rc;
   while ((rc = sqlite3_step(q.stmt)) == SQLITE_ROW) {
@@ -130,8 +130,8 @@ std::string Db3Reader::data(const BagMessageRef& ref) const {
   const auto topic = topic_by_id_.find(sqlite3_column_int64(data_query_, 0));
   if (topic == topic_by_id_.end()) throw IoError(where + ": topic_id is not in table topics");
   if (topic->second.format != "cdr") {
-    throw IoError(where + ": topic " + topic->second.name + " has serialization format '" +
-                  topic->second.format + "': only cdr messages are read");
+    throw IoError(where + ": topic " + topic->second.name + " has serialization format '" + topic->second.format +
+                  "': only cdr messages are read");
   }
   const void* blob = sqlite3_column_blob(data_query_, 1);
   const int size = sqlite3_column_bytes(data_query_, 1);
@@ -142,9 +142,7 @@ std::string Db3Reader::data(const BagMessageRef& ref) const {
 
 }  // namespace
 
-std::unique_ptr<BagReader> open_db3_file(const std::string& path) {
-  return std::make_unique<Db3Reader>(path);
-}
+std::unique_ptr<BagReader> open_db3_file(const std::string& path) { return std::make_unique<Db3Reader>(path); }
 
 }  // namespace detail
 }  // namespace io

@@ -19,8 +19,7 @@ void skip_f64s(CdrReader& in, const std::string& field, int n) {
 // geometry_msgs/Point + Quaternion (a Pose), or Vector3 + Quaternion (a Transform): the same
 // seven float64s. The quaternion is normalised; a zero or non-finite one, or a non-finite
 // position, is refused rather than turned into a pose that would poison a trajectory.
-Pose3d read_pose(CdrReader& in, const std::string& prefix, const char* position,
-                 const char* orientation) {
+Pose3d read_pose(CdrReader& in, const std::string& prefix, const char* position, const char* orientation) {
   const std::string p = prefix + "." + position, q = prefix + "." + orientation;
   Eigen::Vector3d t;
   t.x() = in.f64((p + ".x").c_str());

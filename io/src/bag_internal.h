@@ -37,9 +37,8 @@ class IndexedBag : public BagReader {
 // The reference's `c` names the file of a rosbag2 folder the message lives in; a single-file
 // reader leaves it 0 and ignores it.
 inline void sort_by_log_time(std::vector<BagMessageRef>* refs) {
-  std::stable_sort(refs->begin(), refs->end(), [](const BagMessageRef& l, const BagMessageRef& r) {
-    return l.log_time_ns < r.log_time_ns;
-  });
+  std::stable_sort(refs->begin(), refs->end(),
+                   [](const BagMessageRef& l, const BagMessageRef& r) { return l.log_time_ns < r.log_time_ns; });
 }
 
 }  // namespace detail

@@ -20,10 +20,9 @@ namespace detail {
 namespace mcap {
 
 std::string opcode_name(uint8_t opcode) {
-  static const char* kNames[] = {"Header",     "Footer",          "Schema",     "Channel",
-                                 "Message",    "Chunk",           "MessageIndex", "ChunkIndex",
-                                 "Attachment", "AttachmentIndex", "Statistics", "Metadata",
-                                 "MetadataIndex", "SummaryOffset", "DataEnd"};
+  static const char* kNames[] = {"Header",     "Footer",       "Schema",        "Channel",       "Message",
+                                 "Chunk",      "MessageIndex", "ChunkIndex",    "Attachment",    "AttachmentIndex",
+                                 "Statistics", "Metadata",     "MetadataIndex", "SummaryOffset", "DataEnd"};
   if (opcode >= 1 && opcode <= 0x0F) return kNames[opcode - 1];
   const char* digits = "0123456789abcdef";
   return std::string("unknown opcode 0x") + digits[opcode >> 4] + digits[opcode & 15];
@@ -46,8 +45,9 @@ uint32_t crc32(uint32_t crc, const void* data, size_t n) {
   const uint8_t* p = static_cast<const uint8_t*>(data);
   crc = ~crc;
   for (; n >= 8; n -= 8, p += 8) {
-    const uint32_t lo = (static_cast<uint32_t>(p[0]) | static_cast<uint32_t>(p[1]) << 8 | static_cast<uint32_t>(p[2]) << 16 |
-                         static_cast<uint32_t>(p[3]) << 24) ^ crc;
+    const uint32_t lo = (static_cast<uint32_t>(p[0]) | static_cast<uint32_t>(p[1]) << 8 |
+                         static_cast<uint32_t>(p[2]) << 16 | static_cast<uint32_t>(p[3]) << 24) ^
+                        crc;
     crc = table[7][lo & 0xFF] ^ table[6][(lo >> 8) & 0xFF] ^ table[5][(lo >> 16) & 0xFF] ^ table[4][lo >> 24] ^
           table[3][p[4]] ^ table[2][p[5]] ^ table[1][p[6]] ^ table[0][p[7]];
   }
@@ -58,8 +58,7 @@ uint32_t crc32(uint32_t crc, const void* data, size_t n) {
 uint64_t FieldReader::load(const char* field, size_t n) {
   if (body_.size() - pos_ < n) {
     fail("field " + std::string(field) + " needs " + std::to_string(n) + " bytes at offset " +
-         std::to_string(base_ + pos_) + ", the record has " + std::to_string(body_.size() - pos_) +
-         " left");
+         std::to_string(base_ + pos_) + ", the record has " + std::to_string(body_.size() - pos_) + " left");
   }
   uint64_t v = 0;
   for (size_t i = 0; i < n; ++i) v |= uint64_t{static_cast<uint8_t>(body_[pos_ + i])} << (8 * i);
@@ -145,8 +144,7 @@ void check_zstd_content_size(std::string_view in, uint64_t uncompressed_size, co
   const unsigned long long stated = ZSTD_getFrameContentSize(in.data(), in.size());
   if (stated == ZSTD_CONTENTSIZE_ERROR) throw IoError(where + ": zstd decompression failed: not a zstd frame");
   const size_t frame = ZSTD_findFrameCompressedSize(in.data(), in.size());
-  if (stated != ZSTD_CONTENTSIZE_UNKNOWN && !ZSTD_isError(frame) && frame == in.size() &&
-      stated != uncompressed_size) {
+  if (stated != ZSTD_CONTENTSIZE_UNKNOWN && !ZSTD_isError(frame) && frame == in.size() && stated != uncompressed_size) {
     throw IoError(where + ": the zstd frame holds " + std::to_string(stated) + " bytes, uncompressed_size says " +
                   std::to_string(uncompressed_size));
   }
@@ -163,14 +161,13 @@ size_t lz4_decompress(std::string_view in, std::string* out, const std::string& 
   if (LZ4F_isError(LZ4F_createDecompressionContext(&raw, LZ4F_VERSION))) {
     throw IoError(where + ": cannot create an lz4 decompression context");
   }
-  const std::unique_ptr<LZ4F_dctx, decltype(&LZ4F_freeDecompressionContext)> ctx(
-      raw, &LZ4F_freeDecompressionContext);
+  const std::unique_ptr<LZ4F_dctx, decltype(&LZ4F_freeDecompressionContext)> ctx(raw, &LZ4F_freeDecompressionContext);
   size_t in_pos = 0, out_pos = 0, hint = 1;
   // Frames may follow each other; LZ4F_decompress returns 0 at the end of each.
   while (in_pos < in.size()) {
     size_t src = in.size() - in_pos, dst = out->size() - out_pos;
-    hint = LZ4F_decompress(ctx.get(), out->empty() ? nullptr : &(*out)[out_pos], &dst,
-                           in.data() + in_pos, &src, nullptr);
+    hint =
+        LZ4F_decompress(ctx.get(), out->empty() ? nullptr : &(*out)[out_pos], &dst, in.data() + in_pos, &src, nullptr);
     if (LZ4F_isError(hint)) {
       throw IoError(where + ": lz4 decompression failed: " + LZ4F_getErrorName(hint));
     }
@@ -187,11 +184,10 @@ size_t lz4_decompress(std::string_view in, std::string* out, const std::string& 
 
 }  // namespace
 
-std::string decompress(std::string_view compression, std::string_view compressed,
-                       uint64_t uncompressed_size, uint32_t uncompressed_crc, const std::string& where) {
+std::string decompress(std::string_view compression, std::string_view compressed, uint64_t uncompressed_size,
+                       uint32_t uncompressed_crc, const std::string& where) {
   if (compression != "" && compression != "zstd" && compression != "lz4") {
-    throw IoError(where + ": compression '" + std::string(compression) +
-                  "' is not supported (zstd, lz4 or none)");
+    throw IoError(where + ": compression '" + std::string(compression) + "' is not supported (zstd, lz4 or none)");
   }
   if (compression == "" && uncompressed_size != compressed.size()) {
     throw IoError(where + ": uncompressed chunk of " + std::to_string(compressed.size()) +
@@ -199,8 +195,7 @@ std::string decompress(std::string_view compression, std::string_view compressed
   }
   if (uncompressed_size > max_expansion(compression, compressed.size())) {
     throw IoError(where + ": uncompressed_size " + std::to_string(uncompressed_size) + " is more than " +
-                  std::string(compression) + " can expand " + std::to_string(compressed.size()) +
-                  " bytes to");
+                  std::string(compression) + " can expand " + std::to_string(compressed.size()) + " bytes to");
   }
   if (compression == "zstd") check_zstd_content_size(compressed, uncompressed_size, where);
   std::string out;
@@ -212,8 +207,8 @@ std::string decompress(std::string_view compression, std::string_view compressed
     } catch (const std::bad_alloc&) {  // within the bound, yet more than this machine has
       throw IoError(where + ": cannot allocate " + std::to_string(uncompressed_size) + " bytes for the chunk");
     }
-    const size_t n = compression == "zstd" ? zstd_decompress(compressed, &out, where)
-                                           : lz4_decompress(compressed, &out, where);
+    const size_t n =
+        compression == "zstd" ? zstd_decompress(compressed, &out, where) : lz4_decompress(compressed, &out, where);
     if (n != uncompressed_size) {
       throw IoError(where + ": " + std::string(compression) + " data decompresses to " + std::to_string(n) +
                     " bytes, uncompressed_size says " + std::to_string(uncompressed_size));
@@ -222,8 +217,8 @@ std::string decompress(std::string_view compression, std::string_view compressed
   // Zero means the writer did not compute it (the spec allows that).
   const uint32_t crc = uncompressed_crc == 0 ? 0 : crc32(0, out.data(), out.size());
   if (crc != uncompressed_crc) {
-    throw IoError(where + ": CRC mismatch: the records' CRC-32 is " + std::to_string(crc) +
-                  ", uncompressed_crc says " + std::to_string(uncompressed_crc));
+    throw IoError(where + ": CRC mismatch: the records' CRC-32 is " + std::to_string(crc) + ", uncompressed_crc says " +
+                  std::to_string(uncompressed_crc));
   }
   return out;
 }

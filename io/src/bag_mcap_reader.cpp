@@ -60,8 +60,7 @@ class McapReader final : public IndexedBag {
   bool index_chunk_messages(uint64_t chunk, uint64_t message_index_at, uint64_t* found);
   void scan();
   void scan_chunk(uint64_t chunk, std::string_view body);
-  void index(uint8_t opcode, std::string_view body, uint64_t base, const std::string& where,
-             BagMessageRef ref);
+  void index(uint8_t opcode, std::string_view body, uint64_t base, const std::string& where, BagMessageRef ref);
   // The chunk's records, decompressed; their CRC checked when check_crc (opening checks every
   // chunk once: data() does not again).
   std::string chunk_records(std::string_view body, uint64_t chunk, bool check_crc = true) const;
@@ -101,7 +100,8 @@ bool McapReader::from_summary() try {
   if (size < 2 * kMagic.size() + kRecordPrefix + kFooterBody) return false;
   const uint64_t footer_at = size - kMagic.size() - kRecordPrefix - kFooterBody;
   const std::string footer = file_.read(footer_at, kRecordPrefix + kFooterBody, path_);
-  if (static_cast<uint8_t>(footer[0]) != kFooter || le64(std::string_view(footer).substr(1)) != kFooterBody) return false;
+  if (static_cast<uint8_t>(footer[0]) != kFooter || le64(std::string_view(footer).substr(1)) != kFooterBody)
+    return false;
   FieldReader f(std::string_view(footer).substr(kRecordPrefix), footer_at + kRecordPrefix, where(kFooter, footer_at));
   const uint64_t start = f.u64("summary_start"), offsets = f.u64("summary_offset_start");
   const uint64_t end = offsets != 0 ? offsets : footer_at;
@@ -170,9 +170,8 @@ void McapReader::scan() {
     const uint64_t length = le64(std::string_view(prefix).substr(1));
     const uint64_t left = end - pos - kRecordPrefix;
     if (length > left) {
-      throw IoError(where(opcode, pos) + ": length " + std::to_string(length) +
-                    " runs past the end of the file (" + std::to_string(left) +
-                    " bytes left before the closing magic): truncated?");
+      throw IoError(where(opcode, pos) + ": length " + std::to_string(length) + " runs past the end of the file (" +
+                    std::to_string(left) + " bytes left before the closing magic): truncated?");
     }
     if (first && opcode != kHeader) {
       throw IoError(where(opcode, pos) + ": the first record is not a Header: not an MCAP file");
@@ -182,7 +181,8 @@ void McapReader::scan() {
     if (opcode == kChunk) {
       scan_chunk(pos, file_.read(body_at, length, where(opcode, pos)));
     } else if (opcode == kMessage) {  // only the fixed fields: the payload is read by data()
-      const std::string head = file_.read(body_at, std::min<uint64_t>(length, kMessagePrefix + kBagHeadBytes), where(opcode, pos));
+      const std::string head =
+          file_.read(body_at, std::min<uint64_t>(length, kMessagePrefix + kBagHeadBytes), where(opcode, pos));
       index(opcode, head, body_at, where(opcode, pos), BagMessageRef{0, pos, 0, 0, {}});
     } else if (opcode == kSchema || opcode == kChannel) {
       index(opcode, file_.read(body_at, length, where(opcode, pos)), body_at, where(opcode, pos), {});
@@ -240,8 +240,7 @@ void McapReader::index(uint8_t opcode, std::string_view body, uint64_t base, con
     const std::string encoding(f.string("message_encoding"));
     f.string("metadata");  // a map: its uint32 byte length, then the entries
     if (!channels_.emplace(id, Channel{topic, encoding}).second) return;  // repeated: seen
-    const auto known = std::find_if(topics_.begin(), topics_.end(),
-                                    [&](const BagTopic& t) { return t.name == topic; });
+    const auto known = std::find_if(topics_.begin(), topics_.end(), [&](const BagTopic& t) { return t.name == topic; });
     const auto type = schema_names_.find(schema);  // schema 0: none
     if (known == topics_.end()) topics_.push_back({topic, type == schema_names_.end() ? "" : type->second, 0});
   } else if (opcode == kMessage) {
@@ -265,8 +264,8 @@ const std::string& McapReader::cached_chunk(uint64_t chunk) const {
   if (static_cast<uint8_t>(prefix[0]) != kChunk) {
     throw IoError(where(kChunk, chunk) + ": no Chunk record there (a reference from another bag?)");
   }
-  const std::string body = file_.read(chunk + kRecordPrefix, le64(std::string_view(prefix).substr(1)),
-                                      where(kChunk, chunk));
+  const std::string body =
+      file_.read(chunk + kRecordPrefix, le64(std::string_view(prefix).substr(1)), where(kChunk, chunk));
   cached_records_ = chunk_records(body, chunk, crc_at_read_ && !crc_checked_.count(chunk));
   if (crc_at_read_) crc_checked_.insert(chunk);
   cached_offset_ = chunk;
@@ -299,8 +298,7 @@ std::string McapReader::data(const BagMessageRef& ref) const {
   const std::string& records = cached_chunk(ref.a);
   const uint64_t pos = ref.b - 1;
   const std::string at = where_in_chunk(kMessage, pos, ref.a);
-  if (pos > records.size() || records.size() - pos < kRecordPrefix ||
-      static_cast<uint8_t>(records[pos]) != kMessage) {
+  if (pos > records.size() || records.size() - pos < kRecordPrefix || static_cast<uint8_t>(records[pos]) != kMessage) {
     throw IoError(at + ": no Message record there");
   }
   const uint64_t length = le64(std::string_view(records).substr(pos + 1));
@@ -310,9 +308,7 @@ std::string McapReader::data(const BagMessageRef& ref) const {
 
 }  // namespace
 
-std::unique_ptr<BagReader> open_mcap_file(const std::string& path) {
-  return std::make_unique<McapReader>(path);
-}
+std::unique_ptr<BagReader> open_mcap_file(const std::string& path) { return std::make_unique<McapReader>(path); }
 
 }  // namespace detail
 }  // namespace io

@@ -34,13 +34,12 @@ void put_u16_u64_map(std::string* out, const std::map<uint16_t, uint64_t>& map) 
 }  // namespace
 
 struct McapWriter::Impl {
-  Impl(const std::string& path, const McapWriterOptions& options)
-      : path(path), options(options), file(path) {}
+  Impl(const std::string& path, const McapWriterOptions& options) : path(path), options(options), file(path) {}
 
   std::string path;
   McapWriterOptions options;
   detail::FileWriter file;
-  uint64_t offset = 0;  // bytes written so far
+  uint64_t offset = 0;    // bytes written so far
   uint32_t data_crc = 0;  // CRC-32 of every byte before DataEnd (magic and Header included)
   bool closed = false;
 
@@ -162,8 +161,7 @@ void McapWriter::Impl::flush_chunk() {
   std::map<uint16_t, uint64_t> index_offsets;
   const uint64_t indexes_start = offset;
   for (auto& [channel, entries] : chunk_index) {
-    std::stable_sort(entries.begin(), entries.end(),
-                     [](const auto& l, const auto& r) { return l.first < r.first; });
+    std::stable_sort(entries.begin(), entries.end(), [](const auto& l, const auto& r) { return l.first < r.first; });
     std::string index;
     put_u16(&index, channel);
     put_u32(&index, static_cast<uint32_t>(entries.size() * 16));
@@ -213,9 +211,10 @@ void McapWriter::Impl::write_summary() {
 
   const uint64_t summary_start = offset;
   std::string summary, offsets;
-  const std::pair<uint8_t, const std::string*> groups[] = {
-      {kSchema, &schema_records}, {kChannel, &channel_records}, {kStatistics, &statistics_record},
-      {kChunkIndex, &chunk_index_records}};
+  const std::pair<uint8_t, const std::string*> groups[] = {{kSchema, &schema_records},
+                                                           {kChannel, &channel_records},
+                                                           {kStatistics, &statistics_record},
+                                                           {kChunkIndex, &chunk_index_records}};
   for (const auto& [opcode, records] : groups) {
     if (records->empty()) continue;
     std::string body;

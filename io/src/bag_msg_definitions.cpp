@@ -82,8 +82,8 @@ std::string ros2msg_definition(const std::string& type) {
   std::vector<std::string> order;
   collect(key, &seen, &order);
   for (const std::string& dependency : order) {
-    text += "================================================================================\nMSG: " +
-            dependency + "\n" + definitions().at(dependency).text;
+    text += "================================================================================\nMSG: " + dependency +
+            "\n" + definitions().at(dependency).text;
   }
   return text;
 }

@@ -25,17 +25,15 @@ struct PointField {
 // sensor_msgs/PointField datatypes INT8=1 ... FLOAT64=8; false for anything else.
 bool scalar_of(uint8_t datatype, ScalarType* type) {
   static const ScalarType kTypes[8] = {
-      {ScalarKind::kSigned, 1},   {ScalarKind::kUnsigned, 1}, {ScalarKind::kSigned, 2},
-      {ScalarKind::kUnsigned, 2}, {ScalarKind::kSigned, 4},   {ScalarKind::kUnsigned, 4},
-      {ScalarKind::kFloat, 4},    {ScalarKind::kFloat, 8}};
+      {ScalarKind::kSigned, 1}, {ScalarKind::kUnsigned, 1}, {ScalarKind::kSigned, 2}, {ScalarKind::kUnsigned, 2},
+      {ScalarKind::kSigned, 4}, {ScalarKind::kUnsigned, 4}, {ScalarKind::kFloat, 4},  {ScalarKind::kFloat, 8}};
   if (datatype < 1 || datatype > 8) return false;
   *type = kTypes[datatype - 1];
   return true;
 }
 
 std::string datatype_name(uint8_t datatype) {
-  static const char* kNames[8] = {"INT8",  "UINT8",  "INT16",   "UINT16",
-                                  "INT32", "UINT32", "FLOAT32", "FLOAT64"};
+  static const char* kNames[8] = {"INT8", "UINT8", "INT16", "UINT16", "INT32", "UINT32", "FLOAT32", "FLOAT64"};
   if (datatype < 1 || datatype > 8) return "unknown datatype " + std::to_string(datatype);
   return std::string(kNames[datatype - 1]) + " (" + std::to_string(datatype) + ")";
 }
@@ -76,20 +74,24 @@ Layout layout_of(const std::vector<PointField>& fields, uint32_t point_step) {
     if (known) {
       const uint64_t end = uint64_t{f.offset} + uint64_t(type.size) * std::max<uint32_t>(f.count, 1);
       if (end > point_step) {
-        fail(".fields[" + f.name + "]: offset " + std::to_string(f.offset) + " + " +
-             std::to_string(end - f.offset) + " bytes = " + std::to_string(end) +
-             " exceeds point_step " + std::to_string(point_step));
+        fail(".fields[" + f.name + "]: offset " + std::to_string(f.offset) + " + " + std::to_string(end - f.offset) +
+             " bytes = " + std::to_string(end) + " exceeds point_step " + std::to_string(point_step));
       }
     }
-    Slot* slot = f.name == "x" ? &layout.x : f.name == "y" ? &layout.y : f.name == "z" ? &layout.z
-               : f.name == "intensity" ? &layout.intensity : f.name == "ring" ? &layout.ring : nullptr;
+    Slot* slot = f.name == "x"           ? &layout.x
+                 : f.name == "y"         ? &layout.y
+                 : f.name == "z"         ? &layout.z
+                 : f.name == "intensity" ? &layout.intensity
+                 : f.name == "ring"      ? &layout.ring
+                                         : nullptr;
     if (!slot || slot->present) continue;  // unused, or a duplicate name: the first one counts
     const bool is_xyz = slot != &layout.intensity && slot != &layout.ring;
     if (!known || (is_xyz && type.kind != ScalarKind::kFloat) ||
         (slot == &layout.ring && type.kind == ScalarKind::kFloat)) {
       fail(".fields[" + f.name + "]: datatype " + datatype_name(f.datatype) + " not supported (" +
-           (is_xyz ? "x, y, z must be FLOAT32 or FLOAT64"
-                   : slot == &layout.ring ? "ring must be an integer type" : "intensity must be numeric") +
+           (is_xyz                 ? "x, y, z must be FLOAT32 or FLOAT64"
+            : slot == &layout.ring ? "ring must be an integer type"
+                                   : "intensity must be numeric") +
            ")");
     }
     *slot = Slot{true, type, f.offset};
@@ -100,23 +102,21 @@ Layout layout_of(const std::vector<PointField>& fields, uint32_t point_step) {
   return layout;
 }
 
-void check_sizes(uint32_t height, uint32_t width, uint32_t point_step, uint32_t row_step,
-                 size_t data_size) {
+void check_sizes(uint32_t height, uint32_t width, uint32_t point_step, uint32_t row_step, size_t data_size) {
   const uint64_t rows_bytes = uint64_t{row_step} * height;
   if (rows_bytes != data_size) {
-    fail(": data holds " + std::to_string(data_size) + " bytes but row_step " +
-         std::to_string(row_step) + " * height " + std::to_string(height) + " = " +
-         std::to_string(rows_bytes));
+    fail(": data holds " + std::to_string(data_size) + " bytes but row_step " + std::to_string(row_step) +
+         " * height " + std::to_string(height) + " = " + std::to_string(rows_bytes));
   }
   const uint64_t row_bytes = uint64_t{width} * point_step;
   if (row_bytes > row_step) {
-    fail(": row_step " + std::to_string(row_step) + " is less than width " + std::to_string(width) +
-         " * point_step " + std::to_string(point_step) + " = " + std::to_string(row_bytes));
+    fail(": row_step " + std::to_string(row_step) + " is less than width " + std::to_string(width) + " * point_step " +
+         std::to_string(point_step) + " = " + std::to_string(row_bytes));
   }
 }
 
-void decode_points(std::string_view data, uint32_t height, uint32_t width, uint32_t point_step,
-                   uint32_t row_step, bool swap, const Layout& layout, PointCloud2Message* out) {
+void decode_points(std::string_view data, uint32_t height, uint32_t width, uint32_t point_step, uint32_t row_step,
+                   bool swap, const Layout& layout, PointCloud2Message* out) {
   const bool has_ring = layout.ring.present;
   detail::CloudBuilder builder(size_t{width} * height, layout.intensity.present, has_ring);
   const uint8_t* base = reinterpret_cast<const uint8_t*>(data.data());
@@ -161,8 +161,8 @@ PointCloud2Message decode_point_cloud2(std::string_view cdr) {
 
   const Layout layout = layout_of(fields, point_step);
   check_sizes(out.height, out.width, point_step, row_step, data.size());
-  decode_points(data, out.height, out.width, point_step, row_step, is_bigendian != detail::host_is_big_endian(),
-                layout, &out);
+  decode_points(data, out.height, out.width, point_step, row_step, is_bigendian != detail::host_is_big_endian(), layout,
+                &out);
   return out;
 }
 

@@ -128,8 +128,8 @@ FolderReader::FolderReader(const std::string& folder) : path_(folder) {
     if (!fs::exists(file, ec)) throw IoError(yaml + ": relative_file_paths lists " + relative + ", missing");
     files_.push_back(open_file(file.string(), metadata.storage_identifier));
     for (const BagTopic& topic : files_.back()->topics()) {
-      const auto known = std::find_if(topics_.begin(), topics_.end(),
-                                      [&](const BagTopic& t) { return t.name == topic.name; });
+      const auto known =
+          std::find_if(topics_.begin(), topics_.end(), [&](const BagTopic& t) { return t.name == topic.name; });
       if (known == topics_.end()) {
         topics_.push_back(topic);
       } else {

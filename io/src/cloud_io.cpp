@@ -9,8 +9,7 @@ namespace io {
 namespace {
 
 [[noreturn]] void unknown_extension(const std::string& path, const std::string& ext) {
-  detail::fail(path, "unknown point-cloud extension " + detail::quote(ext) +
-                         " (expected .bin, .pcd or .ply)");
+  detail::fail(path, "unknown point-cloud extension " + detail::quote(ext) + " (expected .bin, .pcd or .ply)");
 }
 
 }  // namespace

@@ -16,9 +16,7 @@ namespace detail {
 
 namespace fs = std::filesystem;
 
-void fail(const std::string& where, const std::string& problem) {
-  throw IoError(where + ": " + problem);
-}
+void fail(const std::string& where, const std::string& problem) { throw IoError(where + ": " + problem); }
 
 std::string line_ref(const std::string& path, size_t line_number) {
   return path + " line " + std::to_string(line_number);
@@ -68,9 +66,7 @@ std::string read_up_to(const std::string& path, size_t max_bytes) {
 
 std::string read_file(const std::string& path) { return read_up_to(path, SIZE_MAX); }
 
-std::string read_file_prefix(const std::string& path, size_t max_bytes) {
-  return read_up_to(path, max_bytes);
-}
+std::string read_file_prefix(const std::string& path, size_t max_bytes) { return read_up_to(path, max_bytes); }
 
 FileWriter::FileWriter(const std::string& path) : path_(path) {
   file_ = std::fopen(path.c_str(), "wb");
@@ -128,9 +124,7 @@ bool parse_double(std::string_view token, double* value) {
 }
 
 namespace {
-bool is_space(char c) {
-  return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\v' || c == '\f';
-}
+bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\v' || c == '\f'; }
 }  // namespace
 
 void split_tokens(std::string_view line, std::vector<std::string_view>* tokens) {
@@ -164,11 +158,11 @@ bool next_line(std::string_view* text, std::string_view* line) {
   return true;
 }
 
-void parse_finite_numbers(const std::string& where, const std::vector<std::string_view>& tokens,
-                          size_t expected, double* out) {
+void parse_finite_numbers(const std::string& where, const std::vector<std::string_view>& tokens, size_t expected,
+                          double* out) {
   if (tokens.size() != expected) {
-    fail(where, "expected " + std::to_string(expected) + (expected == 1 ? " number" : " numbers") +
-                    ", got " + std::to_string(tokens.size()));
+    fail(where, "expected " + std::to_string(expected) + (expected == 1 ? " number" : " numbers") + ", got " +
+                    std::to_string(tokens.size()));
   }
   for (size_t i = 0; i < expected; ++i) {
     if (!parse_double(tokens[i], &out[i])) fail(where, quote(tokens[i]) + " is not a number");

@@ -58,8 +58,8 @@ bool next_line(std::string_view* text, std::string_view* line);
 
 // Parses exactly `expected` finite numbers into out[0..expected); `where` names the line.
 // Wrong count, non-numbers and NaN/Inf raise IoError.
-void parse_finite_numbers(const std::string& where, const std::vector<std::string_view>& tokens,
-                          size_t expected, double* out);
+void parse_finite_numbers(const std::string& where, const std::vector<std::string_view>& tokens, size_t expected,
+                          double* out);
 
 // Shortest text that reads back to exactly the same value.
 void append_number(std::string* out, double value);

@@ -120,8 +120,8 @@ void write_kitti_calib(const std::string& path, const KittiCalib& calib) {
       {718.856, 0, 607.1928, -386.1448, 0, 718.856, 185.2157, 0, 0, 0, 1, 0},
       {718.856, 0, 607.1928, 45.38225, 0, 718.856, 185.2157, -0.1130887, 0, 0, 1, 0.003779761},
       {718.856, 0, 607.1928, -337.2877, 0, 718.856, 185.2157, 2.369057, 0, 0, 1, 0.004915215}};
-  std::string text = calib_line("P0:", kP[0]) + calib_line("P1:", kP[1]) +
-                     calib_line("P2:", kP[2]) + calib_line("P3:", kP[3]);
+  std::string text =
+      calib_line("P0:", kP[0]) + calib_line("P1:", kP[1]) + calib_line("P2:", kP[2]) + calib_line("P3:", kP[3]);
   const Eigen::Matrix<double, 3, 4, Eigen::RowMajor> tr = calib.T_cam0_velo.matrix().topRows<3>();
   text += calib_line("Tr:", tr.data());
   detail::write_file(path, text);

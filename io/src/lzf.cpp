@@ -105,8 +105,7 @@ std::string lzf_decompress(const uint8_t* in, size_t in_size, uint8_t* out, size
     for (size_t i = 0; i < len; ++i, ++op) out[op] = out[op - distance];  // may overlap
   }
   if (op != out_size) {
-    return "decompressed to " + std::to_string(op) + " bytes but " + std::to_string(out_size) +
-           " were declared";
+    return "decompressed to " + std::to_string(op) + " bytes but " + std::to_string(out_size) + " were declared";
   }
   return {};
 }

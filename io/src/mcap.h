@@ -17,14 +17,25 @@ namespace detail {
 namespace mcap {
 
 inline constexpr std::string_view kMagic("\x89MCAP0\r\n", 8);
-inline constexpr size_t kRecordPrefix = 9;         // opcode uint8 + length uint64
+inline constexpr size_t kRecordPrefix = 9;               // opcode uint8 + length uint64
 inline constexpr size_t kMessagePrefix = 2 + 4 + 8 + 8;  // channel, sequence, log and publish time
 
 enum Opcode : uint8_t {
-  kHeader = 0x01, kFooter = 0x02, kSchema = 0x03, kChannel = 0x04, kMessage = 0x05,
-  kChunk = 0x06, kMessageIndex = 0x07, kChunkIndex = 0x08, kAttachment = 0x09,
-  kAttachmentIndex = 0x0A, kStatistics = 0x0B, kMetadata = 0x0C, kMetadataIndex = 0x0D,
-  kSummaryOffset = 0x0E, kDataEnd = 0x0F,
+  kHeader = 0x01,
+  kFooter = 0x02,
+  kSchema = 0x03,
+  kChannel = 0x04,
+  kMessage = 0x05,
+  kChunk = 0x06,
+  kMessageIndex = 0x07,
+  kChunkIndex = 0x08,
+  kAttachment = 0x09,
+  kAttachmentIndex = 0x0A,
+  kStatistics = 0x0B,
+  kMetadata = 0x0C,
+  kMetadataIndex = 0x0D,
+  kSummaryOffset = 0x0E,
+  kDataEnd = 0x0F,
 };
 
 // "Chunk", "Message", ... or "unknown opcode 0x42".
@@ -79,8 +90,8 @@ std::string compress(McapCompression compression, std::string_view records);
 // Decompresses a chunk's records to exactly uncompressed_size bytes and checks the CRC when it
 // is not zero. A size beyond what the codec can expand `compressed` to is refused before any
 // allocation, so a forged size cannot ask for more memory than the file could justify.
-std::string decompress(std::string_view compression, std::string_view compressed,
-                       uint64_t uncompressed_size, uint32_t uncompressed_crc, const std::string& where);
+std::string decompress(std::string_view compression, std::string_view compressed, uint64_t uncompressed_size,
+                       uint32_t uncompressed_crc, const std::string& where);
 
 // The ros2msg schema text rosbag2 stores for a type ("sensor_msgs/msg/PointCloud2"): its .msg
 // definition followed by one "====...\nMSG: pkg/Name" section per type it depends on. Empty for

@@ -40,8 +40,7 @@ size_t single_size(const std::string& where, const std::vector<std::string_view>
 }
 
 // Applies one header line; returns true for the DATA line, which ends the header.
-bool apply_line(const std::string& where, const std::vector<std::string_view>& tokens,
-                RawHeader* raw) {
+bool apply_line(const std::string& where, const std::vector<std::string_view>& tokens, RawHeader* raw) {
   const std::string_view key = tokens[0];
   const std::vector<std::string_view> values(tokens.begin() + 1, tokens.end());
   if (key == "FIELDS" || key == "COLUMNS") {
@@ -64,8 +63,7 @@ bool apply_line(const std::string& where, const std::vector<std::string_view>& t
     if (tokens.size() != 2) fail(where, "DATA expects one value");
     raw->data = std::string(tokens[1]);
     if (raw->data != "ascii" && raw->data != "binary" && raw->data != "binary_compressed") {
-      fail(where, "unsupported DATA encoding " + quote(tokens[1]) +
-                      " (expected ascii, binary or binary_compressed)");
+      fail(where, "unsupported DATA encoding " + quote(tokens[1]) + " (expected ascii, binary or binary_compressed)");
     }
     return true;
   } else if (key != "VERSION" && key != "VIEWPOINT") {  // those two carry nothing we need
@@ -74,8 +72,7 @@ bool apply_line(const std::string& where, const std::vector<std::string_view>& t
   return false;
 }
 
-ScalarType parse_type(const std::string& path, std::string_view type, std::string_view size,
-                      std::string_view field) {
+ScalarType parse_type(const std::string& path, std::string_view type, std::string_view size, std::string_view field) {
   ScalarType t;
   if (type == "F")
     t.kind = ScalarKind::kFloat;
@@ -88,8 +85,7 @@ ScalarType parse_type(const std::string& path, std::string_view type, std::strin
   const size_t bytes = parse_size(path, "SIZE", size);
   t.size = bytes <= 8 ? static_cast<int>(bytes) : 0;
   if (!is_valid(t)) {
-    fail(path, "field " + quote(field) + " has unsupported TYPE/SIZE " + std::string(type) +
-                   std::string(size));
+    fail(path, "field " + quote(field) + " has unsupported TYPE/SIZE " + std::string(type) + std::string(size));
   }
   return t;
 }
@@ -98,11 +94,10 @@ void build_fields(const std::string& path, const RawHeader& raw, PcdHeader* head
   const size_t n = raw.fields.size();
   if (n == 0) fail(path, "header has no FIELDS line");
   if (n > kMaxFields) fail(path, "header declares too many fields");
-  if (raw.sizes.size() != n || raw.types.size() != n ||
-      (!raw.counts.empty() && raw.counts.size() != n)) {
-    fail(path, "header is inconsistent: " + std::to_string(n) + " FIELDS but " +
-                   std::to_string(raw.sizes.size()) + " SIZE, " + std::to_string(raw.types.size()) +
-                   " TYPE and " + std::to_string(raw.counts.size()) + " COUNT values");
+  if (raw.sizes.size() != n || raw.types.size() != n || (!raw.counts.empty() && raw.counts.size() != n)) {
+    fail(path, "header is inconsistent: " + std::to_string(n) + " FIELDS but " + std::to_string(raw.sizes.size()) +
+                   " SIZE, " + std::to_string(raw.types.size()) + " TYPE and " + std::to_string(raw.counts.size()) +
+                   " COUNT values");
   }
   for (size_t i = 0; i < n; ++i) {
     PcdField f;
@@ -143,8 +138,7 @@ void check_xyz(const std::string& path, const PcdHeader& header) {
       fail(path, std::string("missing field ") + name + " (fields: " + names + ")");
     }
     if (f->count != 1)
-      fail(path, std::string("field ") + name + " has COUNT " + std::to_string(f->count) +
-                     ", expected 1");
+      fail(path, std::string("field ") + name + " has COUNT " + std::to_string(f->count) + ", expected 1");
   }
 }
 

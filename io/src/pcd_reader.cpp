@@ -52,8 +52,7 @@ struct BinaryLayout {
   bool per_field_arrays;
 
   const uint8_t* at(const PcdField& f, size_t i) const {
-    if (per_field_arrays)
-      return data + f.offset * points + i * static_cast<size_t>(f.type.size) * f.count;
+    if (per_field_arrays) return data + f.offset * points + i * static_cast<size_t>(f.type.size) * f.count;
     return data + i * point_size + f.offset;
   }
 };
@@ -62,24 +61,21 @@ CloudData decode_binary(const std::string& path, const PcdHeader& h, const Binar
   const Wanted w = wanted_fields(h);
   detail::CloudBuilder builder(h.points, w.intensity != nullptr, w.label != nullptr);
   for (size_t i = 0; i < h.points; ++i) {
-    auto value = [&](const PcdField* f) {
-      return detail::load_double(layout.at(*f, i), f->type, false);
-    };
+    auto value = [&](const PcdField* f) { return detail::load_double(layout.at(*f, i), f->type, false); };
     const float intensity = w.intensity ? detail::to_float(value(w.intensity)) : 0.0f;
     uint32_t label = 0;
     if (w.label && !detail::to_label(value(w.label), w.label->type, &label)) {
       fail(path, "point " + std::to_string(i) + ": " + bad_label(value(w.label)));
     }
-    builder.add(detail::to_float(value(w.x)), detail::to_float(value(w.y)),
-                detail::to_float(value(w.z)), intensity, label);
+    builder.add(detail::to_float(value(w.x)), detail::to_float(value(w.y)), detail::to_float(value(w.z)), intensity,
+                label);
   }
   return builder.finish();
 }
 
 size_t data_bytes(const std::string& path, const PcdHeader& h) {
   if (h.point_size != 0 && h.points > SIZE_MAX / h.point_size) {
-    fail(path, "truncated: header declares " + std::to_string(h.points) +
-                   " points, more than any file can hold");
+    fail(path, "truncated: header declares " + std::to_string(h.points) + " points, more than any file can hold");
   }
   return h.points * h.point_size;
 }
@@ -88,9 +84,8 @@ CloudData read_binary(const std::string& path, const std::string& file, const Pc
   const size_t need = data_bytes(path, h);
   const size_t available = file.size() - h.data_offset;
   if (available < need) {
-    fail(path, "truncated: header declares " + std::to_string(h.points) + " points (" +
-                   std::to_string(need) + " bytes of data) but only " + std::to_string(available) +
-                   " bytes follow");
+    fail(path, "truncated: header declares " + std::to_string(h.points) + " points (" + std::to_string(need) +
+                   " bytes of data) but only " + std::to_string(available) + " bytes follow");
   }
   const auto* data = reinterpret_cast<const uint8_t*>(file.data()) + h.data_offset;
   return decode_binary(path, h, {data, h.points, h.point_size, false});
@@ -120,8 +115,8 @@ CloudData read_compressed(const std::string& path, const std::string& file, cons
   }
   // LZF expands at most ~90x: refuse absurd sizes before allocating for them.
   if (need > compressed * 100 + 4096) {
-    fail(path, "corrupt binary_compressed data: " + std::to_string(compressed) +
-                   " compressed bytes cannot hold " + std::to_string(need) + " bytes");
+    fail(path, "corrupt binary_compressed data: " + std::to_string(compressed) + " compressed bytes cannot hold " +
+                   std::to_string(need) + " bytes");
   }
   std::vector<uint8_t> buffer(need);
   const std::string error = detail::lzf_decompress(data + 8, compressed, buffer.data(), need);
@@ -133,8 +128,7 @@ CloudData read_ascii(const std::string& path, const std::string& file, const Pcd
   const Wanted w = wanted_fields(h);
   // Do not trust POINTS for the reservation: a garbage header could ask for terabytes.
   const size_t max_lines = (file.size() - h.data_offset) / 2 + 1;
-  detail::CloudBuilder builder(std::min(h.points, max_lines), w.intensity != nullptr,
-                               w.label != nullptr);
+  detail::CloudBuilder builder(std::min(h.points, max_lines), w.intensity != nullptr, w.label != nullptr);
   std::string_view rest(file);
   rest.remove_prefix(h.data_offset);
   std::string_view line;
@@ -147,28 +141,25 @@ CloudData read_ascii(const std::string& path, const std::string& file, const Pcd
     if (tokens.empty()) continue;
     const std::string where = detail::line_ref(path, line_number);
     if (tokens.size() != h.values_per_point) {
-      fail(where, "expected " + std::to_string(h.values_per_point) + " values, got " +
-                      std::to_string(tokens.size()));
+      fail(where, "expected " + std::to_string(h.values_per_point) + " values, got " + std::to_string(tokens.size()));
     }
     auto value = [&](const PcdField* f) {
       double v = 0.0;
       if (!detail::parse_double(tokens[f->token_index], &v)) {
-        fail(where, "field " + f->name + ": " + detail::quote(tokens[f->token_index]) +
-                        " is not a number");
+        fail(where, "field " + f->name + ": " + detail::quote(tokens[f->token_index]) + " is not a number");
       }
       return v;
     };
     const float intensity = w.intensity ? detail::to_float(value(w.intensity)) : 0.0f;
     uint32_t label = 0;
-    if (w.label && !detail::to_label(value(w.label), w.label->type, &label))
-      fail(where, bad_label(value(w.label)));
-    builder.add(detail::to_float(value(w.x)), detail::to_float(value(w.y)),
-                detail::to_float(value(w.z)), intensity, label);
+    if (w.label && !detail::to_label(value(w.label), w.label->type, &label)) fail(where, bad_label(value(w.label)));
+    builder.add(detail::to_float(value(w.x)), detail::to_float(value(w.y)), detail::to_float(value(w.z)), intensity,
+                label);
     ++read;
   }
   if (read < h.points) {
-    fail(path, "truncated: header declares " + std::to_string(h.points) + " points but only " +
-                   std::to_string(read) + " data lines follow");
+    fail(path, "truncated: header declares " + std::to_string(h.points) + " points but only " + std::to_string(read) +
+                   " data lines follow");
   }
   return builder.finish();
 }

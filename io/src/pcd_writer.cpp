@@ -15,11 +15,9 @@ namespace {
 std::string header(size_t points, bool with_labels, const char* encoding) {
   const std::string n = std::to_string(points);
   std::string h = "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\n";
-  h += with_labels
-           ? "FIELDS x y z intensity label\nSIZE 4 4 4 4 4\nTYPE F F F F U\nCOUNT 1 1 1 1 1\n"
-           : "FIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\n";
-  h += "WIDTH " + n + "\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS " + n + "\nDATA " + encoding +
-       "\n";
+  h += with_labels ? "FIELDS x y z intensity label\nSIZE 4 4 4 4 4\nTYPE F F F F U\nCOUNT 1 1 1 1 1\n"
+                   : "FIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\n";
+  h += "WIDTH " + n + "\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS " + n + "\nDATA " + encoding + "\n";
   return h;
 }
 
@@ -50,8 +48,7 @@ std::vector<uint8_t> interleaved(const PointCloud& cloud, const std::vector<uint
 }
 
 // binary_compressed stores one array per field (x x x.. y y y..), which compresses better.
-std::vector<uint8_t> per_field_arrays(const PointCloud& cloud,
-                                      const std::vector<uint32_t>* labels) {
+std::vector<uint8_t> per_field_arrays(const PointCloud& cloud, const std::vector<uint32_t>* labels) {
   const size_t n = cloud.size();
   const size_t fields = labels ? 5 : 4;
   std::vector<uint8_t> data(n * fields * 4);
@@ -63,14 +60,12 @@ std::vector<uint8_t> per_field_arrays(const PointCloud& cloud,
   return data;
 }
 
-void write_compressed(const std::string& path, detail::FileWriter* writer,
-                      const std::vector<uint8_t>& raw) {
+void write_compressed(const std::string& path, detail::FileWriter* writer, const std::vector<uint8_t>& raw) {
   const std::vector<uint8_t> packed = detail::lzf_compress(raw.data(), raw.size());
   if (raw.size() > UINT32_MAX || packed.size() > UINT32_MAX) {
     detail::fail(path, "cloud too large for binary_compressed PCD (sizes are 32-bit)");
   }
-  const uint32_t sizes[2] = {static_cast<uint32_t>(packed.size()),
-                             static_cast<uint32_t>(raw.size())};
+  const uint32_t sizes[2] = {static_cast<uint32_t>(packed.size()), static_cast<uint32_t>(raw.size())};
   writer->write(sizes, sizeof(sizes));
   writer->write(packed.data(), packed.size());
 }

@@ -43,8 +43,7 @@ ScalarType type_or_fail(const std::string& where, std::string_view name) {
   return t;
 }
 
-void parse_format(const std::string& where, const std::vector<std::string_view>& tokens,
-                  PlyHeader* header) {
+void parse_format(const std::string& where, const std::vector<std::string_view>& tokens, PlyHeader* header) {
   if (tokens.size() != 3) fail(where, "malformed format line");
   if (tokens[1] == "ascii")
     header->format = PlyFormat::kAscii;
@@ -56,8 +55,7 @@ void parse_format(const std::string& where, const std::vector<std::string_view>&
     fail(where, "unknown format " + quote(tokens[1]));
 }
 
-void parse_element(const std::string& where, const std::vector<std::string_view>& tokens,
-                   PlyHeader* header) {
+void parse_element(const std::string& where, const std::vector<std::string_view>& tokens, PlyHeader* header) {
   if (tokens.size() != 3) fail(where, "malformed element line (expected: element <name> <count>)");
   PlyElement element;
   element.name = std::string(tokens[1]);
@@ -69,8 +67,7 @@ void parse_element(const std::string& where, const std::vector<std::string_view>
   header->elements.push_back(std::move(element));
 }
 
-void parse_property(const std::string& where, const std::vector<std::string_view>& tokens,
-                    PlyHeader* header) {
+void parse_property(const std::string& where, const std::vector<std::string_view>& tokens, PlyHeader* header) {
   if (header->elements.empty()) fail(where, "property declared before any element");
   PlyElement& element = header->elements.back();
   if (element.properties.size() >= kMaxProperties) fail(where, "too many properties");
@@ -78,8 +75,7 @@ void parse_property(const std::string& where, const std::vector<std::string_view
   if (tokens.size() == 5 && tokens[1] == "list") {
     p.is_list = true;
     p.count_type = type_or_fail(where, tokens[2]);
-    if (p.count_type.kind == ScalarKind::kFloat)
-      fail(where, "list count type must be an integer type");
+    if (p.count_type.kind == ScalarKind::kFloat) fail(where, "list count type must be an integer type");
     p.type = type_or_fail(where, tokens[3]);
     p.name = std::string(tokens[4]);
   } else if (tokens.size() == 3) {

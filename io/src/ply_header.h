@@ -25,7 +25,7 @@ struct PlyElement {
   std::vector<PlyProperty> properties;
 
   bool has_lists() const;
-  size_t fixed_stride() const;  // bytes per item; only meaningful without list properties
+  size_t fixed_stride() const;                // bytes per item; only meaningful without list properties
   int find(std::string_view property) const;  // index, or -1
 };
 

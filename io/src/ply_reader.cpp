@@ -32,8 +32,7 @@ int scalar_property(const PlyElement& e, std::string_view a, std::string_view b 
 
 VertexFields vertex_fields(const std::string& path, const PlyElement& e) {
   VertexFields f{scalar_property(e, "x"), scalar_property(e, "y"), scalar_property(e, "z"),
-                 scalar_property(e, "intensity", "scalar_intensity"),
-                 scalar_property(e, "label", "scalar_label")};
+                 scalar_property(e, "intensity", "scalar_intensity"), scalar_property(e, "label", "scalar_label")};
   const int indices[3] = {f.x, f.y, f.z};
   for (int axis = 0; axis < 3; ++axis) {
     if (indices[axis] < 0) {
@@ -44,8 +43,8 @@ VertexFields vertex_fields(const std::string& path, const PlyElement& e) {
 }
 
 [[noreturn]] void truncated(const std::string& path, const PlyElement& e, size_t item) {
-  fail(path, "truncated: data ends inside element '" + e.name + "' item " + std::to_string(item) +
-                 " of " + std::to_string(e.count));
+  fail(path, "truncated: data ends inside element '" + e.name + "' item " + std::to_string(item) + " of " +
+                 std::to_string(e.count));
 }
 
 // Cursor over binary data; every access is bounds-checked because the header is untrusted.
@@ -57,8 +56,7 @@ struct Binary {
 };
 
 // Advances over one item, recording where each scalar property starts (when offsets != null).
-void walk_item(const std::string& path, const PlyElement& e, size_t item, Binary* in,
-               std::vector<size_t>* offsets) {
+void walk_item(const std::string& path, const PlyElement& e, size_t item, Binary* in, std::vector<size_t>* offsets) {
   for (size_t k = 0; k < e.properties.size(); ++k) {
     const PlyProperty& p = e.properties[k];
     if (!p.is_list) {
@@ -83,11 +81,10 @@ size_t fixed_bytes(const std::string& path, const PlyElement& e, const Binary& i
   const size_t stride = e.fixed_stride();
   const size_t available = in.size - in.pos;
   if (stride != 0 && e.count > available / stride) {
-    const std::string need = e.count > SIZE_MAX / stride
-                                 ? "more than any file can hold"
-                                 : std::to_string(e.count * stride) + " bytes of data";
-    fail(path, "truncated: header declares " + std::to_string(e.count) + " " + e.name + " items (" +
-                   need + ") but only " + std::to_string(available) + " bytes follow");
+    const std::string need = e.count > SIZE_MAX / stride ? "more than any file can hold"
+                                                         : std::to_string(e.count * stride) + " bytes of data";
+    fail(path, "truncated: header declares " + std::to_string(e.count) + " " + e.name + " items (" + need +
+                   ") but only " + std::to_string(available) + " bytes follow");
   }
   return e.count * stride;
 }
@@ -106,12 +103,10 @@ CloudData read_vertices_binary(const std::string& path, const PlyElement& e, Bin
   if (fixed) fixed_bytes(path, e, *in);  // up-front truncation check with the byte counts
   std::vector<size_t> offsets(e.properties.size(), 0);
   if (fixed) {
-    for (size_t k = 1; k < offsets.size(); ++k)
-      offsets[k] = offsets[k - 1] + e.properties[k - 1].type.size;
+    for (size_t k = 1; k < offsets.size(); ++k) offsets[k] = offsets[k - 1] + e.properties[k - 1].type.size;
   }
   const size_t stride = e.fixed_stride();
-  detail::CloudBuilder builder(std::min(e.count, (in->size - in->pos) / 3 + 1), f.intensity >= 0,
-                               f.label >= 0);
+  detail::CloudBuilder builder(std::min(e.count, (in->size - in->pos) / 3 + 1), f.intensity >= 0, f.label >= 0);
   for (size_t i = 0; i < e.count; ++i) {
     const size_t base = fixed ? in->pos + i * stride : 0;
     if (!fixed) walk_item(path, e, i, in, &offsets);
@@ -122,8 +117,7 @@ CloudData read_vertices_binary(const std::string& path, const PlyElement& e, Bin
     if (f.label >= 0 && !detail::to_label(value(f.label), e.properties[f.label].type, &label)) {
       fail(path, "vertex " + std::to_string(i) + ": label is not a valid uint32");
     }
-    builder.add(detail::to_float(value(f.x)), detail::to_float(value(f.y)),
-                detail::to_float(value(f.z)),
+    builder.add(detail::to_float(value(f.x)), detail::to_float(value(f.y)), detail::to_float(value(f.z)),
                 f.intensity >= 0 ? detail::to_float(value(f.intensity)) : 0.0f, label);
   }
   return builder.finish();
@@ -149,15 +143,14 @@ double ascii_number(const std::string& path, const PlyElement& e, size_t item, T
   if (!in->next(&token)) truncated(path, e, item);
   double v = 0.0;
   if (!detail::parse_double(token, &v)) {
-    fail(path, "element '" + e.name + "' item " + std::to_string(item) + ": " +
-                   detail::quote(token) + " is not a number");
+    fail(path,
+         "element '" + e.name + "' item " + std::to_string(item) + ": " + detail::quote(token) + " is not a number");
   }
   return v;
 }
 
 // Reads one ascii item; scalar values go to values[k], list properties are skipped.
-void ascii_item(const std::string& path, const PlyElement& e, size_t item, Tokens* in,
-                std::vector<double>* values) {
+void ascii_item(const std::string& path, const PlyElement& e, size_t item, Tokens* in, std::vector<double>* values) {
   for (size_t k = 0; k < e.properties.size(); ++k) {
     const double v = ascii_number(path, e, item, in);
     if (!e.properties[k].is_list) {
@@ -187,16 +180,14 @@ CloudData read_ascii(const std::string& path, const PlyHeader& h, std::string_vi
       continue;
     }
     const VertexFields f = vertex_fields(path, e);
-    detail::CloudBuilder builder(std::min(e.count, body.size() / 6 + 1), f.intensity >= 0,
-                                 f.label >= 0);
+    detail::CloudBuilder builder(std::min(e.count, body.size() / 6 + 1), f.intensity >= 0, f.label >= 0);
     for (size_t i = 0; i < e.count; ++i) {
       ascii_item(path, e, i, &in, &values);
       uint32_t label = 0;
       if (f.label >= 0 && !detail::to_label(values[f.label], e.properties[f.label].type, &label)) {
         fail(path, "vertex " + std::to_string(i) + ": label is not a valid uint32");
       }
-      builder.add(detail::to_float(values[f.x]), detail::to_float(values[f.y]),
-                  detail::to_float(values[f.z]),
+      builder.add(detail::to_float(values[f.x]), detail::to_float(values[f.y]), detail::to_float(values[f.z]),
                   f.intensity >= 0 ? detail::to_float(values[f.intensity]) : 0.0f, label);
     }
     return builder.finish();

@@ -51,7 +51,8 @@ class NewestScans {
   void add(const PointCloud& scan_sensor, const Pose3d& T_odom_sensor, double odometer_m) {
     if (config_.newest_m <= 0.0) return;
     scans_.push_back({odometer_m, transformed(voxel_filter(scan_sensor, grid_), T_odom_sensor)});
-    while (scans_.size() > kMaxScans || (!scans_.empty() && scans_.front().first < odometer_m - config_.newest_m - 1e-9))
+    while (scans_.size() > kMaxScans ||
+           (!scans_.empty() && scans_.front().first < odometer_m - config_.newest_m - 1e-9))
       scans_.pop_front();
   }
   PointCloud points() const {
@@ -86,7 +87,8 @@ std::string odometry_poses_path(const std::string& folder, const std::string& ex
   }
   const fs::path own = fs::path(folder) / "odom_poses.txt";
   if (fs::is_regular_file(own)) return own.string();
-  throw IoError(folder + ": no odom_poses.txt, and local clouds are built from the vehicle's odometry: give --odometry "
+  throw IoError(folder +
+                ": no odom_poses.txt, and local clouds are built from the vehicle's odometry: give --odometry "
                 "FILE (KITTI or TUM poses), or --cloud-poses reference to build them from the reference poses (a "
                 "comparison only: no vehicle has those)");
 }
@@ -115,8 +117,10 @@ void replay_sequence(const Sequence& sequence, const ReplayConfig& config,
     const Pose3d T_odom_sensor = T_odom_world * T_world_sensor;
     const PointCloud scan = sequence.scan(i).points;
     if (!config.single_scan) {  // a single scan is its own query: nothing accumulates
-      if (config.voxelize) voxels.add_scan(scan, T_odom_sensor);
-      else raw.add_scan(scan, T_odom_sensor);
+      if (config.voxelize)
+        voxels.add_scan(scan, T_odom_sensor);
+      else
+        raw.add_scan(scan, T_odom_sensor);
       newest.add(scan, T_odom_sensor, odometer_m);
     }
     if (progress) progress(++done, total);

@@ -110,8 +110,7 @@ inline bool to_label(double v, ScalarType t, uint32_t* label) {
 // so every reader applies the same policy.
 class CloudBuilder {
  public:
-  CloudBuilder(size_t expected_points, bool has_intensity, bool has_labels)
-      : has_labels_(has_labels) {
+  CloudBuilder(size_t expected_points, bool has_intensity, bool has_labels) : has_labels_(has_labels) {
     data_.has_intensity = has_intensity;
     data_.points.reserve(expected_points);
     if (has_labels) data_.labels.reserve(expected_points);

@@ -36,8 +36,7 @@ std::vector<std::string> list_files(const fs::path& dir, const std::string& ext)
 
 std::string stem(const std::string& path) { return fs::path(path).stem().string(); }
 
-std::string count_mismatch(size_t scans, size_t n, const std::string& what,
-                           const std::string& file) {
+std::string count_mismatch(size_t scans, size_t n, const std::string& what, const std::string& file) {
   return std::to_string(scans) + " scans but " + std::to_string(n) + " " + what + " in " + file;
 }
 
@@ -48,8 +47,7 @@ void check_labels_match(const std::string& folder, const std::vector<std::string
   }
   for (size_t i = 0; i < scans.size(); ++i) {
     if (stem(scans[i]) != stem(labels[i])) {
-      detail::fail(labels[i],
-                   "does not match scan " + scans[i] + " (labels are paired with scans by name)");
+      detail::fail(labels[i], "does not match scan " + scans[i] + " (labels are paired with scans by name)");
     }
   }
 }
@@ -71,7 +69,9 @@ Sequence Sequence::open(const std::string& folder, const SequenceOptions& option
   if (!fs::exists(folder, ec)) throw IoError("missing folder: " + folder);
   if (BagReader::is_bag(folder)) return open_bag(folder, options);
   if (options.bag.any())
-    detail::fail(folder, "is a folder of scans, not a ROS 2 bag: --points-topic, --pose-topic, --map-frame and --sensor-frame are for bags");
+    detail::fail(folder,
+                 "is a folder of scans, not a ROS 2 bag: --points-topic, --pose-topic, --map-frame and --sensor-frame "
+                 "are for bags");
   if (!fs::is_directory(folder, ec)) detail::fail(folder, "is not a folder");
   const fs::path root(folder);
 
@@ -96,13 +96,11 @@ Sequence Sequence::open(const std::string& folder, const SequenceOptions& option
   }
   const size_t n = seq.scan_paths_.size();
 
-  const std::string poses_path =
-      options.poses_path.empty() ? (root / "poses.txt").string() : options.poses_path;
+  const std::string poses_path = options.poses_path.empty() ? (root / "poses.txt").string() : options.poses_path;
   require_file(poses_path, "a sequence needs one pose per scan");
   Poses poses = read_poses(poses_path);
   if (poses.size() != n) {
-    detail::fail(
-        folder, count_mismatch(n, poses.size(), "poses", fs::path(poses_path).filename().string()));
+    detail::fail(folder, count_mismatch(n, poses.size(), "poses", fs::path(poses_path).filename().string()));
   }
   if (poses_in_camera_frame(seq.layout_, options.pose_frame)) {
     const std::string calib_path = (root / "calib.txt").string();
@@ -115,11 +113,9 @@ Sequence Sequence::open(const std::string& folder, const SequenceOptions& option
   seq.has_times_ = fs::exists(times_path, ec);
   if (seq.has_times_) {
     seq.times_ = read_times(times_path);
-    if (seq.times_.size() != n)
-      detail::fail(folder, count_mismatch(n, seq.times_.size(), "times", "times.txt"));
+    if (seq.times_.size() != n) detail::fail(folder, count_mismatch(n, seq.times_.size(), "times", "times.txt"));
   } else {
-    for (size_t i = 0; i < n; ++i)
-      seq.times_.push_back(static_cast<double>(i) * kDefaultScanPeriod);
+    for (size_t i = 0; i < n; ++i) seq.times_.push_back(static_cast<double>(i) * kDefaultScanPeriod);
   }
   return seq;
 }
@@ -127,8 +123,8 @@ Sequence Sequence::open(const std::string& folder, const SequenceOptions& option
 std::string Sequence::scan_path(size_t i) const {
   if (layout_ == SequenceLayout::kBag && i < bag_scans_.size()) return folder_ + "#" + std::to_string(i);
   if (i >= size()) {
-    throw std::out_of_range("Sequence: scan index " + std::to_string(i) + " out of range (" +
-                            std::to_string(size()) + " scans in " + folder_ + ")");
+    throw std::out_of_range("Sequence: scan index " + std::to_string(i) + " out of range (" + std::to_string(size()) +
+                            " scans in " + folder_ + ")");
   }
   return scan_paths_[i];
 }

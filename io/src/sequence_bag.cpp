@@ -71,8 +71,10 @@ void add_transforms(const BagReader& bag, const std::string& topic, bool fixed, 
       TfEdge& e = tree[tf.child_frame_id];
       e.parent = tf.header.frame_id;
       e.fixed = fixed;
-      if (fixed) e.T_parent_child = tf.T_parent_child;
-      else e.track.add(tf.header.stamp_s(), tf.T_parent_child);
+      if (fixed)
+        e.T_parent_child = tf.T_parent_child;
+      else
+        e.track.add(tf.header.stamp_s(), tf.T_parent_child);
     }
 }
 
@@ -125,8 +127,10 @@ std::string points_topic(const BagReader& bag, const BagOptions& o) {
   }
   const std::vector<std::string> clouds = topics_of_type(bag, {kPointCloud2});
   if (clouds.size() == 1) return clouds.front();
-  throw IoError(bag.path() + ": " + (clouds.empty() ? "no PointCloud2 topic" : "several PointCloud2 topics (" + joined(clouds) +
-                                                                                   "): choose one with --points-topic"));
+  throw IoError(bag.path() + ": " +
+                (clouds.empty()
+                     ? "no PointCloud2 topic"
+                     : "several PointCloud2 topics (" + joined(clouds) + "): choose one with --points-topic"));
 }
 
 struct Cloud {
@@ -181,10 +185,11 @@ PoseAt poses_from_topic(const BagReader& bag, const std::string& name, const TfT
     auto known = T_child_frame->find(c.frame_id);
     if (known == T_child_frame->end()) {
       std::string root_child, root_sensor;
-      const std::optional<Pose3d> a = to_root(statics, child, 0.0, &root_child), b = to_root(statics, c.frame_id, 0.0, &root_sensor);
+      const std::optional<Pose3d> a = to_root(statics, child, 0.0, &root_child),
+                                  b = to_root(statics, c.frame_id, 0.0, &root_sensor);
       if (!a || !b || root_child != root_sensor)
-        throw IoError(path + ": " + name + " gives poses of frame '" + child + "' and the clouds are in '" + c.frame_id +
-                      "', with no static transform between them in /tf_static");
+        throw IoError(path + ": " + name + " gives poses of frame '" + child + "' and the clouds are in '" +
+                      c.frame_id + "', with no static transform between them in /tf_static");
       known = T_child_frame->emplace(c.frame_id, a->inverse() * *b).first;
     }
     return *T_map_child * known->second;
@@ -194,7 +199,8 @@ PoseAt poses_from_topic(const BagReader& bag, const std::string& name, const TfT
 PoseAt poses_from_tf(const BagReader& bag, const BagOptions& o, const TfTree& tree, const std::string& cloud_frame,
                      std::string* note) {
   const std::string sensor = o.sensor_frame.empty() ? cloud_frame : o.sensor_frame;
-  if (!tree.count(sensor)) throw IoError(bag.path() + ": frame '" + sensor + "' is not in /tf or /tf_static (--sensor-frame)");
+  if (!tree.count(sensor))
+    throw IoError(bag.path() + ": frame '" + sensor + "' is not in /tf or /tf_static (--sensor-frame)");
   *note = "poses from /tf: '" + sensor + "' in '" + (o.map_frame.empty() ? "the root frame" : o.map_frame) + "'";
   auto shared = std::make_shared<TfTree>(tree);
   return [shared, sensor, map = o.map_frame, path = bag.path()](const Cloud& c) -> std::optional<Pose3d> {
@@ -235,7 +241,8 @@ Sequence Sequence::open_bag(const std::string& path, const SequenceOptions& opti
   std::string note;
   PoseAt pose_at;
   if (!options.poses_path.empty()) {
-    if (!o.pose_topic.empty() || !o.map_frame.empty()) throw IoError(path + ": give poses by one source: a file, --pose-topic or /tf");
+    if (!o.pose_topic.empty() || !o.map_frame.empty())
+      throw IoError(path + ": give poses by one source: a file, --pose-topic or /tf");
     pose_at = poses_from_file(options.poses_path, &note);
   } else if (!o.pose_topic.empty()) {
     pose_at = poses_from_topic(*bag, o.pose_topic, statics, &note);
@@ -243,8 +250,10 @@ Sequence Sequence::open_bag(const std::string& path, const SequenceOptions& opti
     pose_at = poses_from_tf(*bag, o, tree, clouds.front().frame_id, &note);
   } else {
     const std::vector<std::string> pose_topics = topics_of_type(*bag, {kOdometry, kPoseStamped});
-    if (pose_topics.size() == 1) pose_at = poses_from_topic(*bag, pose_topics.front(), statics, &note);
-    else if (pose_topics.empty() && !tree.empty()) pose_at = poses_from_tf(*bag, o, tree, clouds.front().frame_id, &note);
+    if (pose_topics.size() == 1)
+      pose_at = poses_from_topic(*bag, pose_topics.front(), statics, &note);
+    else if (pose_topics.empty() && !tree.empty())
+      pose_at = poses_from_tf(*bag, o, tree, clouds.front().frame_id, &note);
     else
       throw IoError(path + ": choose the poses: --pose-topic (Odometry or PoseStamped topics: " + joined(pose_topics) +
                     "), --map-frame for /tf, or a TUM file (--odometry)");
@@ -265,9 +274,10 @@ Sequence Sequence::open_bag(const std::string& path, const SequenceOptions& opti
     seq.times_.push_back(c.stamp);
   }
   if (seq.bag_scans_.empty())
-    throw IoError(path + ": none of the " + std::to_string(clouds.size()) + " clouds of " + topic + " lies within the poses' time span (" +
-                  note + ")");
-  seq.source_note_ = "bag " + path + ": " + std::to_string(seq.bag_scans_.size()) + " clouds of " + topic + ", " + note +
+    throw IoError(path + ": none of the " + std::to_string(clouds.size()) + " clouds of " + topic +
+                  " lies within the poses' time span (" + note + ")");
+  seq.source_note_ = "bag " + path + ": " + std::to_string(seq.bag_scans_.size()) + " clouds of " + topic + ", " +
+                     note +
                      (skipped ? "; " + std::to_string(skipped) + " clouds outside the poses' time span skipped" : "");
   seq.bag_ = std::move(bag);
   seq.bag_mutex_ = std::make_shared<std::mutex>();

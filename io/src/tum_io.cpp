@@ -40,13 +40,12 @@ void for_each_data_line(const std::string& path, OnLine on_line) {
 
 StampedPoses read_tum(const std::string& path) {
   StampedPoses out;
-  for_each_data_line(path,
-                     [&](const std::string& where, const std::vector<std::string_view>& tokens) {
-                       double v[8];
-                       detail::parse_finite_numbers(where, tokens, 8, v);
-                       out.times.push_back(v[0]);
-                       out.poses.push_back(pose_from_tum(where, v + 1));
-                     });
+  for_each_data_line(path, [&](const std::string& where, const std::vector<std::string_view>& tokens) {
+    double v[8];
+    detail::parse_finite_numbers(where, tokens, 8, v);
+    out.times.push_back(v[0]);
+    out.poses.push_back(pose_from_tum(where, v + 1));
+  });
   return out;
 }
 
@@ -71,12 +70,11 @@ void write_tum(const std::string& path, const StampedPoses& poses) {
 
 std::vector<double> read_times(const std::string& path) {
   std::vector<double> times;
-  for_each_data_line(path,
-                     [&](const std::string& where, const std::vector<std::string_view>& tokens) {
-                       double t = 0.0;
-                       detail::parse_finite_numbers(where, tokens, 1, &t);
-                       times.push_back(t);
-                     });
+  for_each_data_line(path, [&](const std::string& where, const std::vector<std::string_view>& tokens) {
+    double t = 0.0;
+    detail::parse_finite_numbers(where, tokens, 1, &t);
+    times.push_back(t);
+  });
   return times;
 }
 

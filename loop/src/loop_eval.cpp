@@ -30,8 +30,7 @@ std::vector<double> path_length(const Poses& truth, size_t first_frame, size_t l
   return odo;
 }
 
-bool is_revisit(size_t q, const Poses& truth, const std::vector<double>& odo, size_t first_frame,
-                const EvalConfig& c) {
+bool is_revisit(size_t q, const Poses& truth, const std::vector<double>& odo, size_t first_frame, const EvalConfig& c) {
   for (size_t m = first_frame; m < q && odo[q] - odo[m] > c.min_revisit_gap_m; ++m)
     if ((truth[q].translation() - truth[m].translation()).norm() <= c.revisit_radius_m) return true;
   return false;
@@ -78,8 +77,8 @@ std::vector<ThresholdPoint> threshold_curve(const std::vector<LoopClosure>& loop
 
 }  // namespace
 
-Evaluation evaluate(const std::vector<LoopClosure>& loops, const std::vector<size_t>& processed,
-                    const Poses& truth, size_t first_frame, const EvalConfig& c) {
+Evaluation evaluate(const std::vector<LoopClosure>& loops, const std::vector<size_t>& processed, const Poses& truth,
+                    size_t first_frame, const EvalConfig& c) {
   Evaluation e;
   size_t last = first_frame;
   for (size_t f : processed) last = std::max(last, f);
@@ -143,8 +142,10 @@ std::string to_json(const Evaluation& e, const EvalConfig& c) {
   j["true_loop_rotation_error_deg"] = {{"median", e.median_rotation_error_deg}, {"max", e.max_rotation_error_deg}};
   j["curve"] = nlohmann::json::array();
   for (const ThresholdPoint& p : e.curve)
-    j["curve"].push_back({{"max_translation_error_m", p.translation_m}, {"true_loops", p.true_loops},
-                          {"precision", p.precision}, {"detected_revisit_local_clouds", p.detected_revisit_clouds},
+    j["curve"].push_back({{"max_translation_error_m", p.translation_m},
+                          {"true_loops", p.true_loops},
+                          {"precision", p.precision},
+                          {"detected_revisit_local_clouds", p.detected_revisit_clouds},
                           {"recall", p.recall}});
   j["per_loop"] = nlohmann::json::array();
   for (const LoopScore& s : e.scores)
@@ -153,9 +154,12 @@ std::string to_json(const Evaluation& e, const EvalConfig& c) {
                              {"correct", s.correct}});
   j["revisits"] = nlohmann::json::array();
   for (const RevisitStretch& s : e.stretches) {
-    nlohmann::json r = {{"first_frame", s.first_frame}, {"last_frame", s.last_frame},
-                        {"length_m", s.length_m},       {"local_clouds", s.clouds},
-                        {"detected_local_clouds", s.detected_clouds}, {"detected", s.detected}};
+    nlohmann::json r = {{"first_frame", s.first_frame},
+                        {"last_frame", s.last_frame},
+                        {"length_m", s.length_m},
+                        {"local_clouds", s.clouds},
+                        {"detected_local_clouds", s.detected_clouds},
+                        {"detected", s.detected}};
     r["driven_before_first_detection_m"] = s.detected ? nlohmann::json(s.driven_before_detection_m) : nlohmann::json();
     j["revisits"].push_back(r);
   }
@@ -172,8 +176,7 @@ void print_summary(const Evaluation& e, const EvalConfig& c) {
                 e.median_rotation_error_deg, e.max_translation_error_m, e.max_rotation_error_deg);
   if (!e.curve.empty()) {
     std::printf("precision / recall by translation threshold (rotation <= %.1f deg):", c.max_rotation_error_deg);
-    for (const ThresholdPoint& p : e.curve)
-      std::printf(" %.2g m %.2f/%.2f", p.translation_m, p.precision, p.recall);
+    for (const ThresholdPoint& p : e.curve) std::printf(" %.2g m %.2f/%.2f", p.translation_m, p.precision, p.recall);
     std::printf("\n");
   }
   for (const RevisitStretch& s : e.stretches) {

@@ -30,10 +30,10 @@ struct LoopScore {
 // A run of consecutive revisit local clouds.
 struct RevisitStretch {
   size_t first_frame = 0, last_frame = 0;
-  size_t clouds = 0, detected_clouds = 0;   // revisit local clouds, those with a true loop
-  double length_m = 0;                      // true path length from first to last frame
+  size_t clouds = 0, detected_clouds = 0;  // revisit local clouds, those with a true loop
+  double length_m = 0;                     // true path length from first to last frame
   bool detected = false;
-  double driven_before_detection_m = 0;     // from first_frame to the first true loop
+  double driven_before_detection_m = 0;  // from first_frame to the first true loop
 };
 
 // Precision and recall when a loop counts as true within translation_m (and the rotation
@@ -59,8 +59,8 @@ struct Evaluation {
 // a local cloud was matched, increasing. Revisited places are searched among frames
 // first_frame.. (the frames the detector was fed). Throws std::invalid_argument when a frame
 // has no pose.
-Evaluation evaluate(const std::vector<LoopClosure>& loops, const std::vector<size_t>& processed,
-                    const Poses& truth, size_t first_frame, const EvalConfig& config);
+Evaluation evaluate(const std::vector<LoopClosure>& loops, const std::vector<size_t>& processed, const Poses& truth,
+                    size_t first_frame, const EvalConfig& config);
 
 std::string to_json(const Evaluation& e, const EvalConfig& config);
 void print_summary(const Evaluation& e, const EvalConfig& config);

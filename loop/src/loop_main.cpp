@@ -76,14 +76,19 @@ LoopDetectorConfig detector_config(const Options& o, const io::PipelineConfig& p
   if (o.min_confidence >= 0) c.min_confidence = static_cast<float>(o.min_confidence);
   if (o.max_drift_m >= 0) c.max_drift_m = o.max_drift_m, c.max_drift_fraction = 0.0;
   if (o.max_drift_deg >= 0) c.max_drift_deg = o.max_drift_deg;
-  if (o.history_m > 0) c.local_cloud_history_m = o.history_m;
-  else c.local_cloud_history_m = std::min(c.local_cloud_history_m, c.exclude_recent_distance_m);
-  std::printf("%s loop settings: a local cloud every %.1f m, recent past %.0f m, history %.0f m, >= %d inliers, "
-              "confidence >= %.2f, drift bound %.1f m%s / %.1f deg%s\n",
-              p.preset.c_str(), c.local_cloud_every_m, c.exclude_recent_distance_m, c.local_cloud_history_m,
-              c.min_inliers, c.min_confidence, c.max_drift_m,
-              c.max_drift_fraction > 0 ? (" or " + std::to_string(c.max_drift_fraction * 100).substr(0, 4) + " % of the distance driven").c_str() : "",
-              c.max_drift_deg, c.max_drift_m > 0 || c.max_drift_fraction > 0 ? "" : " (off)");
+  if (o.history_m > 0)
+    c.local_cloud_history_m = o.history_m;
+  else
+    c.local_cloud_history_m = std::min(c.local_cloud_history_m, c.exclude_recent_distance_m);
+  std::printf(
+      "%s loop settings: a local cloud every %.1f m, recent past %.0f m, history %.0f m, >= %d inliers, "
+      "confidence >= %.2f, drift bound %.1f m%s / %.1f deg%s\n",
+      p.preset.c_str(), c.local_cloud_every_m, c.exclude_recent_distance_m, c.local_cloud_history_m, c.min_inliers,
+      c.min_confidence, c.max_drift_m,
+      c.max_drift_fraction > 0
+          ? (" or " + std::to_string(c.max_drift_fraction * 100).substr(0, 4) + " % of the distance driven").c_str()
+          : "",
+      c.max_drift_deg, c.max_drift_m > 0 || c.max_drift_fraction > 0 ? "" : " (off)");
   return c;
 }
 
@@ -94,7 +99,10 @@ std::shared_ptr<const RandomForestMatcher> pick_matcher(const Options& o, LoopDe
   const bool l2 = o.l2 || (path.empty() && c.localizer.matcher.type == MatcherType::kL2);
   if (path.empty() && !l2) path = cli::shipped_model("default-rf.yml");
   if (l2 || path.empty()) {
-    if (!l2) std::fprintf(stderr, "segmatch-loop: no classifier (share/segmatch/models/default-rf.yml missing): using the L2 matcher\n");
+    if (!l2)
+      std::fprintf(
+          stderr,
+          "segmatch-loop: no classifier (share/segmatch/models/default-rf.yml missing): using the L2 matcher\n");
     c.localizer.matcher.type = MatcherType::kL2;
     c.localizer.matcher.use_shapes = false;
     return nullptr;
@@ -135,7 +143,8 @@ int run_main(Options o) {
   if (o.first < 0 || o.first > last || last >= n)
     throw std::invalid_argument("--first " + std::to_string(o.first) + " --last " + std::to_string(last) +
                                 " outside the sequence's frames 0.." + std::to_string(n - 1));
-  LoopDetectorConfig config = detector_config(o, pipeline_config(o, seq, static_cast<size_t>(o.first), static_cast<size_t>(last)));
+  LoopDetectorConfig config =
+      detector_config(o, pipeline_config(o, seq, static_cast<size_t>(o.first), static_cast<size_t>(last)));
   if (!o.revisit_gap_given) o.eval.min_revisit_gap_m = config.exclude_recent_distance_m;
   const auto classifier = pick_matcher(o, config);
   fs::create_directories(o.out);
@@ -202,12 +211,17 @@ int main(int argc, char** argv) {
   Options o;
   app.add_option("--input", o.input, "sequence folder (KITTI velodyne/ or PCD keyframes scans/)")->required();
   auto* config_opt = app.add_option("--config", o.config_path, "pipeline config JSON");
-  app.add_option("--preset", o.preset, "pipeline preset: auto (default: measured from the input), kitti-hdl64, sparse-keyframes, livox-keyframes")->excludes(config_opt);
+  app.add_option(
+         "--preset", o.preset,
+         "pipeline preset: auto (default: measured from the input), kitti-hdl64, sparse-keyframes, livox-keyframes")
+      ->excludes(config_opt);
   app.add_option("--classifier", o.classifier, "random forest model (default: maps/models/default-rf.yml if present)");
   app.add_flag("--l2", o.l2, "use the L2 feature-distance matcher instead of a random forest");
-  app.add_option("--odometry", o.odometry, "odometry poses (KITTI 12 numbers or TUM 8 columns) instead of the sequence's poses.txt");
+  app.add_option("--odometry", o.odometry,
+                 "odometry poses (KITTI 12 numbers or TUM 8 columns) instead of the sequence's poses.txt");
   app.add_option("--truth", o.truth,
-                 "ground-truth T_world_lidar poses, KITTI 12 numbers or TUM 8 columns (default: the sequence's poses.txt, also with --odometry)");
+                 "ground-truth T_world_lidar poses, KITTI 12 numbers or TUM 8 columns (default: the sequence's "
+                 "poses.txt, also with --odometry)");
   app.add_flag("-v,--verbose", o.verbose, "print what each local cloud did");
   app.add_flag("--no-eval", o.no_eval, "do not evaluate (the input has no ground truth)");
   app.add_flag("--optimize", o.optimize,
@@ -219,31 +233,37 @@ int main(int argc, char** argv) {
                  "--optimize: sideways and vertical sigma relative to along-track (default 1)");
   app.add_option("--gravity-sigma-deg", o.graph.gravity_sigma_deg,
                  "--optimize: hold roll and pitch to the odometry's within this sigma (default 0: off)");
-  app.add_option("--bias-stretch-m", o.graph.bias_stretch_m,
-                 "--optimize: estimate the odometry's yaw-rate and climb bias per stretch of this length (default 100; 0: off)");
+  app.add_option(
+      "--bias-stretch-m", o.graph.bias_stretch_m,
+      "--optimize: estimate the odometry's yaw-rate and climb bias per stretch of this length (default 100; 0: off)");
   app.add_flag("--scan-edges", o.scan_edges,
                "--optimize: register each scan onto the previous ones (ICP) and add the step as an edge: for odometry "
                "that errs in scale or yaw rate (wheels), which loops cannot correct");
-  app.add_option("--scan-sigma-m", o.graph.scan_sigma_m, "--scan-edges: translation sigma of a scan edge (default 0.01)");
+  app.add_option("--scan-sigma-m", o.graph.scan_sigma_m,
+                 "--scan-edges: translation sigma of a scan edge (default 0.01)");
   app.add_option("--scan-sigma-deg", o.graph.scan_sigma_deg, "--scan-edges: rotation sigma of a scan edge (default 1)");
   app.add_option("--scan-voxel-m", o.scan_match.voxel_m, "--scan-edges: scans thinned to this voxel (default 0.3)");
   app.add_option("--scan-target-scans", o.scan_match.target_scans,
                  "--scan-edges: a scan is registered onto this many previous ones (default 3)");
-  app.add_option("--scan-max-range-m", o.scan_match.max_range_m, "--scan-edges: points farther are not used (default 60)");
+  app.add_option("--scan-max-range-m", o.scan_match.max_range_m,
+                 "--scan-edges: points farther are not used (default 60)");
   app.add_option("--first", o.first, "first frame (default 0)");
   app.add_option("--last", o.last, "last frame (default: the sequence's last)");
   app.add_option("--every-m", o.every_m, "local cloud every this many metres (default 10; livox-keyframes: 1)");
   app.add_option("--radius-m", o.radius_m, "local cloud radius (default: the config's)");
   app.add_option("--exclude-m", o.exclude_m, "recent past excluded from matching, metres driven (default 150)");
   app.add_option("--exclude-s", o.exclude_s, "recent past excluded from matching, seconds (default 0)");
-  app.add_option("--history-m", o.history_m, "query local cloud holds at most this much driving (default min(120, exclude))");
+  app.add_option("--history-m", o.history_m,
+                 "query local cloud holds at most this much driving (default min(120, exclude))");
   app.add_option("--min-confidence", o.min_confidence, "minimum confidence of a loop, 0..1 (default 0.6)");
   app.add_option("--min-inliers", o.min_inliers, "minimum inlier matches of a loop (default 5)");
-  app.add_option("--max-drift-m", o.max_drift_m, "accept loops only within this of the odometry's own position (default 0: anywhere)")
+  app.add_option("--max-drift-m", o.max_drift_m,
+                 "accept loops only within this of the odometry's own position (default 0: anywhere)")
       ->check(CLI::Range(0.0, 1e6));
   app.add_option("--max-drift-deg", o.max_drift_deg, "with --max-drift-m: heading drift bound, degrees (default 5)")
       ->check(CLI::Range(0.0, 180.0));
-  app.add_option("--revisit-radius-m", o.eval.revisit_radius_m, "evaluation: a revisit is within this of an earlier pose");
+  app.add_option("--revisit-radius-m", o.eval.revisit_radius_m,
+                 "evaluation: a revisit is within this of an earlier pose");
   app.add_option("--revisit-gap-m", o.eval.min_revisit_gap_m,
                  "evaluation: ... driven at least this long before (default: --exclude-m)");
   cli::add_output_option(app, o.out, "output folder, required");

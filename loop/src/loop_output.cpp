@@ -113,7 +113,8 @@ void write_curve_png(const std::string& path, const std::vector<ThresholdPoint>&
   const double lx0 = std::log10(curve.front().translation_m), lx1 = std::log10(curve.back().translation_m);
   const auto px = [&](double t, double v) {
     const double fx = lx1 > lx0 ? (std::log10(t) - lx0) / (lx1 - lx0) : 0.5;
-    return cv::Point(left + static_cast<int>(fx * (w - left - right)), h - bottom - static_cast<int>(v * (h - top - bottom)));
+    return cv::Point(left + static_cast<int>(fx * (w - left - right)),
+                     h - bottom - static_cast<int>(v * (h - top - bottom)));
   };
   cv::Mat img(h, w, CV_8UC3, cv::Scalar(255, 255, 255));
   const cv::Scalar black(0, 0, 0), grey(200, 200, 200);
@@ -126,21 +127,22 @@ void write_curve_png(const std::string& path, const std::vector<ThresholdPoint>&
   for (const ThresholdPoint& p : curve) {
     const cv::Point base = px(p.translation_m, 0.0);
     cv::line(img, base, px(p.translation_m, 1.0), grey, 1);
-    cv::putText(img, cv::format("%g", p.translation_m), cv::Point(base.x - 12, h - bottom + 20), cv::FONT_HERSHEY_SIMPLEX,
-                0.45, black, 1, cv::LINE_AA);
+    cv::putText(img, cv::format("%g", p.translation_m), cv::Point(base.x - 12, h - bottom + 20),
+                cv::FONT_HERSHEY_SIMPLEX, 0.45, black, 1, cv::LINE_AA);
   }
   const cv::Scalar blue(200, 90, 30), green(40, 160, 40);
   for (size_t i = 0; i < curve.size(); ++i) {
-    const cv::Point pp = px(curve[i].translation_m, curve[i].precision), pr = px(curve[i].translation_m, curve[i].recall);
+    const cv::Point pp = px(curve[i].translation_m, curve[i].precision),
+                    pr = px(curve[i].translation_m, curve[i].recall);
     cv::circle(img, pp, 4, blue, cv::FILLED, cv::LINE_AA);
     cv::circle(img, pr, 4, green, cv::FILLED, cv::LINE_AA);
     if (i == 0) continue;
     cv::line(img, px(curve[i - 1].translation_m, curve[i - 1].precision), pp, blue, 2, cv::LINE_AA);
     cv::line(img, px(curve[i - 1].translation_m, curve[i - 1].recall), pr, green, 2, cv::LINE_AA);
   }
-  cv::putText(img, cv::format("precision (blue), recall over revisit local clouds (green); rotation <= %.1f deg",
-                              rotation_deg),
-              cv::Point(10, 25), cv::FONT_HERSHEY_SIMPLEX, 0.5, black, 1, cv::LINE_AA);
+  cv::putText(
+      img, cv::format("precision (blue), recall over revisit local clouds (green); rotation <= %.1f deg", rotation_deg),
+      cv::Point(10, 25), cv::FONT_HERSHEY_SIMPLEX, 0.5, black, 1, cv::LINE_AA);
   cv::putText(img, "translation error threshold (m, log scale)", cv::Point(w / 2 - 160, h - 15),
               cv::FONT_HERSHEY_SIMPLEX, 0.5, black, 1, cv::LINE_AA);
   if (!cv::imwrite(path, img)) throw std::runtime_error("cannot write " + path);

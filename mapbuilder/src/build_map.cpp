@@ -38,7 +38,8 @@ void check_output(const BuildOptions& o) {
 
 // A config file or a named preset as given; otherwise (or with --preset auto) the scans to be
 // used are measured and the parameters derived from them (io/auto_profile.h).
-io::PipelineConfig load_config(const BuildOptions& o, const io::Sequence& seq, size_t first, size_t last, size_t stride) {
+io::PipelineConfig load_config(const BuildOptions& o, const io::Sequence& seq, size_t first, size_t last,
+                               size_t stride) {
   if (!o.config_path.empty()) return io::read_pipeline_config(o.config_path);
   if (!o.preset.empty() && o.preset != "auto") {
     try {
@@ -80,7 +81,8 @@ std::optional<storage::ClassifierBlob> load_classifier(const BuildOptions& o) {
       return std::nullopt;
     }
   }
-  storage::ClassifierBlob blob{storage::kClassifierFormatRTreesYaml, io::read_file_bytes(path, "classifier model file")};
+  storage::ClassifierBlob blob{storage::kClassifierFormatRTreesYaml,
+                               io::read_file_bytes(path, "classifier model file")};
   try {
     RandomForestMatcher::load(blob.bytes);
   } catch (const std::exception& e) {
@@ -173,8 +175,10 @@ void check_segment_count(const MapBuilder& b, const io::PipelineConfig& config, 
                                              : "preset " + config.preset + " (the input not measured)";
   const std::string chose = io::describe_choice(config);
   char what[256];
-  std::snprintf(what, sizeof what, "the segmentation kept %zu segments (from %zu extracted views) over %.3f km driven, at least %.0f expected",
-                segments, b.extracted_segments(), km, floor);
+  std::snprintf(
+      what, sizeof what,
+      "the segmentation kept %zu segments (from %zu extracted views) over %.3f km driven, at least %.0f expected",
+      segments, b.extracted_segments(), km, floor);
   throw TooFewSegments(std::string(what) + "; no map written. " + sensor + ", " + chose +
                        ". Sparse scans need smaller clusters or fewer points per voxel: try another --preset, or "
                        "--print-config, edit voxel and segmenter, and pass the file with --config" +
@@ -196,8 +200,7 @@ int build_map(const BuildOptions& o, const volatile std::sig_atomic_t* stop_sign
   if (!seq.source_note().empty()) std::fprintf(stderr, "%s\n", seq.source_note().c_str());
   const ScanRange range = scan_range(o, seq);
   // Read before the recording is measured (seconds): a wrong model file fails at once.
-  const std::optional<storage::ClassifierBlob> classifier =
-      o.print_config ? std::nullopt : load_classifier(o);
+  const std::optional<storage::ClassifierBlob> classifier = o.print_config ? std::nullopt : load_classifier(o);
   const io::PipelineConfig config = load_config(o, seq, range.first, range.last, range.stride);
   MapBuilder builder(builder_config(config, o.map_every_m));
   if (o.print_config) {
@@ -221,7 +224,8 @@ int build_map(const BuildOptions& o, const volatile std::sig_atomic_t* stop_sign
       const size_t i = frames[k];
       const io::CloudData scan = seq.scan(i);
       const Pose3d& T_map_sensor = corrected ? corrected->T_map_sensor[k] : seq.poses()[i];
-      builder.add_scan(scan.points, T_map_sensor, static_cast<uint32_t>(i), scan.labels.empty() ? nullptr : &scan.labels);
+      builder.add_scan(scan.points, T_map_sensor, static_cast<uint32_t>(i),
+                       scan.labels.empty() ? nullptr : &scan.labels);
       trajectory.push_back({static_cast<uint32_t>(i), seq.times()[i], T_map_sensor});
       progress.advance();
     }
@@ -244,7 +248,8 @@ int build_map(const BuildOptions& o, const volatile std::sig_atomic_t* stop_sign
   writer.commit();
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   print_summary(builder, trajectory.size(), seconds, o.output);
-  if (config.surfaces.enabled) std::printf("surfaces:     %zu points (leaf %.2f m)\n", surfaces.size(), config.surfaces.leaf_m);
+  if (config.surfaces.enabled)
+    std::printf("surfaces:     %zu points (leaf %.2f m)\n", surfaces.size(), config.surfaces.leaf_m);
   return 0;
 }
 

@@ -28,14 +28,14 @@ struct BuildOptions {
   bool print_config = false;    // print the chosen config as JSON and build nothing
   std::string classifier_path;  // empty: the default model if present
   bool no_classifier = false;
-  std::string name;             // map name (empty: the output file's stem)
+  std::string name;                   // map name (empty: the output file's stem)
   std::optional<size_t> first, last;  // scan range, inclusive (default: the whole sequence)
-  size_t stride = 1;            // use every stride-th scan of the range
-  double map_every_m = 5.0;     // MapBuilderConfig::map_every_m
-  bool force = false;           // replace an existing map
-  std::string odometry_path;    // poses to use instead of the sequence's poses.txt (empty: those)
-  bool close_loops = false;     // detect loops and optimise the poses first (loop_poses.h)
-  bool scan_edges = false;      // ... with LiDAR registration edges too (posegraph/scan_edges.h)
+  size_t stride = 1;                  // use every stride-th scan of the range
+  double map_every_m = 5.0;           // MapBuilderConfig::map_every_m
+  bool force = false;                 // replace an existing map
+  std::string odometry_path;          // poses to use instead of the sequence's poses.txt (empty: those)
+  bool close_loops = false;           // detect loops and optimise the poses first (loop_poses.h)
+  bool scan_edges = false;            // ... with LiDAR registration edges too (posegraph/scan_edges.h)
   // A map with no segments, or fewer than this many per km driven, is refused (nothing is
   // written): the profile's parameters emptied it. 0 refuses only an empty map.
   double min_segments_per_km = 50.0;

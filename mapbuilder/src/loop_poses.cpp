@@ -36,7 +36,8 @@ LoopCorrectedPoses close_loops_first(const io::Sequence& seq, const std::vector<
   size_t downweighted = 0;
   double max_shift_m = 0;
   for (size_t i = 0; i < r.frames.size(); ++i)
-    max_shift_m = std::max(max_shift_m, (r.T_corrected_sensor[i].translation() - r.T_odom_sensor[i].translation()).norm());
+    max_shift_m =
+        std::max(max_shift_m, (r.T_corrected_sensor[i].translation() - r.T_odom_sensor[i].translation()).norm());
   nlohmann::json loops = nlohmann::json::array();
   if (r.last_solve)
     for (const posegraph::LoopReport& w : r.last_solve->loops) {

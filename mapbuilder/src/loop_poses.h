@@ -16,8 +16,8 @@
 namespace segmatch::mapbuilder {
 
 struct LoopCorrectedPoses {
-  Poses T_map_sensor;          // one per frame given, corrected
-  nlohmann::json summary;      // loops, down-weighted loops, correction size: stored in the map
+  Poses T_map_sensor;      // one per frame given, corrected
+  nlohmann::json summary;  // loops, down-weighted loops, correction size: stored in the map
 };
 
 // frames: the scans the map is built from (increasing). classifier: the model the map stores

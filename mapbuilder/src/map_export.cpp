@@ -97,7 +97,8 @@ void draw_top_down_png(const std::string& path, const Segments& segments,
     min_y = std::min(min_y, y), max_y = std::max(max_y, y);
   };
   for_each_point(segments, [&](const Point& p, Rgb) { grow(p.x, p.y); });
-  for (const storage::Keyframe& k : trajectory) grow(k.T_map_sensor.translation().x(), k.T_map_sensor.translation().y());
+  for (const storage::Keyframe& k : trajectory)
+    grow(k.T_map_sensor.translation().x(), k.T_map_sensor.translation().y());
   if (min_x > max_x) grow(0, 0), grow(10, 10);  // empty map: still a valid picture
   // At most ~1600 px on the long side, never finer than 10 cm per pixel.
   const double m_per_px = std::max(0.1, std::max(max_x - min_x, max_y - min_y) / 1600.0);

@@ -40,15 +40,17 @@ int main(int argc, char** argv) {
   CLI::App app{"Build a SegMatch segment map (one SQLite file) from a mapping traversal"};
   mapbuilder::BuildOptions o;
   size_t first = 0, last = 0;
-  app.add_option("-i,--input", o.input,
-                 "sequence folder: KITTI (velodyne/, poses.txt, calib.txt) or PCD keyframes; or a ROS 2 bag (.mcap, .db3, "
-                 "or a rosbag2 folder)")
+  app.add_option(
+         "-i,--input", o.input,
+         "sequence folder: KITTI (velodyne/, poses.txt, calib.txt) or PCD keyframes; or a ROS 2 bag (.mcap, .db3, "
+         "or a rosbag2 folder)")
       ->required();
   cli::add_bag_options(app, o.bag.points_topic, o.bag.pose_topic, o.bag.map_frame, o.bag.sensor_frame);
   auto* output = app.add_option("-o,--output", o.output, "map file to write (e.g. map.sqlite)");
   auto* config = app.add_option("--config", o.config_path, "pipeline config JSON (see io/pipeline_config.h)");
-  app.add_option("--preset", o.preset,
-                 "pipeline preset: auto (default: measured from the input), kitti-hdl64, sparse-keyframes or livox-keyframes")
+  app.add_option(
+         "--preset", o.preset,
+         "pipeline preset: auto (default: measured from the input), kitti-hdl64, sparse-keyframes or livox-keyframes")
       ->excludes(config);
   auto* print = app.add_flag("--print-config", o.print_config,
                              "print the chosen pipeline config as JSON (to reuse with --config) and build nothing");
@@ -62,8 +64,10 @@ int main(int argc, char** argv) {
   app.add_flag("--no-classifier", o.no_classifier, "store no classifier")->excludes(model);
   app.add_option("--name", o.name, "map name (default: the output file's stem)");
   app.add_flag("--force", o.force, "replace an existing map file");
-  app.add_option("--odometry", o.odometry_path, "poses (KITTI 12 numbers as poses.txt, or TUM 8 columns) to build from instead of poses.txt (a bag: TUM, "
-                 "matched by time)");
+  app.add_option(
+      "--odometry", o.odometry_path,
+      "poses (KITTI 12 numbers as poses.txt, or TUM 8 columns) to build from instead of poses.txt (a bag: TUM, "
+      "matched by time)");
   app.add_flag("--close-loops", o.close_loops,
                "the poses are a drifting odometry: detect loops and optimise the pose graph first, and build "
                "the map on the corrected poses");

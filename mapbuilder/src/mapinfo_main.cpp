@@ -31,8 +31,10 @@ void print_metadata(const storage::MapReader& map) {
   std::printf("created:        %s\n", m.created_utc.c_str());
   std::printf("tool version:   %s\n", m.tool_version.c_str());
   if (map.schema_version() < storage::kSchemaVersion)
-    std::printf("schema version: %d (older than this build's %d: readable; `segmatch-mapinfo --upgrade OLD NEW` "
-                "rewrites it, smaller)\n", map.schema_version(), storage::kSchemaVersion);
+    std::printf(
+        "schema version: %d (older than this build's %d: readable; `segmatch-mapinfo --upgrade OLD NEW` "
+        "rewrites it, smaller)\n",
+        map.schema_version(), storage::kSchemaVersion);
   else
     std::printf("schema version: %d\n", map.schema_version());
 }
@@ -47,8 +49,9 @@ void print_surfaces(const storage::MapReader& map) {
   } else if (map.schema_version() < 4) {
     std::printf("surfaces:       no surface layer (map written before schema 4; rebuild it to get one)\n");
   } else {
-    std::printf("surfaces:       no surface layer (built without one, or upgraded from a map written before schema 4; "
-                "rebuild the map from its traversal to get one)\n");
+    std::printf(
+        "surfaces:       no surface layer (built without one, or upgraded from a map written before schema 4; "
+        "rebuild the map from its traversal to get one)\n");
   }
 }
 
@@ -58,8 +61,9 @@ int upgrade(const std::string& old_path, const std::string& new_path, bool overw
               static_cast<double>(fs::file_size(old_path)) / 1e6, new_path.c_str(), storage::kSchemaVersion,
               static_cast<double>(fs::file_size(new_path)) / 1e6);
   if (!storage::MapReader::open(new_path).surfaces()) {
-    std::printf("the new map has no surface layer (the old map holds no scans to make one from): rebuild the map "
-                "from its traversal (segmatch-mapbuilder) to get one\n");
+    std::printf(
+        "the new map has no surface layer (the old map holds no scans to make one from): rebuild the map "
+        "from its traversal (segmatch-mapbuilder) to get one\n");
   }
   return 0;
 }
@@ -74,14 +78,14 @@ void print_stats(const storage::MapReader& map, const Segments& segments) {
   for (const Segment& seg : segments)
     for (const Point& p : seg.points) lo = lo.cwiseMin(p.xyz()), hi = hi.cwiseMax(p.xyz());
   if (lo.x() <= hi.x())
-    std::printf("extent:         x %.1f..%.1f  y %.1f..%.1f  z %.1f..%.1f m\n", lo.x(), hi.x(), lo.y(), hi.y(),
-                lo.z(), hi.z());
+    std::printf("extent:         x %.1f..%.1f  y %.1f..%.1f  z %.1f..%.1f m\n", lo.x(), hi.x(), lo.y(), hi.y(), lo.z(),
+                hi.z());
   else
     std::printf("extent:         (no points)\n");
   const auto classifier = map.classifier();
-  std::printf("classifier:     %s\n",
-              classifier ? (classifier->format + ", " + std::to_string(classifier->bytes.size()) + " bytes").c_str()
-                         : "none");
+  std::printf(
+      "classifier:     %s\n",
+      classifier ? (classifier->format + ", " + std::to_string(classifier->bytes.size()) + " bytes").c_str() : "none");
   print_surfaces(map);
   std::printf("file size:      %.2f MB\n", static_cast<double>(fs::file_size(map.path())) / 1e6);
 }

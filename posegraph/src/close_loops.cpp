@@ -1,6 +1,5 @@
 #include "segmatch/posegraph/close_loops.h"
 
-
 #include <algorithm>
 #include <cstdio>
 #include <stdexcept>
@@ -25,18 +24,20 @@ void print_step(size_t frame, const LoopStep& step) {
 void print_loop(const LoopClosure& l, const OptimizationResult* solve) {
   std::fprintf(stderr, "\nloop: frame %zu -> %zu, %zu inliers, confidence %.2f, |t| %.2f m", l.query_frame,
                l.match_frame, l.inliers, l.confidence, l.T_query_match.translation().norm());
-  if (solve)
-    std::fprintf(stderr, "; optimised in %.0f ms, weight %.2f", solve->solve_ms, solve->loops.back().weight);
+  if (solve) std::fprintf(stderr, "; optimised in %.0f ms, weight %.2f", solve->solve_ms, solve->loops.back().weight);
   std::fprintf(stderr, "\n");
 }
 
 // Moves the detector's map with the keyframes it was seen from.
 void correct_map(const LoopDetector& detector, ClosedLoops& r, const SegmentMapConfig& merge) {
   r.map_odom = detector.map_segments();
-  r.map_corrected = correct_segment_map(r.map_odom, detector.map_segment_frames(), [&](size_t frame) {
-    const size_t n = r.node_of(frame);
-    return Pose3d(r.T_corrected_sensor[n] * r.T_odom_sensor[n].inverse());
-  }, merge);
+  r.map_corrected = correct_segment_map(
+      r.map_odom, detector.map_segment_frames(),
+      [&](size_t frame) {
+        const size_t n = r.node_of(frame);
+        return Pose3d(r.T_corrected_sensor[n] * r.T_odom_sensor[n].inverse());
+      },
+      merge);
 }
 
 void add_scan_edge(ScanMatcher& matcher, const PointCloud& scan, const Pose3d& T_odom_sensor, size_t node,

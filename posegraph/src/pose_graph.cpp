@@ -113,9 +113,11 @@ LoopReport report_edge(size_t index, const Edge& e, const Poses& T, const PoseGr
 }  // namespace
 
 void PoseGraphConfig::validate() const {
-  require(odometry_sigma_fraction >= 0 && std::isfinite(odometry_sigma_fraction), "odometry_sigma_fraction must be >= 0");
+  require(odometry_sigma_fraction >= 0 && std::isfinite(odometry_sigma_fraction),
+          "odometry_sigma_fraction must be >= 0");
   require(odometry_min_sigma_m > 0 && std::isfinite(odometry_min_sigma_m), "odometry_min_sigma_m must be > 0");
-  require(odometry_sigma_deg_per_m >= 0 && std::isfinite(odometry_sigma_deg_per_m), "odometry_sigma_deg_per_m must be >= 0");
+  require(odometry_sigma_deg_per_m >= 0 && std::isfinite(odometry_sigma_deg_per_m),
+          "odometry_sigma_deg_per_m must be >= 0");
   require(odometry_min_sigma_deg > 0 && std::isfinite(odometry_min_sigma_deg), "odometry_min_sigma_deg must be > 0");
   require(loop_sigma_m > 0 && std::isfinite(loop_sigma_m), "loop_sigma_m must be > 0");
   require(loop_sigma_deg > 0 && std::isfinite(loop_sigma_deg), "loop_sigma_deg must be > 0");
@@ -176,7 +178,8 @@ PoseGraph odometry_graph(const Poses& T_odom_node, const PoseGraphConfig& c) {
   PoseGraph g;
   g.T_world_node = T_odom_node;
   for (const Pose3d& T : T_odom_node) g.up_in_node.push_back(up_in(T));
-  for (size_t i = 1; i < T_odom_node.size(); ++i) g.odometry.push_back(odometry_edge(i - 1, T_odom_node[i - 1], T_odom_node[i], c));
+  for (size_t i = 1; i < T_odom_node.size(); ++i)
+    g.odometry.push_back(odometry_edge(i - 1, T_odom_node[i - 1], T_odom_node[i], c));
   return g;
 }
 
@@ -241,7 +244,8 @@ OptimizationResult optimize(const PoseGraph& graph, const PoseGraphConfig& c) {
   ceres::Solve(options, &problem, &summary);
 
   result.T_world_node = nodes.poses();
-  for (size_t i = 0; i < graph.loops.size(); ++i) result.loops.push_back(report_edge(i, graph.loops[i], result.T_world_node, c));
+  for (size_t i = 0; i < graph.loops.size(); ++i)
+    result.loops.push_back(report_edge(i, graph.loops[i], result.T_world_node, c));
   for (size_t i = 0; i < graph.scans.size(); ++i)
     result.scans_downweighted += report_edge(i, graph.scans[i], result.T_world_node, c).downweighted;
   result.initial_cost = summary.initial_cost;
@@ -272,8 +276,7 @@ Poses IncrementalPoseGraph::estimate() const {
   return out;
 }
 
-void IncrementalPoseGraph::add_loop_edge(size_t query, size_t match, const Pose3d& T_query_match,
-                                         double confidence) {
+void IncrementalPoseGraph::add_loop_edge(size_t query, size_t match, const Pose3d& T_query_match, double confidence) {
   graph_.loops.push_back(loop_edge(query, match, T_query_match, confidence, config_));
 }
 

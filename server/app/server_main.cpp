@@ -31,7 +31,8 @@ std::string read_token(const std::string& path) {
   // Group access is how service managers hand secrets over (a Kubernetes secret with fsGroup,
   // systemd credentials); access for everyone is a mistake.
   if (::stat(path.c_str(), &st) == 0 && (st.st_mode & 007))
-    server::log_to_stderr(server::LogLevel::kWarning, "token file " + path + " is readable by every user (chmod 600 it)");
+    server::log_to_stderr(server::LogLevel::kWarning,
+                          "token file " + path + " is readable by every user (chmod 600 it)");
   return token;
 }
 
@@ -65,7 +66,8 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 // SIGHUP: the map file is opened and checked whole before it replaces the served one; on any
 // failure the old map keeps serving. Replace the file by renaming a new one over it (as
 // segmatch-mapbuilder writes maps): the old map's lazy point reads keep the old file open.
-void reload(server::Server& served, const std::string& path, const server::MapLoadOptions& load, const std::string& points) {
+void reload(server::Server& served, const std::string& path, const server::MapLoadOptions& load,
+            const std::string& points) {
   info("SIGHUP: reloading " + path + " ...");
   const auto t0 = std::chrono::steady_clock::now();
   try {
@@ -81,8 +83,8 @@ void reload(server::Server& served, const std::string& path, const server::MapLo
 }
 
 // --http-port: the operator's page (console.h) on the server's token and metrics; null without.
-std::unique_ptr<server::Console> start_console(int http_port, server::ConsoleConfig console, const server::ServerConfig& config,
-                                               const server::Server& served) {
+std::unique_ptr<server::Console> start_console(int http_port, server::ConsoleConfig console,
+                                               const server::ServerConfig& config, const server::Server& served) {
   if (http_port < 0) return nullptr;
   console.port = static_cast<uint16_t>(http_port);
   console.token = config.token;
@@ -106,33 +108,44 @@ int main(int argc, char** argv) {
   app.add_option("--port", config.port, "TCP port; 0 = ephemeral (the chosen port is printed)")->capture_default_str();
   app.add_option("--workers", config.workers, "localization threads (default: number of cores)");
   app.add_option("--token-file", token_file, "file holding the shared-secret token clients must send first");
-  app.add_option("--max-frame-mb", max_frame_mb, "largest accepted frame payload (MiB)")->capture_default_str()->check(CLI::Range(0.001, 4095.0));
-  app.add_option("--read-timeout-s", config.read_timeout_s, "drop a connection idle or stalled this long")->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--max-frame-mb", max_frame_mb, "largest accepted frame payload (MiB)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.001, 4095.0));
+  app.add_option("--read-timeout-s", config.read_timeout_s, "drop a connection idle or stalled this long")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
   app.add_option("--request-timeout-s", config.request_timeout_s,
                  "answer ERROR REQUEST_TIMEOUT to a localization not done this long after it arrived, and free its "
                  "worker (0 = no limit)")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1e6));
-  app.add_option("--max-connections", config.max_connections, "connections served at once")->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--max-connections", config.max_connections, "connections served at once")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
   int metrics_port = -1;
   std::string metrics_listen = "127.0.0.1";
   app.add_option("--metrics-port", metrics_port,
                  "serve Prometheus metrics over HTTP on this port (GET /metrics; 0: a free port, printed)")
       ->check(CLI::Range(0, 65535));
-  app.add_option("--metrics-listen", metrics_listen, "address of the metrics endpoint (default loopback)")->capture_default_str();
+  app.add_option("--metrics-listen", metrics_listen, "address of the metrics endpoint (default loopback)")
+      ->capture_default_str();
   int http_port = -1;
   server::ConsoleConfig console;
   app.add_option("--http-port", http_port,
                  "serve the operator's page and its JSON API (docs/console.md) over HTTP on this port, with the "
                  "token if there is one, and GET /metrics (0: a free port, printed); may equal --metrics-port")
       ->check(CLI::Range(0, 65535));
-  app.add_option("--http-listen", console.listen_address, "address of the operator's page (default loopback)")->capture_default_str();
-  app.add_option("--http-threads", console.threads, "HTTP threads of the operator's page")->capture_default_str()->check(CLI::Range(1, 64));
+  app.add_option("--http-listen", console.listen_address, "address of the operator's page (default loopback)")
+      ->capture_default_str();
+  app.add_option("--http-threads", console.threads, "HTTP threads of the operator's page")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 64));
   std::string log_requests = "on";  // on|off rather than a flag: a service file says which
   app.add_option("--log-requests", log_requests, "one log line per request: on or off")
       ->capture_default_str()
       ->check(CLI::IsMember({"on", "off"}));
-  app.add_option("--stats-interval-s", config.stats_interval_s, "counters line period (0 = none)")->capture_default_str();
+  app.add_option("--stats-interval-s", config.stats_interval_s, "counters line period (0 = none)")
+      ->capture_default_str();
   std::string map_points = "lazy";
   double point_cache_mb = 32.0;
   app.add_option("--map-points", map_points,
@@ -170,7 +183,8 @@ int main(int argc, char** argv) {
     server::Server server(config, map);
     server.start();
     std::cout << "listening on " << server.address() << std::endl;
-    std::unique_ptr<server::Console> page = start_console(http_port, console, config, server);  // reset before the server stops
+    std::unique_ptr<server::Console> page =
+        start_console(http_port, console, config, server);  // reset before the server stops
     int signal = 0;
     while (sigwait(&signals, &signal) == 0 && signal == SIGHUP) reload(server, map_path, load, map_points);
     info("signal " + std::to_string(signal) + ": stopping (finishing in-flight requests)");

@@ -43,7 +43,7 @@ class GaugeHeld {
 
 struct Handled {
   std::vector<uint8_t> reply;
-  std::string detail;       // for the log line
+  std::string detail;  // for the log line
   std::string status = "ok";
   bool is_localize = false, localized = false, error = false, timed_out = false;
   uint16_t error_code = 0;  // with error
@@ -151,13 +151,16 @@ Answer answer_of(api::LocalizeReply& reply, const Asked& asked) {
   a.refusal = api::to_string(reply.refusal);
   a.refusal_code = static_cast<uint16_t>(reply.refusal);
   a.reason = reply.reason;
-  if (reply.status != api::LocalizeStatus::kNotLocalized) set_pose(a, reply.T_map_local, asked);
-  else if (asked.has_prior) set_pose(a, asked.T_map_local_prior, asked), a.pose_from_prior = true;
+  if (reply.status != api::LocalizeStatus::kNotLocalized)
+    set_pose(a, reply.T_map_local, asked);
+  else if (asked.has_prior)
+    set_pose(a, asked.T_map_local_prior, asked), a.pose_from_prior = true;
   if (reply.detail && reply.detail->estimate) {
     const api::ReplyDetail::Estimate& e = *reply.detail->estimate;
     a.method = api::to_string(static_cast<api::ReplyMethod>(e.method));
     const Eigen::Matrix<double, 6, 6> c = api::covariance_matrix(e.covariance_upper);  // rotation, then position
-    if (c(3, 3) > 0.0 && c(4, 4) > 0.0) a.has_covariance = true, a.cov_xx_m2 = c(3, 3), a.cov_xy_m2 = c(3, 4), a.cov_yy_m2 = c(4, 4);
+    if (c(3, 3) > 0.0 && c(4, 4) > 0.0)
+      a.has_covariance = true, a.cov_xx_m2 = c(3, 3), a.cov_xy_m2 = c(3, 4), a.cov_yy_m2 = c(4, 4);
   }
   if (!asked.refusal_code) reply.refusal = api::RefusalCode::kNone;
   if (!asked.detail) reply.detail.reset();
@@ -247,10 +250,8 @@ Handled handle_frame(Server::State& s, const api::Header& header, const std::vec
       h.reply = api::encode(info_of(*s.current_map()));
       return h;
     }
-    case MessageType::kLocalize:
-      return handle_localize<api::LocalizeRequest>(s, payload, start);
-    case MessageType::kLocalizeSegments:
-      return handle_localize<api::LocalizeSegmentsRequest>(s, payload, start);
+    case MessageType::kLocalize: return handle_localize<api::LocalizeRequest>(s, payload, start);
+    case MessageType::kLocalizeSegments: return handle_localize<api::LocalizeSegmentsRequest>(s, payload, start);
     default:
       return error_reply(ErrorCode::kUnexpectedMessage, std::string(api::to_string(type)) + " is not a request", false);
   }
@@ -326,7 +327,8 @@ void serve_connection(Server::State& s, api::Socket socket, const std::string& p
     uint8_t header_bytes[api::kHeaderBytes];
     api::IoResult r = api::read_exact(socket.fd(), header_bytes, sizeof(header_bytes),
                                       api::deadline_after(s.config.read_timeout_s), &s.stopping);
-    if (r == api::IoResult::kTimeout) s.log(peer + " closed: idle for " + std::to_string(s.config.read_timeout_s) + " s");
+    if (r == api::IoResult::kTimeout)
+      s.log(peer + " closed: idle for " + std::to_string(s.config.read_timeout_s) + " s");
     if (r != api::IoResult::kOk) return;
     const auto start = std::chrono::steady_clock::now();
     api::Header header;

@@ -58,8 +58,10 @@ void respond(mg_connection* c, int status, const char* content_type, const std::
 
 int fail(mg_connection* c, int status, const std::string& why, const char* extra_name = nullptr,
          const char* extra_value = nullptr) {
-  respond(c, status, "application/json", nlohmann::json{{"error", why}, {"status", status}}.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace),
-          extra_name, extra_value);
+  respond(
+      c, status, "application/json",
+      nlohmann::json{{"error", why}, {"status", status}}.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace),
+      extra_name, extra_value);
   return status;
 }
 
@@ -89,8 +91,10 @@ std::string url_encoded(const std::string& text) {
   static const char* kHex = "0123456789ABCDEF";
   std::string out;
   for (unsigned char ch : text) {
-    if (std::isalnum(ch) || ch == '-' || ch == '.' || ch == '_' || ch == '~') out += static_cast<char>(ch);
-    else out += {'%', kHex[ch >> 4], kHex[ch & 15]};
+    if (std::isalnum(ch) || ch == '-' || ch == '.' || ch == '_' || ch == '~')
+      out += static_cast<char>(ch);
+    else
+      out += {'%', kHex[ch >> 4], kHex[ch & 15]};
   }
   return out;
 }
@@ -102,7 +106,8 @@ std::string url_encoded(const std::string& text) {
 std::string asset_body(const Impl& impl, const ConsoleAsset& asset, const mg_request_info& ri) {
   std::string body(reinterpret_cast<const char*>(asset.data), asset.size);
   const std::string placeholder = "{{token_query}}";
-  const bool in_query = !impl.config.token.empty() && same_token(query_value(ri.query_string, "token"), impl.config.token);
+  const bool in_query =
+      !impl.config.token.empty() && same_token(query_value(ri.query_string, "token"), impl.config.token);
   const std::string query = in_query ? "?token=" + url_encoded(impl.config.token) : "";
   for (size_t at = body.find(placeholder); at != std::string::npos; at = body.find(placeholder, at + query.size()))
     body.replace(at, placeholder.size(), query);
@@ -120,13 +125,15 @@ int serve_tile(Impl& impl, mg_connection* c, const std::string& rest) {
   const int64_t limit = int64_t{1} << (*z + 12);
   const std::optional<int64_t> x = parse_int(rest.substr(a + 1, b - a - 1), limit);
   const std::optional<int64_t> y = parse_int(rest.substr(b + 1), limit);
-  if (!x || !y) return fail(c, 400, "tile x and y must be integers within +-" + std::to_string(limit) + " at this level");
+  if (!x || !y)
+    return fail(c, 400, "tile x and y must be integers within +-" + std::to_string(limit) + " at this level");
   return ok_json(c, impl.tiles.tile(impl.server.map(), static_cast<int>(*z), *x, *y));
 }
 
 int serve_answers(Impl& impl, mg_connection* c, const mg_request_info& ri) {
   const std::string since_text = query_value(ri.query_string, "since"), max_text = query_value(ri.query_string, "max");
-  const std::optional<uint64_t> since = since_text.empty() ? std::optional<uint64_t>(0) : parse_count(since_text, UINT64_MAX / 2);
+  const std::optional<uint64_t> since =
+      since_text.empty() ? std::optional<uint64_t>(0) : parse_count(since_text, UINT64_MAX / 2);
   if (!since) return fail(c, 400, "since must be a cursor (a non-negative integer) from a previous answer");
   const uint64_t cap = impl.config.max_answers_per_reply;
   const std::optional<uint64_t> max = max_text.empty() ? std::optional<uint64_t>(cap) : parse_count(max_text, cap);
@@ -138,7 +145,8 @@ int route(Impl& impl, mg_connection* c, const mg_request_info& ri) {
   const std::string path = ri.local_uri ? ri.local_uri : "";
   if (path == "/api/map") return ok_json(c, map_json(*impl.server.map()));
   if (path == "/api/stats")
-    return ok_json(c, stats_json(impl.server, std::chrono::duration<double>(std::chrono::steady_clock::now() - impl.start).count()));
+    return ok_json(c, stats_json(impl.server,
+                                 std::chrono::duration<double>(std::chrono::steady_clock::now() - impl.start).count()));
   if (path == "/api/answers") return serve_answers(impl, c, ri);
   const std::string tiles = "/api/tiles/";
   if (path.compare(0, tiles.size(), tiles) == 0) return serve_tile(impl, c, path.substr(tiles.size()));
@@ -181,7 +189,8 @@ int keep_log(const mg_connection* c, const char* message) {
 
 void check(const ConsoleConfig& c) {
   if (c.threads < 1 || c.threads > 64) throw std::invalid_argument("console threads must be 1..64");
-  if (c.request_timeout_ms < 1 || c.keep_alive_timeout_ms < 0) throw std::invalid_argument("console timeouts must be > 0");
+  if (c.request_timeout_ms < 1 || c.keep_alive_timeout_ms < 0)
+    throw std::invalid_argument("console timeouts must be > 0");
   if (c.max_request_bytes < 1024) throw std::invalid_argument("console max_request_bytes must be >= 1024");
   if (c.max_answers_per_reply < 1 || c.tile_cache_entries < 1)
     throw std::invalid_argument("console max_answers_per_reply and tile_cache_entries must be >= 1");
@@ -193,12 +202,24 @@ Console::Console(const ConsoleConfig& config, const Server& server) : impl_(std:
   check(config);
   mg_init_library(0);
   const bool v6 = config.listen_address.find(':') != std::string::npos;
-  const std::string bind = (v6 ? "[" + config.listen_address + "]" : config.listen_address) + ":" + std::to_string(config.port);
+  const std::string bind =
+      (v6 ? "[" + config.listen_address + "]" : config.listen_address) + ":" + std::to_string(config.port);
   const std::string threads = std::to_string(config.threads), request_ms = std::to_string(config.request_timeout_ms),
-                    keep_ms = std::to_string(config.keep_alive_timeout_ms), max_bytes = std::to_string(config.max_request_bytes);
-  const char* options[] = {"listening_ports", bind.c_str(), "num_threads", threads.c_str(), "request_timeout_ms", request_ms.c_str(),
-                           "keep_alive_timeout_ms", keep_ms.c_str(), "enable_keep_alive", "yes", "max_request_size",
-                           max_bytes.c_str(), nullptr};
+                    keep_ms = std::to_string(config.keep_alive_timeout_ms),
+                    max_bytes = std::to_string(config.max_request_bytes);
+  const char* options[] = {"listening_ports",
+                           bind.c_str(),
+                           "num_threads",
+                           threads.c_str(),
+                           "request_timeout_ms",
+                           request_ms.c_str(),
+                           "keep_alive_timeout_ms",
+                           keep_ms.c_str(),
+                           "enable_keep_alive",
+                           "yes",
+                           "max_request_size",
+                           max_bytes.c_str(),
+                           nullptr};
   mg_callbacks callbacks{};
   callbacks.log_message = keep_log;
   impl_->context = mg_start(&callbacks, impl_.get(), options);

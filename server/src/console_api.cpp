@@ -31,9 +31,17 @@ json trajectory_json(const std::vector<Eigen::Vector3d>& trajectory) {
 }
 
 json answer_json(const Answer& a) {
-  json j = {{"cursor", a.cursor},   {"time", a.unix_time_s}, {"peer", a.peer},     {"type", a.type},
-            {"request_id", a.request_id}, {"status", a.status}, {"refusal", a.refusal}, {"refusal_code", a.refusal_code},
-            {"reason", a.reason}, {"method", a.method}, {"latency_ms", std::round(a.latency_ms * 10) / 10}};
+  json j = {{"cursor", a.cursor},
+            {"time", a.unix_time_s},
+            {"peer", a.peer},
+            {"type", a.type},
+            {"request_id", a.request_id},
+            {"status", a.status},
+            {"refusal", a.refusal},
+            {"refusal_code", a.refusal_code},
+            {"reason", a.reason},
+            {"method", a.method},
+            {"latency_ms", std::round(a.latency_ms * 10) / 10}};
   if (a.status == "error") j["error_code"] = a.error_code;
   if (a.has_pose) j["pose"] = {{"x", a.x_m}, {"y", a.y_m}, {"yaw", a.yaw_rad}, {"from_prior", a.pose_from_prior}};
   if (a.has_covariance) j["covariance_xy"] = {a.cov_xx_m2, a.cov_xy_m2, a.cov_yy_m2};
@@ -72,17 +80,22 @@ std::string stats_json(const Server& server, double uptime_s) {
   for (const auto& [code, n] : r.errors) errors[std::to_string(code)] = n;
   json j;
   j["uptime_s"] = uptime_s;
-  j["counters"] = {{"frames_received", c.frames_received}, {"requests", c.requests},
-                   {"localize_requests", c.localize_requests}, {"localized", c.localized},
-                   {"errors", c.errors}, {"timed_out", c.timed_out},
-                   {"connections", c.connections}, {"refused_connections", c.refused_connections}};
-  j["localization"] = {{"answered", r.answered},
-                       {"by_type_status", r.by_type_status},
-                       {"refusals", r.refusals},
-                       {"errors", errors},
-                       {"rate_per_s", r.rate_per_s},
-                       {"rate_window_s", r.rate_window_s},
-                       {"latency_ms", {{"p50", r.p50_ms}, {"p90", r.p90_ms}, {"p99", r.p99_ms}, {"samples", r.latency_samples}}}};
+  j["counters"] = {{"frames_received", c.frames_received},
+                   {"requests", c.requests},
+                   {"localize_requests", c.localize_requests},
+                   {"localized", c.localized},
+                   {"errors", c.errors},
+                   {"timed_out", c.timed_out},
+                   {"connections", c.connections},
+                   {"refused_connections", c.refused_connections}};
+  j["localization"] = {
+      {"answered", r.answered},
+      {"by_type_status", r.by_type_status},
+      {"refusals", r.refusals},
+      {"errors", errors},
+      {"rate_per_s", r.rate_per_s},
+      {"rate_window_s", r.rate_window_s},
+      {"latency_ms", {{"p50", r.p50_ms}, {"p90", r.p90_ms}, {"p99", r.p99_ms}, {"samples", r.latency_samples}}}};
   return j.dump();
 }
 
@@ -92,7 +105,8 @@ std::string answers_json(const Recent& recent, uint64_t since, size_t max_answer
   json list = json::array();
   for (const Answer& a : answers) list.push_back(answer_json(a));
   const double now = std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
-  return json{{"cursor", next}, {"missed", missed}, {"capacity", recent.capacity()}, {"now", now}, {"answers", list}}.dump();
+  return json{{"cursor", next}, {"missed", missed}, {"capacity", recent.capacity()}, {"now", now}, {"answers", list}}
+      .dump();
 }
 
 std::string query_value(const char* query_string, const char* name) {

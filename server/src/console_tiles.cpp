@@ -54,7 +54,8 @@ std::string TileCache::build(const LoadedMap& map, int z, int64_t x, int64_t y) 
   std::string out;
   out.reserve(64 + std::min(total, kTileMaxSegments) * 40);
   char buf[160];
-  std::snprintf(buf, sizeof(buf), "{\"z\":%d,\"x\":%lld,\"y\":%lld,\"size_m\":%.6g,\"total\":%zu,\"sampled\":%s,\"segments\":[", z,
+  std::snprintf(buf, sizeof(buf),
+                "{\"z\":%d,\"x\":%lld,\"y\":%lld,\"size_m\":%.6g,\"total\":%zu,\"sampled\":%s,\"segments\":[", z,
                 static_cast<long long>(x), static_cast<long long>(y), size_m, total, stride > 1 ? "true" : "false");
   out += buf;
   bool first = true;

@@ -45,7 +45,7 @@ class TileCache {
   std::weak_ptr<const LoadedMap> indexed_owner_;
   // Segment indices by kIndexCellM cell (packed x, y), for tiles of any level.
   std::unordered_map<uint64_t, std::vector<uint32_t>> cells_;
-  using Key = std::string;  // "z/x/y"
+  using Key = std::string;                      // "z/x/y"
   std::list<std::pair<Key, std::string>> lru_;  // most recent first
   std::unordered_map<Key, std::list<std::pair<Key, std::string>>::iterator> entries_;
   Counters counters_;

@@ -17,7 +17,8 @@ std::shared_ptr<const RandomForestMatcher> load_classifier(const storage::MapRea
   const std::optional<storage::ClassifierBlob> blob = reader.classifier();
   if (!blob) return nullptr;
   if (blob->format != storage::kClassifierFormatRTreesYaml)
-    throw std::runtime_error(reader.path() + ": classifier format '" + blob->format + "' is not " + storage::kClassifierFormatRTreesYaml);
+    throw std::runtime_error(reader.path() + ": classifier format '" + blob->format + "' is not " +
+                             storage::kClassifierFormatRTreesYaml);
   try {
     return std::make_shared<const RandomForestMatcher>(RandomForestMatcher::load(blob->bytes));
   } catch (const std::exception& e) {
@@ -42,15 +43,21 @@ PlacesFuture places_of(const storage::MapReader& reader, std::shared_ptr<const M
   if (!surfaces || !config.enabled) return {};
   std::vector<Pose3d> trajectory;
   for (const storage::Keyframe& k : reader.trajectory()) trajectory.push_back(k.T_map_sensor);
-  return std::async(std::launch::async, [trajectory = std::move(trajectory), surfaces, config, stop]() -> std::shared_ptr<const PlaceIndex> {
-           try {
-             return std::make_shared<const PlaceIndex>(build_place_index(
-                 trajectory, [&surfaces](const Eigen::Vector3d& c, double r) { return crop_cylinder(surfaces->near(c, r), c, r); },
-                 config, stop.get()));
-           } catch (const std::exception&) {
-             return nullptr;
-           }
-         }).share();
+  return std::async(
+             std::launch::async,
+             [trajectory = std::move(trajectory), surfaces, config, stop]() -> std::shared_ptr<const PlaceIndex> {
+               try {
+                 return std::make_shared<const PlaceIndex>(build_place_index(
+                     trajectory,
+                     [&surfaces](const Eigen::Vector3d& c, double r) {
+                       return crop_cylinder(surfaces->near(c, r), c, r);
+                     },
+                     config, stop.get()));
+               } catch (const std::exception&) {
+                 return nullptr;
+               }
+             })
+      .share();
 }
 
 }  // namespace
@@ -75,14 +82,15 @@ std::shared_ptr<const LoadedMap> load_map(const std::string& path, const MapLoad
   if (matcher.type == MatcherType::kRandomForest && !classifier) {
     matcher.type = MatcherType::kL2;
     map->fell_back_to_l2 = true;
-    map->warnings.push_back(path + ": the parameters ask for the random forest matcher but the map has no "
+    map->warnings.push_back(path +
+                            ": the parameters ask for the random forest matcher but the map has no "
                             "classifier; serving with the L2 matcher (l2_threshold " +
                             std::to_string(matcher.l2_threshold) + ")");
   }
   if (matcher.type == MatcherType::kRandomForest && classifier->config().use_shapes != matcher.use_shapes)
-    throw std::runtime_error(path + ": the classifier was trained with use_shapes=" +
-                             (classifier->config().use_shapes ? "true" : "false") + " but the parameters say " +
-                             (matcher.use_shapes ? "true" : "false"));
+    throw std::runtime_error(
+        path + ": the classifier was trained with use_shapes=" + (classifier->config().use_shapes ? "true" : "false") +
+        " but the parameters say " + (matcher.use_shapes ? "true" : "false"));
   map->segments_digest = api::segments_digest(io::to_json(map->config));
   if (reader.schema_version() < storage::kSchemaVersion)
     map->warnings.push_back(path + ": map schema " + std::to_string(reader.schema_version()) +
@@ -142,7 +150,7 @@ struct RequestFields {
 
 RequestFields request_fields(const api::LocalizeRequest& r) {
   RequestFields p{(r.flags & api::kFlagHasPrior) != 0, r.T_map_local_prior, r.prior_radius_m, std::nullopt,
-                r.sensor_position_local};
+                  r.sensor_position_local};
   if (r.flags & api::kFlagPriorHeading) p.heading_tolerance_deg = r.prior_heading_tolerance_deg;
   p.refusal_code = (r.flags & api::kFlagRefusalCode) != 0;
   p.detail = (r.flags & api::kFlagDetail) != 0;
@@ -150,8 +158,12 @@ RequestFields request_fields(const api::LocalizeRequest& r) {
 }
 
 RequestFields request_fields(const api::LocalizeSegmentsRequest& r) {
-  return {(r.flags & api::kSegmentsFlagHasPrior) != 0, r.T_map_local_prior, r.prior_radius_m,
-          r.prior_heading_tolerance_deg, r.sensor_position_local, (r.flags & api::kSegmentsFlagRefusalCode) != 0,
+  return {(r.flags & api::kSegmentsFlagHasPrior) != 0,
+          r.T_map_local_prior,
+          r.prior_radius_m,
+          r.prior_heading_tolerance_deg,
+          r.sensor_position_local,
+          (r.flags & api::kSegmentsFlagRefusalCode) != 0,
           (r.flags & api::kSegmentsFlagDetail) != 0};
 }
 
@@ -202,7 +214,7 @@ api::LocalizeReply reply_of(const LoadedMap& map, const LocalizationResult& r, u
                             const RequestFields& prior, std::chrono::steady_clock::time_point start) {
   api::LocalizeReply reply;
   reply.request_id = request_id;
-  reply.status = r.localized()                            ? api::LocalizeStatus::kLocalized
+  reply.status = r.localized()                         ? api::LocalizeStatus::kLocalized
                  : r.refusal == Refusal::kOutsidePrior ? api::LocalizeStatus::kOutsidePrior
                                                        : api::LocalizeStatus::kNotLocalized;
   reply.reason = r.reason;
@@ -213,9 +225,11 @@ api::LocalizeReply reply_of(const LoadedMap& map, const LocalizationResult& r, u
   reply.support = static_cast<uint32_t>(r.support);
   const Segments& targets = map.localizer->targets();
   for (const Match& m : r.inliers)
-    if (m.target >= 0 && static_cast<size_t>(m.target) < targets.size()) reply.matched_segment_ids.push_back(targets[m.target].id);
+    if (m.target >= 0 && static_cast<size_t>(m.target) < targets.size())
+      reply.matched_segment_ids.push_back(targets[m.target].id);
   copy_timings(r.timings, reply.timings);
-  if (!r.localized() && !r.registration_reason.empty()) reply.reason += " (registration: " + r.registration_reason + ")";
+  if (!r.localized() && !r.registration_reason.empty())
+    reply.reason += " (registration: " + r.registration_reason + ")";
   check_prior(prior, reply);
   if (prior.detail) {
     reply.detail = api::ReplyDetail{r.window_warp_m, r.window_warp_deg, static_cast<uint32_t>(r.window_points), {}};
@@ -264,7 +278,8 @@ Outcome outcome_of(const LoadedMap& map, const LocalizationResult& r, uint64_t r
 
 api::LocalizeReply localize_request(const LoadedMap& map, const api::LocalizeRequest& request) {
   const auto start = std::chrono::steady_clock::now();
-  return reply_of(map, localize_cloud(map, request, Deadline::never()), request.request_id, request_fields(request), start);
+  return reply_of(map, localize_cloud(map, request, Deadline::never()), request.request_id, request_fields(request),
+                  start);
 }
 
 Outcome serve_localize(const LoadedMap& map, const api::LocalizeRequest& request, const Deadline& deadline) {
@@ -304,7 +319,8 @@ Outcome serve_localize_segments(const LoadedMap& map, api::LocalizeSegmentsReque
       tracked = map.localizer->track(std::move(request.segments), request.newest_points, sensor, *prior);
       if (!tracked.localized()) request.segments = std::move(tracked.query);  // a refusal keeps them, for the full path
     } else {
-      tracked.refusal = Refusal::kTrackingLost, tracked.reason = "tracking on the surface layer needs a prior radius > 0";
+      tracked.refusal = Refusal::kTrackingLost,
+      tracked.reason = "tracking on the surface layer needs a prior radius > 0";
     }
     if (tracked.localized() || !has_points) return outcome_of(map, tracked, request.request_id, fields, start);
     tracking_reason = std::move(tracked.reason);

@@ -26,7 +26,8 @@ class StateCollectable : public prometheus::Collectable {
     name_ = name, schema_ = schema, segments_ = segments;
   }
   std::vector<prometheus::MetricFamily> Collect() const override {
-    prometheus::MetricFamily map{"segmatch_map_info", "The map being served (value 1)", prometheus::MetricType::Gauge, {}};
+    prometheus::MetricFamily map{
+        "segmatch_map_info", "The map being served (value 1)", prometheus::MetricType::Gauge, {}};
     prometheus::ClientMetric m;
     {
       std::lock_guard<std::mutex> lock(mutex_);
@@ -34,8 +35,8 @@ class StateCollectable : public prometheus::Collectable {
     }
     m.gauge.value = 1.0;
     map.metric.push_back(m);
-    prometheus::MetricFamily uptime{"segmatch_uptime_seconds", "Seconds since the server started",
-                                    prometheus::MetricType::Gauge, {}};
+    prometheus::MetricFamily uptime{
+        "segmatch_uptime_seconds", "Seconds since the server started", prometheus::MetricType::Gauge, {}};
     prometheus::ClientMetric u;
     u.gauge.value = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
     uptime.metric.push_back(u);
@@ -55,17 +56,21 @@ class StateCollectable : public prometheus::Collectable {
 struct Metrics::Impl {
   std::shared_ptr<prometheus::Registry> registry = std::make_shared<prometheus::Registry>();
   std::shared_ptr<StateCollectable> state = std::make_shared<StateCollectable>();
-  prometheus::Family<prometheus::Counter>& requests =
-      prometheus::BuildCounter().Name("segmatch_requests_total").Help("Frames answered, by type and status").Register(*registry);
-  prometheus::Family<prometheus::Counter>& errors =
-      prometheus::BuildCounter().Name("segmatch_errors_total").Help("ERROR replies, by protocol code").Register(*registry);
+  prometheus::Family<prometheus::Counter>& requests = prometheus::BuildCounter()
+                                                          .Name("segmatch_requests_total")
+                                                          .Help("Frames answered, by type and status")
+                                                          .Register(*registry);
+  prometheus::Family<prometheus::Counter>& errors = prometheus::BuildCounter()
+                                                        .Name("segmatch_errors_total")
+                                                        .Help("ERROR replies, by protocol code")
+                                                        .Register(*registry);
   // Buckets from 5 ms (a segments query) to 30 s (the default request timeout).
-  prometheus::Histogram& duration =
-      prometheus::BuildHistogram()
-          .Name("segmatch_request_duration_seconds")
-          .Help("LOCALIZE and LOCALIZE_SEGMENTS, frame received to reply ready")
-          .Register(*registry)
-          .Add({}, prometheus::Histogram::BucketBoundaries{0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 5, 10, 30});
+  prometheus::Histogram& duration = prometheus::BuildHistogram()
+                                        .Name("segmatch_request_duration_seconds")
+                                        .Help("LOCALIZE and LOCALIZE_SEGMENTS, frame received to reply ready")
+                                        .Register(*registry)
+                                        .Add({}, prometheus::Histogram::BucketBoundaries{0.005, 0.01, 0.025, 0.05, 0.1,
+                                                                                         0.25, 0.5, 1, 2.5, 5, 10, 30});
   prometheus::Gauge& in_flight = prometheus::BuildGauge()
                                      .Name("segmatch_in_flight_requests")
                                      .Help("Localizations received and not yet answered")
@@ -106,7 +111,9 @@ void Metrics::request(const std::string& type, const std::string& status, double
 void Metrics::error(uint16_t code) { impl_->errors.Add({{"code", std::to_string(code)}}).Increment(); }
 void Metrics::in_flight(int delta) { impl_->in_flight.Increment(delta); }
 void Metrics::connections(int delta) { impl_->connections.Increment(delta); }
-void Metrics::map(const std::string& name, int schema, size_t segments) { impl_->state->set_map(name, schema, segments); }
+void Metrics::map(const std::string& name, int schema, size_t segments) {
+  impl_->state->set_map(name, schema, segments);
+}
 
 std::string Metrics::text() const {
   std::vector<prometheus::MetricFamily> families = impl_->registry->Collect();

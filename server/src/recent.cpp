@@ -56,7 +56,8 @@ std::vector<Answer> Recent::since(uint64_t cursor, size_t max_answers, uint64_t&
   const uint64_t first = std::max(cursor + 1, oldest);
   missed = first - (cursor + 1);
   std::vector<Answer> out;
-  for (uint64_t c = first; c <= last_cursor_ && out.size() < max_answers; ++c) out.push_back(ring_[(c - 1) % ring_.size()]);
+  for (uint64_t c = first; c <= last_cursor_ && out.size() < max_answers; ++c)
+    out.push_back(ring_[(c - 1) % ring_.size()]);
   next_cursor = out.empty() ? std::max(cursor, first - 1) : out.back().cursor;
   return out;
 }

@@ -56,9 +56,11 @@ std::string Stats::period_line() {
     std::snprintf(p50, sizeof(p50), "%.1f", l[l.size() / 2]);
   }
   std::ostringstream s;
-  s << "stats: requests=" << counters_.requests << " (+" << period_requests_ << ") localize=" << counters_.localize_requests
-    << " localized=" << counters_.localized << " errors=" << counters_.errors << " timed_out=" << counters_.timed_out << " connections=" << counters_.connections
-    << " refused=" << counters_.refused_connections << " localize_p50_ms=" << p50 << " (period)";
+  s << "stats: requests=" << counters_.requests << " (+" << period_requests_
+    << ") localize=" << counters_.localize_requests << " localized=" << counters_.localized
+    << " errors=" << counters_.errors << " timed_out=" << counters_.timed_out
+    << " connections=" << counters_.connections << " refused=" << counters_.refused_connections
+    << " localize_p50_ms=" << p50 << " (period)";
   l.clear();
   period_requests_ = 0;
   return s.str();
@@ -86,7 +88,8 @@ api::Socket listen_on(const std::string& address, uint16_t port, uint16_t& bound
   api::Socket s(::socket(list->ai_family, list->ai_socktype | SOCK_CLOEXEC, list->ai_protocol));
   const int one = 1;
   std::string error;
-  if (!s.valid()) error = std::strerror(errno);
+  if (!s.valid())
+    error = std::strerror(errno);
   else if (::setsockopt(s.fd(), SOL_SOCKET, SO_REUSEADDR, &one, sizeof(one)) != 0 ||
            ::bind(s.fd(), list->ai_addr, list->ai_addrlen) != 0 || ::listen(s.fd(), 128) != 0)
     error = std::strerror(errno);
@@ -114,10 +117,12 @@ void reap_finished(Server::State& s) {
 
 void refuse_busy(Server::State& s, api::Socket socket, const std::string& peer) {
   s.stats.connection(true);
-  const std::vector<uint8_t> bytes = api::encode(api::ErrorReply{api::ErrorCode::kServerBusy,
-      "server busy: " + std::to_string(s.config.max_connections) + " connections already open"});
+  const std::vector<uint8_t> bytes = api::encode(
+      api::ErrorReply{api::ErrorCode::kServerBusy,
+                      "server busy: " + std::to_string(s.config.max_connections) + " connections already open"});
   api::write_all(socket.fd(), bytes.data(), bytes.size(), api::deadline_after(1.0));
-  s.log(peer + " refused: max connections (" + std::to_string(s.config.max_connections) + ") reached", LogLevel::kWarning);
+  s.log(peer + " refused: max connections (" + std::to_string(s.config.max_connections) + ") reached",
+        LogLevel::kWarning);
 }
 
 void accept_loop(Server::State& s) {
@@ -156,7 +161,8 @@ void stats_loop(Server::State& s) {
 Server::Server(const ServerConfig& config, std::shared_ptr<const LoadedMap> map) : state_(std::make_unique<State>()) {
   if (!map || !map->localizer) throw std::invalid_argument("Server needs a loaded map");
   if (config.max_connections < 1) throw std::invalid_argument("max_connections must be >= 1");
-  if (!(config.read_timeout_s > 0) || !(config.write_timeout_s > 0)) throw std::invalid_argument("timeouts must be > 0");
+  if (!(config.read_timeout_s > 0) || !(config.write_timeout_s > 0))
+    throw std::invalid_argument("timeouts must be > 0");
   state_->config = config;
   state_->recent = std::make_unique<Recent>(std::max<size_t>(1, config.recent_answers));
   if (config.metrics) config.metrics->map(map->metadata.name, map->schema_version, map->segment_count());
@@ -186,7 +192,8 @@ ServerCounters Server::counters() const { return state_->stats.counters(); }
 
 void Server::replace_map(std::shared_ptr<const LoadedMap> map) {
   if (!map || !map->localizer) throw std::invalid_argument("Server::replace_map needs a loaded map");
-  if (state_->config.metrics) state_->config.metrics->map(map->metadata.name, map->schema_version, map->segment_count());
+  if (state_->config.metrics)
+    state_->config.metrics->map(map->metadata.name, map->schema_version, map->segment_count());
   std::atomic_store(&state_->map, std::shared_ptr<const LoadedMap>(std::move(map)));
 }
 

@@ -45,8 +45,7 @@ void clear_previous_output(const fs::path& out, bool force) {
   if (!fs::exists(out)) return;
   if (!fs::is_directory(out)) throw std::runtime_error(out.string() + " exists and is not a folder");
   if (fs::is_empty(out)) return;
-  if (!force)
-    throw std::runtime_error(out.string() + " is not empty: pass --force to replace the dataset in it");
+  if (!force) throw std::runtime_error(out.string() + " is not empty: pass --force to replace the dataset in it");
   for (const char* sub : {"sequences", "keyframes", "ground_truth", "world.png", "scan.png", "dataset.json"})
     fs::remove_all(out / sub);
 }
@@ -75,12 +74,14 @@ void add_keyframe_options(CLI::App& app, KeyframeOptions* k) {
   app.add_option("--odom-yaw-drift-deg-per-m", k->config.odom_yaw_drift_deg_per_m,
                  "and turns this much left per metre (default 0.003)");
   app.add_option("--odom-climb-m-per-m", k->config.odom_climb_m_per_m, "and climbs this much per metre (default 0)");
-  app.add_option("--odom-heading-walk", k->config.odom_heading_walk_deg_per_sqrt_m,
-                 "and its heading takes a random walk of this many deg per sqrt(m) driven (default 0.04: LiDAR-inertial "
-                 "odometry, ~0.4 deg per 100 m; 0: none)");
+  app.add_option(
+      "--odom-heading-walk", k->config.odom_heading_walk_deg_per_sqrt_m,
+      "and its heading takes a random walk of this many deg per sqrt(m) driven (default 0.04: LiDAR-inertial "
+      "odometry, ~0.4 deg per 100 m; 0: none)");
   app.add_option("--odom-pitch-walk", k->config.odom_pitch_walk_deg_per_sqrt_m,
                  "and its pitch one of this many deg per sqrt(m) (default 0.02; 0: none)");
-  app.add_option("--odom-seed", k->config.odom_seed, "seed of those random walks (default 1; mixed with --seed per sequence)");
+  app.add_option("--odom-seed", k->config.odom_seed,
+                 "seed of those random walks (default 1; mixed with --seed per sequence)");
 }
 
 void print_summary(const sim::DatasetConfig& config, const sim::DatasetSummary& s, const std::string& out) {
@@ -127,7 +128,8 @@ int main(int argc, char** argv) {
   app.add_option("--seed", seed, "world seed: same seed, same bytes");
   cli::add_output_option(app, out, "output folder (default: out/sim-<preset>-<seed>)");
   app.add_option("--sensor", sensor,
-                 "hdl64e (default), hdl32e, vlp16, os1-64, os0-64 (+-45 deg, carried at 1.5 m) or livox-avia (rosette scan in a 70.4 x 77.2 deg forward cone, "
+                 "hdl64e (default), hdl32e, vlp16, os1-64, os0-64 (+-45 deg, carried at 1.5 m) or livox-avia (rosette "
+                 "scan in a 70.4 x 77.2 deg forward cone, "
                  "24000 points per 0.1 s frame, never repeating; carried at 1.0 m)");
   app.add_option("--speed-mps", speed_mps, "cruise speed of both traversals (default 10; e.g. 1.5 for walking)")
       ->check(CLI::Range(0.3, 40.0));

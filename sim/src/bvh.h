@@ -12,15 +12,14 @@
 
 namespace segmatch::sim::bvh {
 
-
 constexpr uint32_t kLeafBit = 0x80000000u;
 constexpr uint32_t kLeafCountBits = 4;  // leaf ref: kLeafBit | first << 4 | count
 constexpr uint32_t kLeafCountMask = (1u << kLeafCountBits) - 1u;
 constexpr uint32_t kMaxLeafSize = 8;  // must be <= kLeafCountMask
 constexpr uint32_t kMaxPrimitives = (kLeafBit >> kLeafCountBits) - 1u;
 constexpr int kNumBins = 16;
-constexpr int kMaxSahDepth = 48;   // deeper subtrees are split at the object median
-constexpr int kWidth = 8;  // children per node (a multiple of 4)
+constexpr int kMaxSahDepth = 48;  // deeper subtrees are split at the object median
+constexpr int kWidth = 8;         // children per node (a multiple of 4)
 // Max stack use: (kWidth - 1) pushes per level; levels <= kMaxSahDepth + log2(kMaxPrimitives).
 constexpr int kStackSize = (kWidth - 1) * (kMaxSahDepth + 32) + 16;
 constexpr float kTraversalCost = 1.0f;
@@ -70,8 +69,7 @@ constexpr int kHiOffset = kWidth * static_cast<int>(sizeof(float));        // by
 struct alignas(16) Aabb {
   float lo[4] = {std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
                  std::numeric_limits<float>::infinity(), 0.0f};
-  float hi[4] = {-std::numeric_limits<float>::infinity(),
-                 -std::numeric_limits<float>::infinity(),
+  float hi[4] = {-std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity(),
                  -std::numeric_limits<float>::infinity(), 0.0f};
 
   // Lane-wise as one four-float min and max (segmatch/core/detail/simd.h); the 4th lane is unused.

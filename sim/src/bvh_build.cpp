@@ -108,8 +108,7 @@ bool pack_primitive(const Primitive& in, uint32_t index, PackedPrim* out, Aabb* 
       }
       break;
     }
-    default:
-      return false;
+    default: return false;
   }
   return pad_box(box);
 }
@@ -224,8 +223,8 @@ class Builder {
         acc.grow(bins[axis][i - 1]);
         cnt += counts[axis][i - 1];
         if (cnt == 0 || right_count[i] == 0) continue;
-        const float cost = acc.half_area() * static_cast<float>(cnt) +
-                           right_area[i] * static_cast<float>(right_count[i]);
+        const float cost =
+            acc.half_area() * static_cast<float>(cnt) + right_area[i] * static_cast<float>(right_count[i]);
         if (cost < best.cost) {
           best.cost = cost;
           best.axis = axis;
@@ -251,16 +250,13 @@ class Builder {
     if (best_axis >= 0) {
       const float area = bounds.half_area();
       const float split_cost =
-          kTraversalCost + kIntersectionCost * (area > 0.0f ? best_cost / area
-                                                            : static_cast<float>(n));
+          kTraversalCost + kIntersectionCost * (area > 0.0f ? best_cost / area : static_cast<float>(n));
       const float leaf_cost = kIntersectionCost * static_cast<float>(n);
       if (n <= kMaxLeafSize && leaf_cost <= split_cost) return make_leaf(begin, end, bounds);
       const int axis = best_axis, split = best_split;
       const float lo = cb.lo[axis], sc = scale[axis];
       auto it = std::partition(prims_.begin() + begin, prims_.begin() + end,
-                               [&](const BuildPrim& p) {
-                                 return bin_of(p.centre[axis], lo, sc, nb) < split;
-                               });
+                               [&](const BuildPrim& p) { return bin_of(p.centre[axis], lo, sc, nb) < split; });
       mid = static_cast<uint32_t>(it - prims_.begin());
       if (mid == begin || mid == end) mid = begin + n / 2;  // cannot happen; be safe
     } else {
@@ -271,9 +267,7 @@ class Builder {
         if (cb.hi[k] - cb.lo[k] > cb.hi[axis] - cb.lo[axis]) axis = k;
       }
       std::nth_element(prims_.begin() + begin, prims_.begin() + mid, prims_.begin() + end,
-                       [&](const BuildPrim& x, const BuildPrim& y) {
-                         return x.centre[axis] < y.centre[axis];
-                       });
+                       [&](const BuildPrim& x, const BuildPrim& y) { return x.centre[axis] < y.centre[axis]; });
     }
 
     Aabb lb, lcb, rb, rcb;

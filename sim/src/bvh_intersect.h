@@ -31,8 +31,7 @@ inline bool select_t(float tnear, float tfar, float tmin, float tmax, float* t, 
   return false;
 }
 
-inline bool intersect_box(const PackedPrim& p, const Ray& r, float tmin, float tmax, float* t,
-                          int* face) {
+inline bool intersect_box(const PackedPrim& p, const Ray& r, float tmin, float tmax, float* t, int* face) {
   const float c = p.f[6], s = p.f[7];
   const float rx = r.o[0] - p.f[0], ry = r.o[1] - p.f[1], rz = r.o[2] - p.f[2];
   // Into the box frame: rotate by -yaw about z.
@@ -76,8 +75,7 @@ inline bool solve_quadratic(float a, float b, float c, float disc, float* t0, fl
   return true;
 }
 
-inline bool intersect_cylinder(const PackedPrim& p, const Ray& r, float tmin, float tmax, float* t,
-                               int* face) {
+inline bool intersect_cylinder(const PackedPrim& p, const Ray& r, float tmin, float tmax, float* t, int* face) {
   const float px = r.o[0] - p.f[0], py = r.o[1] - p.f[1];
   const float dx = r.d[0], dy = r.d[1];
   const float rr = p.f[5];
@@ -106,12 +104,10 @@ inline bool intersect_cylinder(const PackedPrim& p, const Ray& r, float tmin, fl
   return true;
 }
 
-inline bool intersect_ellipsoid(const PackedPrim& p, const Ray& r, float tmin, float tmax,
-                                float* t) {
+inline bool intersect_ellipsoid(const PackedPrim& p, const Ray& r, float tmin, float tmax, float* t) {
   const float sx = p.f[3], sy = p.f[4], sz = p.f[5];
   // Scale into the unit-sphere frame (the ray parameter t is unchanged).
-  const float ox = (r.o[0] - p.f[0]) * sx, oy = (r.o[1] - p.f[1]) * sy,
-              oz = (r.o[2] - p.f[2]) * sz;
+  const float ox = (r.o[0] - p.f[0]) * sx, oy = (r.o[1] - p.f[1]) * sy, oz = (r.o[2] - p.f[2]) * sz;
   const float dx = r.d[0] * sx, dy = r.d[1] * sy, dz = r.d[2] * sz;
   const float a = dx * dx + dy * dy + dz * dz;
   const float b = ox * dx + oy * dy + oz * dz;
@@ -124,8 +120,7 @@ inline bool intersect_ellipsoid(const PackedPrim& p, const Ray& r, float tmin, f
   return select_t(t0, t1, tmin, tmax, t, &exit);
 }
 
-inline bool intersect_triangle(const PackedPrim& p, const Ray& r, float tmin, float tmax,
-                               float* t) {
+inline bool intersect_triangle(const PackedPrim& p, const Ray& r, float tmin, float tmax, float* t) {
   // Moller-Trumbore, two-sided.
   const float e1x = p.f[3], e1y = p.f[4], e1z = p.f[5];
   const float e2x = p.f[6], e2y = p.f[7], e2z = p.f[8];
@@ -152,17 +147,12 @@ inline bool intersect_triangle(const PackedPrim& p, const Ray& r, float tmin, fl
   return true;
 }
 
-inline bool intersect(const PackedPrim& p, const Ray& r, float tmin, float tmax, float* t,
-                      int* face) {
+inline bool intersect(const PackedPrim& p, const Ray& r, float tmin, float tmax, float* t, int* face) {
   switch (static_cast<Shape>(p.shape)) {
-    case Shape::kTriangle:
-      return intersect_triangle(p, r, tmin, tmax, t);
-    case Shape::kBox:
-      return intersect_box(p, r, tmin, tmax, t, face);
-    case Shape::kCylinder:
-      return intersect_cylinder(p, r, tmin, tmax, t, face);
-    case Shape::kEllipsoid:
-      return intersect_ellipsoid(p, r, tmin, tmax, t);
+    case Shape::kTriangle: return intersect_triangle(p, r, tmin, tmax, t);
+    case Shape::kBox: return intersect_box(p, r, tmin, tmax, t, face);
+    case Shape::kCylinder: return intersect_cylinder(p, r, tmin, tmax, t, face);
+    case Shape::kEllipsoid: return intersect_ellipsoid(p, r, tmin, tmax, t);
   }
   return false;
 }

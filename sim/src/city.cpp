@@ -23,12 +23,14 @@ Segments segments_along(const World& world, const Traversal& traversal, const Li
   SegmentMap map(config.segment_map);
   Segments all;
   for_each_voxelized_cloud(caster, model, traversal, without_age_limit(config.local_cloud), config.segmentation.voxel,
-                           config.schedule,
-                           [&](const SimulatedLocalCloud& lc) {
-                             Segments s = extract_segments_from_voxels(
-                                 lc.cloud, lc.T_world_sensor.translation().cast<float>(), config.segmentation, &lc.labels);
-                             if (config.merge) map.add(std::move(s));
-                             else std::move(s.begin(), s.end(), std::back_inserter(all));
+                           config.schedule, [&](const SimulatedLocalCloud& lc) {
+                             Segments s =
+                                 extract_segments_from_voxels(lc.cloud, lc.T_world_sensor.translation().cast<float>(),
+                                                              config.segmentation, &lc.labels);
+                             if (config.merge)
+                               map.add(std::move(s));
+                             else
+                               std::move(s.begin(), s.end(), std::back_inserter(all));
                            });
   return config.merge ? map.segments() : all;
 }

@@ -29,9 +29,9 @@ constexpr double kUnmappedM = 30.0;  // a scan of 01 this far from all of 00 is 
 // KITTI odometry sequence 00's LiDAR-to-camera transform.
 Pose3d kitti_T_cam0_velo() {
   Eigen::Matrix<double, 3, 4> m;
-  m << 4.276802385584e-04, -9.999672484946e-01, -8.084491683471e-03, -1.198459927713e-02,
-      -7.210626507497e-03, 8.081198471645e-03, -9.999413164504e-01, -5.403984729748e-02,
-      9.999738645903e-01, 4.859485810390e-04, -7.206933692422e-03, -2.921968648686e-01;
+  m << 4.276802385584e-04, -9.999672484946e-01, -8.084491683471e-03, -1.198459927713e-02, -7.210626507497e-03,
+      8.081198471645e-03, -9.999413164504e-01, -5.403984729748e-02, 9.999738645903e-01, 4.859485810390e-04,
+      -7.206933692422e-03, -2.921968648686e-01;
   Pose3d T = Pose3d::Identity();
   T.linear() = m.leftCols<3>();
   T.translation() = m.col(3);
@@ -177,8 +177,7 @@ KeyframeSummary write_sequence_keyframes(const DatasetConfig& c, int index, cons
   return k;
 }
 
-nlohmann::json describe(const DatasetConfig& c, const World& w, const DatasetSummary& s,
-                        const Traversal* t[2]) {
+nlohmann::json describe(const DatasetConfig& c, const World& w, const DatasetSummary& s, const Traversal* t[2]) {
   nlohmann::json j;
   j["preset"] = c.preset;
   j["seed"] = c.world.seed;
@@ -192,9 +191,11 @@ nlohmann::json describe(const DatasetConfig& c, const World& w, const DatasetSum
   j["world"]["objects"] = counts;
   for (int k = 0; k < 2; ++k) {
     const auto& T = t[k]->T_world_lidar.front();
-    j["sequences"][k == 0 ? "00" : "01"] = {{"scans", s.scans[k]}, {"length_m", s.length_m[k]},
-                                             {"duration_s", t[k]->times_s.back()},
-                                             {"T_world_lidar0_translation", {T.translation().x(), T.translation().y(), T.translation().z()}}};
+    j["sequences"][k == 0 ? "00" : "01"] = {
+        {"scans", s.scans[k]},
+        {"length_m", s.length_m[k]},
+        {"duration_s", t[k]->times_s.back()},
+        {"T_world_lidar0_translation", {T.translation().x(), T.translation().y(), T.translation().z()}}};
   }
   const KeyframeConfig& d = c.keyframes;  // the drift of every odom_poses.txt
   j["odometry"] = {{"scale_error", d.odom_scale_error},
@@ -203,15 +204,16 @@ nlohmann::json describe(const DatasetConfig& c, const World& w, const DatasetSum
                    {"heading_walk_deg_per_sqrt_m", d.odom_heading_walk_deg_per_sqrt_m},
                    {"pitch_walk_deg_per_sqrt_m", d.odom_pitch_walk_deg_per_sqrt_m},
                    {"seed", d.odom_seed}};
-  j["revisits"] = {{"frames_01_within_5m_of_00", s.revisit_frames},
-                   {"frames_01_beyond_30m_of_00", s.unmapped_frames}};
+  j["revisits"] = {{"frames_01_within_5m_of_00", s.revisit_frames}, {"frames_01_beyond_30m_of_00", s.unmapped_frames}};
   j["points"] = s.points;
   if (c.keyframes.every_m > 0)
-    j["keyframes"] = {{"every_m", c.keyframes.every_m}, {"leaf_m", c.keyframes.leaf_m},
+    j["keyframes"] = {{"every_m", c.keyframes.every_m},
+                      {"leaf_m", c.keyframes.leaf_m},
                       {"frames", keyframe_scan_count(c)},
                       {"odom_scale_error", c.keyframes.odom_scale_error},
                       {"odom_yaw_drift_deg_per_m", c.keyframes.odom_yaw_drift_deg_per_m},
-                      {"count", {s.keyframes[0], s.keyframes[1]}}, {"points", s.keyframe_points}};
+                      {"count", {s.keyframes[0], s.keyframes[1]}},
+                      {"points", s.keyframe_points}};
   return j;
 }
 

@@ -1,7 +1,7 @@
 #include "segmatch/sim/keyframes.h"
 
-#include "segmatch/core/preprocess/preprocess.h"
 #include "segmatch/core/detail/random.h"
+#include "segmatch/core/preprocess/preprocess.h"
 #include "segmatch/io/cloud_io.h"
 #include "segmatch/io/pose_io.h"
 
@@ -69,7 +69,8 @@ std::vector<size_t> keyframe_frames(const Traversal& traversal, double every_m, 
   const size_t first = static_cast<size_t>(std::max(1, frames)) - 1;
   for (size_t i = first; i < traversal.size(); ++i) {
     if (out.empty() ||
-        (traversal.T_world_lidar[i].translation() - traversal.T_world_lidar[out.back()].translation()).norm() >= every_m)
+        (traversal.T_world_lidar[i].translation() - traversal.T_world_lidar[out.back()].translation()).norm() >=
+            every_m)
       out.push_back(i);
   }
   return out;
@@ -90,7 +91,8 @@ Poses drifted_odometry(const Poses& T_world_sensor, const KeyframeConfig& c) {
     const Pose3d step = T_world_sensor[k - 1].inverse() * T_world_sensor[k];
     const double length_m = step.translation().norm();
     const double root = std::sqrt(length_m);
-    const double yaw = c.odom_yaw_drift_deg_per_m * length_m + c.odom_heading_walk_deg_per_sqrt_m * root * walk.normal();
+    const double yaw =
+        c.odom_yaw_drift_deg_per_m * length_m + c.odom_heading_walk_deg_per_sqrt_m * root * walk.normal();
     pitch_deg += c.odom_pitch_walk_deg_per_sqrt_m * root * walk.normal();
     Pose3d read = step;
     read.translation() *= 1.0 + c.odom_scale_error;

@@ -48,37 +48,73 @@ double inverse_normal_cdf(double p) {
   if (std::fabs(q) <= 0.425) {
     const double r = 0.180625 - q * q;
     return q *
-           (((((((2509.0809287301226727 * r + 33430.575583588128105) * r +
-                 67265.770927008700853) * r + 45921.953931549871457) * r +
-               13731.693765509461125) * r + 1971.5909503065514427) * r +
-             133.14166789178437745) * r + 3.387132872796366608) /
-           (((((((5226.495278852545925 * r + 28729.085735721942674) * r +
-                 39307.89580009271061) * r + 21213.794301586595867) * r +
-               5394.1960214247511077) * r + 687.1870074920579083) * r +
-             42.313330701600911252) * r + 1.0);
+           (((((((2509.0809287301226727 * r + 33430.575583588128105) * r + 67265.770927008700853) * r +
+                45921.953931549871457) *
+                   r +
+               13731.693765509461125) *
+                  r +
+              1971.5909503065514427) *
+                 r +
+             133.14166789178437745) *
+                r +
+            3.387132872796366608) /
+           (((((((5226.495278852545925 * r + 28729.085735721942674) * r + 39307.89580009271061) * r +
+                21213.794301586595867) *
+                   r +
+               5394.1960214247511077) *
+                  r +
+              687.1870074920579083) *
+                 r +
+             42.313330701600911252) *
+                r +
+            1.0);
   }
   double r = std::sqrt(-std::log(q < 0.0 ? p : 1.0 - p));
   double x;
   if (r <= 5.0) {
     r -= 1.6;
-    x = (((((((7.7454501427834140764e-4 * r + 0.0227238449892691845833) * r +
-              0.24178072517745061177) * r + 1.27045825245236838258) * r +
-            3.64784832476320460504) * r + 5.7694972214606914055) * r +
-          4.6303378461565452959) * r + 1.42343711074968357734) /
-        (((((((1.05075007164441684324e-9 * r + 5.475938084995344946e-4) * r +
-              0.0151986665636164571966) * r + 0.14810397642748007459) * r +
-            0.68976733498510000455) * r + 1.6763848301838038494) * r +
-          2.05319162663775882187) * r + 1.0);
+    x = (((((((7.7454501427834140764e-4 * r + 0.0227238449892691845833) * r + 0.24178072517745061177) * r +
+             1.27045825245236838258) *
+                r +
+            3.64784832476320460504) *
+               r +
+           5.7694972214606914055) *
+              r +
+          4.6303378461565452959) *
+             r +
+         1.42343711074968357734) /
+        (((((((1.05075007164441684324e-9 * r + 5.475938084995344946e-4) * r + 0.0151986665636164571966) * r +
+             0.14810397642748007459) *
+                r +
+            0.68976733498510000455) *
+               r +
+           1.6763848301838038494) *
+              r +
+          2.05319162663775882187) *
+             r +
+         1.0);
   } else {
     r -= 5.0;
-    x = (((((((2.01033439929228813265e-7 * r + 2.71155556874348757815e-5) * r +
-              0.0012426609473880784386) * r + 0.026532189526576123093) * r +
-            0.29656057182850489123) * r + 1.7848265399172913358) * r +
-          5.4637849111641143699) * r + 6.6579046435011037772) /
-        (((((((2.04426310338993978564e-15 * r + 1.4215117583164458887e-7) * r +
-              1.8463183175100546818e-5) * r + 7.868691311456132591e-4) * r +
-            0.0148753612908506148525) * r + 0.13692988092273580531) * r +
-          0.59983220655588793769) * r + 1.0);
+    x = (((((((2.01033439929228813265e-7 * r + 2.71155556874348757815e-5) * r + 0.0012426609473880784386) * r +
+             0.026532189526576123093) *
+                r +
+            0.29656057182850489123) *
+               r +
+           1.7848265399172913358) *
+              r +
+          5.4637849111641143699) *
+             r +
+         6.6579046435011037772) /
+        (((((((2.04426310338993978564e-15 * r + 1.4215117583164458887e-7) * r + 1.8463183175100546818e-5) * r +
+             7.868691311456132591e-4) *
+                r +
+            0.0148753612908506148525) *
+               r +
+           0.13692988092273580531) *
+              r +
+          0.59983220655588793769) *
+             r +
+         1.0);
   }
   return q < 0.0 ? -x : x;
 }
@@ -94,9 +130,9 @@ std::vector<float> linspace_deg(double from, double to, int n) {
 
 // The two words every ray draws, whether or not it hits (see the top of the file).
 struct RayDraws {
-  double u_drop;   // [0, 1)
-  double u_int;    // [0, 1)
-  uint64_t w2;     // range noise, used only on a hit
+  double u_drop;  // [0, 1)
+  double u_int;   // [0, 1)
+  uint64_t w2;    // range noise, used only on a hit
 };
 
 RayDraws draw_ray(Rng& rng) {
@@ -201,7 +237,8 @@ SimulatedScan simulate_rosette(const RayCaster& caster, const LidarModel& model,
     const RayDraws d = draw_ray(rng);  // fixed draws per ray, independent of the outcome
     if (d.u_drop < model.dropout_probability) continue;
 
-    const Eigen::Vector3d dir_s = rosette_direction(model.rosette, pattern_time_s + static_cast<double>(k) * ray_period_s);
+    const Eigen::Vector3d dir_s =
+        rosette_direction(model.rosette, pattern_time_s + static_cast<double>(k) * ray_period_s);
     const Eigen::Vector3f dir_w = (R * dir_s).cast<float>();
     if (!caster.cast(origin, dir_w, model.min_range_m, model.max_range_m, &hit)) continue;
     const double range = noisy_range(hit, model.range_noise_sigma_m, d.w2);
@@ -274,7 +311,7 @@ LidarModel os1_64() {
 LidarModel hdl32e() {
   LidarModel m;
   m.name = "hdl32e";
-  m.elevations_deg = linspace_deg(10.67, -30.67, 32);  // 1.33 deg apart
+  m.elevations_deg = linspace_deg(10.67, -30.67, 32);       // 1.33 deg apart
   m.columns = static_cast<int>(std::lround(360.0 / 0.16));  // 2250 at 10 Hz
   m.min_range_m = 1.0f;
   m.max_range_m = 100.0f;
@@ -311,7 +348,7 @@ LidarModel livox_avia() {
   // About 116 petals per 0.1 s frame, ~200 rays each.
   m.rosette.prism1_hz = 720.0;
   m.rosette.prism2_hz = -720.0 * 0.6180339887498949;
-  m.min_range_m = 1.0f;   // blind zone in front of the window
+  m.min_range_m = 1.0f;  // blind zone in front of the window
   m.max_range_m = 100.0f;
   m.range_noise_sigma_m = 0.02f;  // data sheet: 2 cm (1 sigma at 20 m)
   m.dropout_probability = 0.02f;
@@ -334,15 +371,15 @@ LidarModel lidar_model_by_name(const std::string& name) {
                               "'; valid names: hdl64e, hdl32e, vlp16, os1-64, os0-64, livox-avia");
 }
 
-SimulatedScan simulate_scan(const RayCaster& caster, const LidarModel& model,
-                            const Pose3d& T_world_sensor, uint64_t seed, double pattern_time_s) {
+SimulatedScan simulate_scan(const RayCaster& caster, const LidarModel& model, const Pose3d& T_world_sensor,
+                            uint64_t seed, double pattern_time_s) {
   if (model.pattern == ScanPattern::kRosette)
     return simulate_rosette(caster, model, T_world_sensor, seed, pattern_time_s);
   return simulate_spinning(caster, model, T_world_sensor, seed);
 }
 
-SimulatedScan simulate_scan(const RayCaster& caster, const LidarModel& model,
-                            const Pose3d& T_world_sensor, uint64_t seed) {
+SimulatedScan simulate_scan(const RayCaster& caster, const LidarModel& model, const Pose3d& T_world_sensor,
+                            uint64_t seed) {
   // A start anywhere in the first hour of the pattern, from a stream no ray uses.
   const double start_s = static_cast<double>(mix_seed(seed, 0x705e77e, 1) >> 11) * 0x1.0p-53 * kRosettePatternSpanS;
   return simulate_scan(caster, model, T_world_sensor, seed, start_s);

@@ -4,10 +4,10 @@
 // over the primitives' tight world-space AABBs gives a binary tree, which is collapsed into
 // 8-wide nodes (repeatedly opening the child with the largest surface area) flattened
 // depth-first into one array. A node stores its children's AABBs structure-of-arrays, so
-// four-lane SIMD (segmatch/core/detail/simd.h) tests four children at a time. Leaves hold up to kMaxLeafSize primitives,
-// stored contiguously in leaf order in a packed, intersection-ready form (precomputed yaw
-// sin/cos, triangle edges, inverse semi-axes, ...). Degenerate primitives (non-finite
-// values, negative or zero size, zero-area triangles) are skipped.
+// four-lane SIMD (segmatch/core/detail/simd.h) tests four children at a time. Leaves hold up to kMaxLeafSize
+// primitives, stored contiguously in leaf order in a packed, intersection-ready form (precomputed yaw sin/cos, triangle
+// edges, inverse semi-axes, ...). Degenerate primitives (non-finite values, negative or zero size, zero-area triangles)
+// are skipped.
 //
 // Traversal: explicit stack, nearest child first; the other hit children are pushed with
 // their entry distance and skipped on pop once a closer hit has been found (early-out
@@ -51,8 +51,8 @@ RayCaster& RayCaster::operator=(RayCaster&&) noexcept = default;
 
 size_t RayCaster::primitive_count() const { return impl_ ? impl_->bvh.prims.size() : 0; }
 
-bool RayCaster::cast(const Eigen::Vector3f& origin, const Eigen::Vector3f& direction,
-                     float min_range_m, float max_range_m, RayHit* hit) const {
+bool RayCaster::cast(const Eigen::Vector3f& origin, const Eigen::Vector3f& direction, float min_range_m,
+                     float max_range_m, RayHit* hit) const {
   if (!impl_ || impl_->bvh.nodes.empty()) return false;
   if (!(min_range_m <= max_range_m)) return false;  // also rejects NaN
   if (!origin.allFinite() || !direction.allFinite()) return false;
@@ -165,8 +165,7 @@ bool RayCaster::cast(const Eigen::Vector3f& origin, const Eigen::Vector3f& direc
         const PackedPrim& p = prims[i];
         float t;
         int face = 0;
-        if (intersect(p, ray, tmin, tbest, &t, &face) &&
-            (t < tbest || p.index < best_index)) {
+        if (intersect(p, ray, tmin, tbest, &t, &face) && (t < tbest || p.index < best_index)) {
           tbest = t;
           tcull = t * kFarScale;
           best = i;

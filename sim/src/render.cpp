@@ -27,8 +27,8 @@ struct Canvas {
   int px(double metres) const { return std::max(1, static_cast<int>(std::lround(metres * px_per_m))); }
 };
 
-void fill_rect(Canvas& c, const Eigen::Vector2f& centre, const Eigen::Vector2f& half, float yaw,
-               const cv::Scalar& fill, const cv::Scalar* outline) {
+void fill_rect(Canvas& c, const Eigen::Vector2f& centre, const Eigen::Vector2f& half, float yaw, const cv::Scalar& fill,
+               const cv::Scalar* outline) {
   const Eigen::Vector2f ax(std::cos(yaw), std::sin(yaw)), ay(-std::sin(yaw), std::cos(yaw));
   std::vector<cv::Point> pts;
   for (auto [sx, sy] : {std::pair{-1, -1}, {1, -1}, {1, 1}, {-1, 1}}) {
@@ -75,7 +75,9 @@ void draw_object(Canvas& c, const WorldObject& o, bool highlight) {
     case ObjectKind::kBush: cv::circle(c.img, p, c.px(0.9), kBush, cv::FILLED, cv::LINE_AA); break;
     case ObjectKind::kHedge: fill_rect(c, o.position, o.half_extents, o.yaw, kBush, nullptr); break;
     case ObjectKind::kWall:
-    case ObjectKind::kFence: fill_rect(c, o.position, o.half_extents + Eigen::Vector2f(0, 0.1f), o.yaw, kDark, nullptr); break;
+    case ObjectKind::kFence:
+      fill_rect(c, o.position, o.half_extents + Eigen::Vector2f(0, 0.1f), o.yaw, kDark, nullptr);
+      break;
     case ObjectKind::kCar: fill_rect(c, o.position, o.half_extents, o.yaw, highlight ? kNew : kCar, &kDark); break;
     case ObjectKind::kPedestrian: cv::circle(c.img, p, c.px(0.6), cv::Scalar(200, 0, 200), cv::FILLED); break;
     case ObjectKind::kStreetLamp: cv::circle(c.img, p, c.px(0.6), cv::Scalar(0, 215, 255), cv::FILLED); break;
@@ -103,21 +105,26 @@ void draw_traversal(Canvas& c, const Traversal& t, const cv::Scalar& colour, int
 }
 
 void draw_legend(Canvas& c, bool second) {
-  struct Item { const char* text; cv::Scalar colour; };
-  std::vector<Item> items = {{"traversal 00 (map)", kFirst}, {"building", kBuilding}, {"tree", kTree},
-                             {"parked car", kCar}, {"street lamp", cv::Scalar(0, 215, 255)},
-                             {"sign", cv::Scalar(0, 0, 220)}};
+  struct Item {
+    const char* text;
+    cv::Scalar colour;
+  };
+  std::vector<Item> items = {
+      {"traversal 00 (map)", kFirst},           {"building", kBuilding},        {"tree", kTree}, {"parked car", kCar},
+      {"street lamp", cv::Scalar(0, 215, 255)}, {"sign", cv::Scalar(0, 0, 220)}};
   if (second) {
     items.insert(items.begin() + 1, {"traversal 01 (revisit)", kSecond});
     items.push_back({"car new in 01", cv::Scalar(0, 165, 255)});
     items.push_back({"pedestrian (01)", cv::Scalar(200, 0, 200)});
   }
   const int x0 = 10, y0 = 10, h = 22;
-  cv::rectangle(c.img, {x0, y0}, {x0 + 240, y0 + 12 + h * static_cast<int>(items.size())}, cv::Scalar(255, 255, 255), cv::FILLED);
+  cv::rectangle(c.img, {x0, y0}, {x0 + 240, y0 + 12 + h * static_cast<int>(items.size())}, cv::Scalar(255, 255, 255),
+                cv::FILLED);
   for (size_t k = 0; k < items.size(); ++k) {
     const int y = y0 + 8 + h * static_cast<int>(k);
     cv::rectangle(c.img, {x0 + 8, y}, {x0 + 24, y + 14}, items[k].colour, cv::FILLED);
-    cv::putText(c.img, items[k].text, {x0 + 32, y + 13}, cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
+    cv::putText(c.img, items[k].text, {x0 + 32, y + 13}, cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 1,
+                cv::LINE_AA);
   }
   // Scale bar: 100 m.
   const int len = c.px(100.0), yb = c.img.rows - 20;
@@ -156,8 +163,8 @@ cv::Scalar class_colour(uint16_t cls) {
 
 }  // namespace
 
-void write_world_png(const std::string& path, const World& world, const World* changed,
-                     const Traversal& first, const Traversal* second) {
+void write_world_png(const std::string& path, const World& world, const World* changed, const Traversal& first,
+                     const Traversal* second) {
   Canvas c;
   c.bounds = world.bounds;
   c.px_per_m = std::min(4.0, 2400.0 / world.bounds.sizes().maxCoeff());
@@ -189,7 +196,7 @@ cv::Mat spinning_range_image(const SimulatedScan& scan, const LidarModel& model)
   std::vector<int> row_of_beam(beams);
   for (int b = 0; b < beams; ++b)
     row_of_beam[b] = static_cast<int>(std::count_if(model.elevations_deg.begin(), model.elevations_deg.end(),
-                                                     [&](float e) { return e > model.elevations_deg[b]; }));
+                                                    [&](float e) { return e > model.elevations_deg[b]; }));
   for (const auto& p : scan.points) {
     const double r = std::sqrt(p.x * p.x + p.y * p.y + p.z * p.z);
     const double az = std::atan2(p.y, p.x), el = std::asin(p.z / std::max(r, 1e-6)) * 180.0 / M_PI;
@@ -209,7 +216,8 @@ cv::Mat spinning_range_image(const SimulatedScan& scan, const LidarModel& model)
 cv::Mat rosette_range_image(const SimulatedScan& scan, const LidarModel& model) {
   constexpr double kCellDeg = 0.25;
   const double half_h = 0.5 * model.rosette.fov_horizontal_deg, half_v = 0.5 * model.rosette.fov_vertical_deg;
-  const int cols = static_cast<int>(std::ceil(2 * half_h / kCellDeg)), rows = static_cast<int>(std::ceil(2 * half_v / kCellDeg));
+  const int cols = static_cast<int>(std::ceil(2 * half_h / kCellDeg)),
+            rows = static_cast<int>(std::ceil(2 * half_v / kCellDeg));
   cv::Mat range(rows, cols, CV_8UC1, cv::Scalar(0));
   for (const auto& p : scan.points) {
     const double r = std::sqrt(p.x * p.x + p.y * p.y + p.z * p.z);
@@ -252,19 +260,27 @@ void write_scan_png(const std::string& path, const SimulatedScan& scan, const Li
     }
   }
   cv::circle(top, {bev / 2, bev / 2}, 4, cv::Scalar(255, 255, 255), cv::FILLED);
-  const std::pair<const char*, uint16_t> legend[] = {
-      {"road", semantic::kRoad}, {"sidewalk", semantic::kSidewalk}, {"terrain", semantic::kTerrain},
-      {"building", semantic::kBuilding}, {"vegetation", semantic::kVegetation}, {"trunk", semantic::kTrunk},
-      {"pole", semantic::kPole}, {"traffic sign", semantic::kTrafficSign}, {"car", semantic::kCar},
-      {"person", semantic::kPerson}, {"fence", semantic::kFence}, {"wall", semantic::kOtherStructure}};
+  const std::pair<const char*, uint16_t> legend[] = {{"road", semantic::kRoad},
+                                                     {"sidewalk", semantic::kSidewalk},
+                                                     {"terrain", semantic::kTerrain},
+                                                     {"building", semantic::kBuilding},
+                                                     {"vegetation", semantic::kVegetation},
+                                                     {"trunk", semantic::kTrunk},
+                                                     {"pole", semantic::kPole},
+                                                     {"traffic sign", semantic::kTrafficSign},
+                                                     {"car", semantic::kCar},
+                                                     {"person", semantic::kPerson},
+                                                     {"fence", semantic::kFence},
+                                                     {"wall", semantic::kOtherStructure}};
   int y = title_h + range_h + 30;
   for (const auto& [name, cls] : legend) {
     cv::rectangle(img, {bev + 30, y - 14}, {bev + 50, y + 4}, class_colour(cls), cv::FILLED);
     cv::putText(img, name, {bev + 60, y}, cv::FONT_HERSHEY_SIMPLEX, 0.6, cv::Scalar(230, 230, 230), 1, cv::LINE_AA);
     y += 28;
   }
-  cv::putText(img, rosette ? "top: front view (near = red, far = blue); left: bird's-eye view 100 m x 100 m, forward = up"
-                          : "top: range image (near = red, far = blue); left: bird's-eye view 100 m x 100 m, forward = up",
+  cv::putText(img,
+              rosette ? "top: front view (near = red, far = blue); left: bird's-eye view 100 m x 100 m, forward = up"
+                      : "top: range image (near = red, far = blue); left: bird's-eye view 100 m x 100 m, forward = up",
               {bev + 30, y + 20}, cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(200, 200, 200), 1, cv::LINE_AA);
   cv::putText(img, title, {10, 21}, cv::FONT_HERSHEY_SIMPLEX, 0.65, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
   write_png(path, img);

@@ -4,8 +4,8 @@
 
 namespace segmatch::sim {
 
-Primitive Primitive::box(const Eigen::Vector3f& centre, const Eigen::Vector3f& half_extents,
-                         float yaw, uint32_t label, float reflectivity) {
+Primitive Primitive::box(const Eigen::Vector3f& centre, const Eigen::Vector3f& half_extents, float yaw, uint32_t label,
+                         float reflectivity) {
   Primitive p;
   p.shape = Shape::kBox;
   p.a = centre;
@@ -16,8 +16,8 @@ Primitive Primitive::box(const Eigen::Vector3f& centre, const Eigen::Vector3f& h
   return p;
 }
 
-Primitive Primitive::cylinder(const Eigen::Vector3f& base_centre, float radius, float height,
-                              uint32_t label, float reflectivity) {
+Primitive Primitive::cylinder(const Eigen::Vector3f& base_centre, float radius, float height, uint32_t label,
+                              float reflectivity) {
   Primitive p;
   p.shape = Shape::kCylinder;
   p.a = base_centre;
@@ -27,8 +27,8 @@ Primitive Primitive::cylinder(const Eigen::Vector3f& base_centre, float radius, 
   return p;
 }
 
-Primitive Primitive::ellipsoid(const Eigen::Vector3f& centre, const Eigen::Vector3f& semi_axes,
-                               uint32_t label, float reflectivity) {
+Primitive Primitive::ellipsoid(const Eigen::Vector3f& centre, const Eigen::Vector3f& semi_axes, uint32_t label,
+                               float reflectivity) {
   Primitive p;
   p.shape = Shape::kEllipsoid;
   p.a = centre;
@@ -38,8 +38,8 @@ Primitive Primitive::ellipsoid(const Eigen::Vector3f& centre, const Eigen::Vecto
   return p;
 }
 
-Primitive Primitive::triangle(const Eigen::Vector3f& v0, const Eigen::Vector3f& v1,
-                              const Eigen::Vector3f& v2, uint32_t label, float reflectivity) {
+Primitive Primitive::triangle(const Eigen::Vector3f& v0, const Eigen::Vector3f& v1, const Eigen::Vector3f& v2,
+                              uint32_t label, float reflectivity) {
   Primitive p;
   p.shape = Shape::kTriangle;
   p.a = v0;

@@ -33,8 +33,8 @@ double route_length(const StreetGraph& g, const Route& r) {
 // Random walk that never turns back; weight(cur, next) scores each continuation and
 // `used` counts how often each edge was driven so far (updated here).
 template <typename WeightFn>
-Route walk(const StreetGraph& g, int start, int prev, double length_m, Rng& rng,
-           std::map<int, int>& used, WeightFn&& weight) {
+Route walk(const StreetGraph& g, int start, int prev, double length_m, Rng& rng, std::map<int, int>& used,
+           WeightFn&& weight) {
   Route r;
   r.nodes.push_back(start);
   double len = 0;
@@ -82,8 +82,8 @@ void add_straight(std::vector<PathSample>& out, const Vector2d& a, const Vector2
 }
 
 // Circular arc tangent to direction d_in at `start`, turning by `angle` (left positive).
-Vector2d add_arc(std::vector<PathSample>& out, const Vector2d& start, const Vector2d& d_in,
-                 double radius, double angle, int leg) {
+Vector2d add_arc(std::vector<PathSample>& out, const Vector2d& start, const Vector2d& d_in, double radius, double angle,
+                 int leg) {
   const double side = angle > 0 ? 1.0 : -1.0;
   const Vector2d normal = side * Vector2d(-d_in.y(), d_in.x());
   const Vector2d centre = start + radius * normal;
@@ -127,8 +127,9 @@ std::vector<PathSample> lane_path(const World& world, const Route& route, const 
     add_straight(out, cursor, corner - tangent * dir[i - 1], static_cast<int>(i - 1));
     cursor = add_arc(out, corner - tangent * dir[i - 1], dir[i - 1], radius, angle, static_cast<int>(i - 1));
   }
-  const Vector2d end = g.nodes[route.nodes.back()] + (base.back() - g.nodes[route.nodes[legs - 1]]) -
-                       dir.back() * std::min(20.0, (g.nodes[route.nodes.back()] - g.nodes[route.nodes[legs - 1]]).norm() / 3);
+  const Vector2d end =
+      g.nodes[route.nodes.back()] + (base.back() - g.nodes[route.nodes[legs - 1]]) -
+      dir.back() * std::min(20.0, (g.nodes[route.nodes.back()] - g.nodes[route.nodes[legs - 1]]).norm() / 3);
   add_straight(out, cursor, end, static_cast<int>(legs - 1));
   out.push_back({end, out.back().heading, 0.0, static_cast<int>(legs - 1)});
   return out;
@@ -140,8 +141,10 @@ std::vector<double> speed_profile(const std::vector<PathSample>& path, const Dri
   for (size_t i = 0; i < path.size(); ++i)
     v[i] = path[i].curvature > 0 ? std::min(c.cruise_speed_mps, std::sqrt(c.max_lateral_accel_mps2 / path[i].curvature))
                                  : c.cruise_speed_mps;
-  for (size_t i = 1; i < v.size(); ++i) v[i] = std::min(v[i], std::sqrt(v[i - 1] * v[i - 1] + 2 * c.max_accel_mps2 * kStepM));
-  for (size_t i = v.size() - 1; i-- > 0;) v[i] = std::min(v[i], std::sqrt(v[i + 1] * v[i + 1] + 2 * c.max_accel_mps2 * kStepM));
+  for (size_t i = 1; i < v.size(); ++i)
+    v[i] = std::min(v[i], std::sqrt(v[i - 1] * v[i - 1] + 2 * c.max_accel_mps2 * kStepM));
+  for (size_t i = v.size() - 1; i-- > 0;)
+    v[i] = std::min(v[i], std::sqrt(v[i + 1] * v[i + 1] + 2 * c.max_accel_mps2 * kStepM));
   return v;
 }
 
@@ -215,8 +218,7 @@ Route plan_revisit_route(const StreetGraph& g, const Route& first, double length
       (first_dir.count(key) ? same : first_dir.count(key ^ 1) ? opposite : fresh) += len;
     }
     const double total = route_length(g, r);
-    const double score = std::min(same, 0.35 * total) + std::min(opposite, 0.35 * total) +
-                         std::min(fresh, 0.2 * total);
+    const double score = std::min(same, 0.35 * total) + std::min(opposite, 0.35 * total) + std::min(fresh, 0.2 * total);
     if (score > best_score) {
       best_score = score;
       best = r;
@@ -269,7 +271,8 @@ std::vector<RevisitMatch> match_revisits(const Traversal& reference, const Trave
     if (m.reference_frame >= 0) {
       const Eigen::Vector3d a = revisit.T_world_lidar[i].linear().col(0);
       const Eigen::Vector3d b = reference.T_world_lidar[m.reference_frame].linear().col(0);
-      m.heading_diff_deg = std::acos(std::clamp(a.head<2>().normalized().dot(b.head<2>().normalized()), -1.0, 1.0)) * 180.0 / M_PI;
+      m.heading_diff_deg =
+          std::acos(std::clamp(a.head<2>().normalized().dot(b.head<2>().normalized()), -1.0, 1.0)) * 180.0 / M_PI;
     }
     out.push_back(m);
   }

@@ -82,8 +82,8 @@ Scene World::scene() const {
 }
 
 size_t World::count(ObjectKind kind) const {
-  return static_cast<size_t>(std::count_if(objects.begin(), objects.end(),
-                                           [kind](const WorldObject& o) { return o.kind == kind; }));
+  return static_cast<size_t>(
+      std::count_if(objects.begin(), objects.end(), [kind](const WorldObject& o) { return o.kind == kind; }));
 }
 
 uint16_t World::allocate_instance() {
@@ -96,8 +96,8 @@ namespace detail {
 namespace {
 
 // Street lines along one axis: centre positions and widths, blocks of random size between.
-void layout_lines(const WorldConfig& c, Rng& rng, int blocks, std::vector<double>& pos,
-                  std::vector<double>& width, std::vector<int>& lanes) {
+void layout_lines(const WorldConfig& c, Rng& rng, int blocks, std::vector<double>& pos, std::vector<double>& width,
+                  std::vector<int>& lanes) {
   for (int i = 0; i <= blocks; ++i) {
     const int l = rng.bernoulli(c.wide_street_fraction) ? 2 : 1;
     lanes.push_back(l);
@@ -179,10 +179,10 @@ void build_block_ground(World& w, const Block& blk) {
   const float kerb = w.config.kerb_height_m;
   const double swl = blk.street[kLeft] ? sw : 0, swr = blk.street[kRight] ? sw : 0;
   const double swb = blk.street[kBottom] ? sw : 0, swt = blk.street[kTop] ? sw : 0;
-  const auto xs = subdivide(blk.box.min().x(), blk.box.max().x(),
-                            {blk.box.min().x() + swl, blk.box.max().x() - swr}, cell);
-  const auto ys = subdivide(blk.box.min().y(), blk.box.max().y(),
-                            {blk.box.min().y() + swb, blk.box.max().y() - swt}, cell);
+  const auto xs =
+      subdivide(blk.box.min().x(), blk.box.max().x(), {blk.box.min().x() + swl, blk.box.max().x() - swr}, cell);
+  const auto ys =
+      subdivide(blk.box.min().y(), blk.box.max().y(), {blk.box.min().y() + swb, blk.box.max().y() - swt}, cell);
   auto vertex = [&](double x, double y) {
     return Eigen::Vector3f(float(x), float(y), float(w.road_height(x, y)) + kerb);
   };
@@ -192,9 +192,8 @@ void build_block_ground(World& w, const Block& blk) {
       const bool sidewalk = cx < blk.box.min().x() + swl || cx > blk.box.max().x() - swr ||
                             cy < blk.box.min().y() + swb || cy > blk.box.max().y() - swt;
       const uint32_t label = encode_label(sidewalk ? semantic::kSidewalk : semantic::kTerrain, 0);
-      add_quad(w.ground, vertex(xs[i], ys[j]), vertex(xs[i + 1], ys[j]),
-               vertex(xs[i + 1], ys[j + 1]), vertex(xs[i], ys[j + 1]), label,
-               sidewalk ? 0.3f : 0.2f);
+      add_quad(w.ground, vertex(xs[i], ys[j]), vertex(xs[i + 1], ys[j]), vertex(xs[i + 1], ys[j + 1]),
+               vertex(xs[i], ys[j + 1]), label, sidewalk ? 0.3f : 0.2f);
     }
   }
   // Kerb faces: the vertical step from the road up to the sidewalk.
@@ -205,8 +204,8 @@ void build_block_ground(World& w, const Block& blk) {
       const Eigen::Vector2f a = side.at(side.length_m * k / n, 0);
       const Eigen::Vector2f c = side.at(side.length_m * (k + 1) / n, 0);
       const float za = float(w.road_height(a.x(), a.y())), zc = float(w.road_height(c.x(), c.y()));
-      add_quad(w.ground, {a.x(), a.y(), za}, {c.x(), c.y(), zc}, {c.x(), c.y(), zc + kerb},
-               {a.x(), a.y(), za + kerb}, kerb_label, 0.35f);
+      add_quad(w.ground, {a.x(), a.y(), za}, {c.x(), c.y(), zc}, {c.x(), c.y(), zc + kerb}, {a.x(), a.y(), za + kerb},
+               kerb_label, 0.35f);
     }
   }
 }

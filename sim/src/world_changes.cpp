@@ -51,8 +51,8 @@ void change_cars(World& w, Rng& rng, const ChangeConfig& c) {
       const Vector2f fwd(std::cos(o.yaw), std::sin(o.yaw));
       const float shift = static_cast<float>(rng.uniform(1.5, 6.0)) * (rng.bernoulli(0.5) ? 1.f : -1.f);
       const Vector2f p = o.position + shift * fwd;
-      const float dz = static_cast<float>(w.surface_height(p.x(), p.y()) -
-                                          w.surface_height(o.position.x(), o.position.y()));
+      const float dz =
+          static_cast<float>(w.surface_height(p.x(), p.y()) - w.surface_height(o.position.x(), o.position.y()));
       translate(o, Eigen::Vector3f(shift * fwd.x(), shift * fwd.y(), dz));
       relabel(o, w.allocate_instance());
     }

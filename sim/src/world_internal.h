@@ -17,10 +17,10 @@ enum Side { kLeft = 0, kRight = 1, kBottom = 2, kTop = 3 };
 
 // A block: the area between four street lines (or a street line and the world's edge).
 struct Block {
-  Eigen::AlignedBox2d box;                // kerb to kerb
-  std::array<bool, 4> street{};           // which sides face a street (by Side)
-  std::array<int, 4> line_ids{};          // grid line index of each side (left, right, bottom, top)
-  bool outer = false;                     // in the ring beyond the outermost streets
+  Eigen::AlignedBox2d box;        // kerb to kerb
+  std::array<bool, 4> street{};   // which sides face a street (by Side)
+  std::array<int, 4> line_ids{};  // grid line index of each side (left, right, bottom, top)
+  bool outer = false;             // in the ring beyond the outermost streets
 };
 
 std::vector<Block> make_blocks(const World& w);

@@ -14,8 +14,8 @@ using Eigen::Vector3f;
 
 Vector3f lift(const Vector2f& p, float z) { return {p.x(), p.y(), z}; }
 
-WorldObject start_object(ObjectKind kind, uint16_t instance, const Vector2f& p,
-                         const Vector2f& half, float yaw, float height) {
+WorldObject start_object(ObjectKind kind, uint16_t instance, const Vector2f& p, const Vector2f& half, float yaw,
+                         float height) {
   WorldObject o;
   o.kind = kind;
   o.instance = instance;
@@ -27,11 +27,10 @@ WorldObject start_object(ObjectKind kind, uint16_t instance, const Vector2f& p,
 }
 
 // Box given in a side's local frame: s, o of its centre, half sizes along/inward, z range.
-Primitive side_box(const SideFrame& side, float s, float o, float half_s, float half_o,
-                   float z0, float z1, uint32_t label, float refl) {
+Primitive side_box(const SideFrame& side, float s, float o, float half_s, float half_o, float z0, float z1,
+                   uint32_t label, float refl) {
   const Vector2f c = side.at(s, o);
-  return Primitive::box(lift(c, 0.5f * (z0 + z1)), {half_s, half_o, 0.5f * (z1 - z0)},
-                        side.yaw(), label, refl);
+  return Primitive::box(lift(c, 0.5f * (z0 + z1)), {half_s, half_o, 0.5f * (z1 - z0)}, side.yaw(), label, refl);
 }
 
 }  // namespace
@@ -43,14 +42,14 @@ float car_length(int model) {
   return kLength[model % kCarModels];
 }
 
-WorldObject make_building(PartBuilder& b, const SideFrame& side, float s0, float o0, float width,
-                          float depth, float height) {
+WorldObject make_building(PartBuilder& b, const SideFrame& side, float s0, float o0, float width, float depth,
+                          float height) {
   Rng& rng = b.rng;
   const uint32_t label = encode_label(semantic::kBuilding, b.instance);
   const float refl = static_cast<float>(rng.uniform(0.25, 0.7));
   const Vector2f centre2 = side.at(s0 + 0.5f * width, o0 + 0.5f * depth);
-  WorldObject obj = start_object(ObjectKind::kBuilding, b.instance, centre2,
-                                 {0.5f * width, 0.5f * depth}, side.yaw(), height);
+  WorldObject obj =
+      start_object(ObjectKind::kBuilding, b.instance, centre2, {0.5f * width, 0.5f * depth}, side.yaw(), height);
   // Seat the building on the lowest corner so no gap shows on a slope.
   float zmin = 1e9f;
   for (float fs : {0.0f, 1.0f})
@@ -62,18 +61,16 @@ WorldObject make_building(PartBuilder& b, const SideFrame& side, float s0, float
   const float sc = s0 + 0.5f * width;
   // Main mass, recessed by `relief` behind the facade plane at o0.
   if (arcade) {
-    obj.parts.push_back(side_box(side, sc, o0 + 0.5f * depth, 0.5f * width, 0.5f * depth,
-                                 z0 + arcade_height, z0 + height, label, refl));
-    obj.parts.push_back(side_box(side, sc, o0 + arcade_depth + 0.5f * (depth - arcade_depth),
-                                 0.5f * width, 0.5f * (depth - arcade_depth), z0, z0 + arcade_height,
-                                 label, refl));
+    obj.parts.push_back(side_box(side, sc, o0 + 0.5f * depth, 0.5f * width, 0.5f * depth, z0 + arcade_height,
+                                 z0 + height, label, refl));
+    obj.parts.push_back(side_box(side, sc, o0 + arcade_depth + 0.5f * (depth - arcade_depth), 0.5f * width,
+                                 0.5f * (depth - arcade_depth), z0, z0 + arcade_height, label, refl));
     for (float s = s0 + 0.6f; s < s0 + width - 0.3f; s += 4.0f) {
-      obj.parts.push_back(Primitive::cylinder(lift(side.at(s, o0 + 0.4f), z0), 0.25f,
-                                              arcade_height, label, refl));
+      obj.parts.push_back(Primitive::cylinder(lift(side.at(s, o0 + 0.4f), z0), 0.25f, arcade_height, label, refl));
     }
   } else {
-    obj.parts.push_back(side_box(side, sc, o0 + relief + 0.5f * (depth - relief), 0.5f * width,
-                                 0.5f * (depth - relief), z0, z0 + height, label, refl));
+    obj.parts.push_back(side_box(side, sc, o0 + relief + 0.5f * (depth - relief), 0.5f * width, 0.5f * (depth - relief),
+                                 z0, z0 + height, label, refl));
   }
   // Facade relief: floor bands and pilasters at the facade plane leave recessed windows.
   const float floor_h = static_cast<float>(rng.uniform(2.9, 3.6));
@@ -82,8 +79,7 @@ WorldObject make_building(PartBuilder& b, const SideFrame& side, float s0, float
   const float facade_z0 = arcade ? z0 + arcade_height : z0;
   const float o_band = o0 + 0.5f * relief;
   for (float z = facade_z0 + floor_h; z < z0 + height - 0.5f; z += floor_h) {
-    obj.parts.push_back(side_box(side, sc, o_band, 0.5f * width, 0.5f * relief, z - 0.35f,
-                                 z + 0.35f, label, refl));
+    obj.parts.push_back(side_box(side, sc, o_band, 0.5f * width, 0.5f * relief, z - 0.35f, z + 0.35f, label, refl));
   }
   const int bays = std::max(1, static_cast<int>(width / bay));
   const float bay_w = width / bays;
@@ -91,13 +87,12 @@ WorldObject make_building(PartBuilder& b, const SideFrame& side, float s0, float
   for (int i = 0; i <= bays; ++i) {
     const float s = std::clamp(s0 + i * bay_w, s0 + 0.5f * pilaster, s0 + width - 0.5f * pilaster);
     const bool by_door = !arcade && (i == door_bay || i == door_bay + 1);
-    obj.parts.push_back(side_box(side, s, o_band, 0.5f * pilaster, 0.5f * relief,
-                                 by_door ? z0 : facade_z0 + 0.9f, z0 + height, label, refl));
+    obj.parts.push_back(side_box(side, s, o_band, 0.5f * pilaster, 0.5f * relief, by_door ? z0 : facade_z0 + 0.9f,
+                                 z0 + height, label, refl));
   }
   // Ground-floor plinth under the windows (absent at the door).
   if (!arcade) {
-    obj.parts.push_back(side_box(side, sc, o_band, 0.5f * width, 0.5f * relief, z0,
-                                 zmin + 0.9f, label, refl));
+    obj.parts.push_back(side_box(side, sc, o_band, 0.5f * width, 0.5f * relief, z0, zmin + 0.9f, label, refl));
   }
   // Balconies: slab and railing in front of every other bay of the upper floors.
   if (rng.bernoulli(0.4) && height > 7.0f) {
@@ -106,10 +101,9 @@ WorldObject make_building(PartBuilder& b, const SideFrame& side, float s0, float
       for (int i = (door_bay % 2); i < bays; i += 2) {
         const float s = s0 + (i + 0.5f) * bay_w;
         const float half = 0.5f * (bay_w - pilaster) + 0.3f;
-        obj.parts.push_back(side_box(side, s, o0 - 0.5f * depth_b, half, 0.5f * depth_b, z - 0.1f,
-                                     z + 0.08f, label, refl));
-        obj.parts.push_back(side_box(side, s, o0 - depth_b + 0.03f, half, 0.03f, z + 0.08f,
-                                     z + 1.05f, label, refl));
+        obj.parts.push_back(
+            side_box(side, s, o0 - 0.5f * depth_b, half, 0.5f * depth_b, z - 0.1f, z + 0.08f, label, refl));
+        obj.parts.push_back(side_box(side, s, o0 - depth_b + 0.03f, half, 0.03f, z + 0.08f, z + 1.05f, label, refl));
       }
     }
   }
@@ -119,8 +113,8 @@ WorldObject make_building(PartBuilder& b, const SideFrame& side, float s0, float
     const float wd = static_cast<float>(rng.uniform(4.0, 9.0));
     const float hs = height * static_cast<float>(rng.uniform(0.5, 1.3));
     const float ss = s0 + static_cast<float>(rng.uniform(0.0, width - ws));
-    obj.parts.push_back(side_box(side, ss + 0.5f * ws, o0 + depth + 0.5f * wd - 0.5f, 0.5f * ws,
-                                 0.5f * wd, z0, z0 + hs, label, refl));
+    obj.parts.push_back(
+        side_box(side, ss + 0.5f * ws, o0 + depth + 0.5f * wd - 0.5f, 0.5f * ws, 0.5f * wd, z0, z0 + hs, label, refl));
   }
   return obj;
 }
@@ -156,9 +150,8 @@ void regrow_crown(WorldObject& tree, Rng& rng) {
                           static_cast<float>(rng.uniform(-0.5, 0.5)) * rx,
                           static_cast<float>(rng.uniform(-0.3, 0.4)) * rz);
     const float k = static_cast<float>(rng.uniform(0.55, 0.85));
-    tree.parts.push_back(Primitive::ellipsoid(centre + offset,
-                                              {k * rx, k * rx * static_cast<float>(rng.uniform(0.8, 1.2)), k * rz},
-                                              label, 0.45f));
+    tree.parts.push_back(Primitive::ellipsoid(
+        centre + offset, {k * rx, k * rx * static_cast<float>(rng.uniform(0.8, 1.2)), k * rz}, label, 0.45f));
   }
   tree.half_extents = {rx, rx};
   tree.height_m = centre.z() + rz - base.z();
@@ -172,8 +165,8 @@ WorldObject make_bush(PartBuilder& b, const Vector2f& p) {
   const int lobes = rng.uniform_int(1, 3);
   for (int i = 0; i < lobes; ++i) {
     const float r = static_cast<float>(rng.uniform(0.4, 0.9));
-    const Vector2f q = p + Vector2f(static_cast<float>(rng.uniform(-0.6, 0.6)),
-                                    static_cast<float>(rng.uniform(-0.6, 0.6)));
+    const Vector2f q =
+        p + Vector2f(static_cast<float>(rng.uniform(-0.6, 0.6)), static_cast<float>(rng.uniform(-0.6, 0.6)));
     obj.parts.push_back(Primitive::ellipsoid(lift(q, z + 0.6f * r), {r, r, 0.8f * r}, label, 0.45f));
   }
   return obj;
@@ -182,8 +175,8 @@ WorldObject make_bush(PartBuilder& b, const Vector2f& p) {
 WorldObject make_hedge(PartBuilder& b, const SideFrame& side, float s0, float s1, float o) {
   Rng& rng = b.rng;
   const uint32_t label = encode_label(semantic::kVegetation, b.instance);
-  WorldObject obj = start_object(ObjectKind::kHedge, b.instance, side.at(0.5f * (s0 + s1), o),
-                                 {0.5f * (s1 - s0), 0.5f}, side.yaw(), 1.5f);
+  WorldObject obj = start_object(ObjectKind::kHedge, b.instance, side.at(0.5f * (s0 + s1), o), {0.5f * (s1 - s0), 0.5f},
+                                 side.yaw(), 1.5f);
   const float h = static_cast<float>(rng.uniform(0.9, 1.8));
   // Irregular top and thickness: short pieces of slightly different size.
   for (float s = s0; s < s1 - 0.5f;) {
@@ -191,8 +184,7 @@ WorldObject make_hedge(PartBuilder& b, const SideFrame& side, float s0, float s1
     const float z = b.ground(side.at(s + 0.5f * len, o));
     const float hh = h + static_cast<float>(rng.uniform(-0.15, 0.15));
     const float th = static_cast<float>(rng.uniform(0.35, 0.55));
-    obj.parts.push_back(side_box(side, s + 0.5f * len, o, 0.5f * len + 0.1f, th, z - 0.2f, z + hh,
-                                 label, 0.45f));
+    obj.parts.push_back(side_box(side, s + 0.5f * len, o, 0.5f * len + 0.1f, th, z - 0.2f, z + hh, label, 0.45f));
     s += len;
   }
   return obj;
@@ -202,10 +194,9 @@ WorldObject make_wall(PartBuilder& b, const SideFrame& side, float s0, float s1,
   const uint32_t label = encode_label(semantic::kOtherStructure, b.instance);
   const float h = static_cast<float>(b.rng.uniform(0.8, 2.4));
   const float z = std::min(b.ground(side.at(s0, o)), b.ground(side.at(s1, o)));
-  WorldObject obj = start_object(ObjectKind::kWall, b.instance, side.at(0.5f * (s0 + s1), o),
-                                 {0.5f * (s1 - s0), 0.15f}, side.yaw(), h);
-  obj.parts.push_back(side_box(side, 0.5f * (s0 + s1), o, 0.5f * (s1 - s0), 0.15f, z - 0.3f,
-                               z + h, label, 0.6f));
+  WorldObject obj = start_object(ObjectKind::kWall, b.instance, side.at(0.5f * (s0 + s1), o), {0.5f * (s1 - s0), 0.15f},
+                                 side.yaw(), h);
+  obj.parts.push_back(side_box(side, 0.5f * (s0 + s1), o, 0.5f * (s1 - s0), 0.15f, z - 0.3f, z + h, label, 0.6f));
   return obj;
 }
 
@@ -221,8 +212,8 @@ WorldObject make_fence(PartBuilder& b, const SideFrame& side, float s0, float s1
     obj.parts.push_back(side_box(side, s, o, 0.05f, 0.05f, zp - 0.2f, zp + h, label, 0.7f));
   }
   for (float frac : {0.35f, 0.9f}) {
-    obj.parts.push_back(side_box(side, 0.5f * (s0 + s1), o, 0.5f * (s1 - s0), 0.02f,
-                                 z + frac * h - 0.06f, z + frac * h + 0.06f, label, 0.7f));
+    obj.parts.push_back(side_box(side, 0.5f * (s0 + s1), o, 0.5f * (s1 - s0), 0.02f, z + frac * h - 0.06f,
+                                 z + frac * h + 0.06f, label, 0.7f));
   }
   return obj;
 }
@@ -230,16 +221,15 @@ WorldObject make_fence(PartBuilder& b, const SideFrame& side, float s0, float s1
 WorldObject make_street_lamp(PartBuilder& b, const Vector2f& p, float yaw_to_road, float height) {
   const uint32_t label = encode_label(semantic::kPole, b.instance);
   const float z = b.ground(p);
-  WorldObject obj = start_object(ObjectKind::kStreetLamp, b.instance, p, {0.15f, 0.15f},
-                                 yaw_to_road, height);
+  WorldObject obj = start_object(ObjectKind::kStreetLamp, b.instance, p, {0.15f, 0.15f}, yaw_to_road, height);
   obj.parts.push_back(Primitive::cylinder(lift(p, z - 0.2f), 0.11f, height + 0.2f, label, 0.8f));
   obj.parts.push_back(Primitive::cylinder(lift(p, z - 0.2f), 0.2f, 0.9f, label, 0.8f));  // foot
   const Vector2f dir(std::cos(yaw_to_road), std::sin(yaw_to_road));
   const float arm = 1.6f;
-  obj.parts.push_back(Primitive::box(lift(p + 0.5f * arm * dir, z + height - 0.1f),
-                                     {0.5f * arm, 0.05f, 0.05f}, yaw_to_road, label, 0.8f));
-  obj.parts.push_back(Primitive::box(lift(p + arm * dir, z + height - 0.25f), {0.35f, 0.15f, 0.1f},
-                                     yaw_to_road, label, 0.9f));
+  obj.parts.push_back(Primitive::box(lift(p + 0.5f * arm * dir, z + height - 0.1f), {0.5f * arm, 0.05f, 0.05f},
+                                     yaw_to_road, label, 0.8f));
+  obj.parts.push_back(
+      Primitive::box(lift(p + arm * dir, z + height - 0.25f), {0.35f, 0.15f, 0.1f}, yaw_to_road, label, 0.9f));
   return obj;
 }
 
@@ -261,14 +251,13 @@ WorldObject make_sign(PartBuilder& b, const Vector2f& p, float yaw_to_road) {
   const float z = b.ground(p);
   const float h = static_cast<float>(b.rng.uniform(2.0, 3.0));
   WorldObject obj = start_object(ObjectKind::kSign, b.instance, p, {0.4f, 0.1f}, yaw_to_road, h);
-  obj.parts.push_back(Primitive::cylinder(lift(p, z - 0.2f), 0.04f, h + 0.2f,
-                                          encode_label(semantic::kPole, b.instance), 0.6f));
+  obj.parts.push_back(
+      Primitive::cylinder(lift(p, z - 0.2f), 0.04f, h + 0.2f, encode_label(semantic::kPole, b.instance), 0.6f));
   const float w = static_cast<float>(b.rng.uniform(0.5, 0.9));
   const float ph = static_cast<float>(b.rng.uniform(0.5, 0.9));
   // The plate faces the road: its thin axis points along yaw_to_road.
-  obj.parts.push_back(Primitive::box(lift(p, z + h - 0.5f * ph), {0.03f, 0.5f * w, 0.5f * ph},
-                                     yaw_to_road, encode_label(semantic::kTrafficSign, b.instance),
-                                     0.95f));
+  obj.parts.push_back(Primitive::box(lift(p, z + h - 0.5f * ph), {0.03f, 0.5f * w, 0.5f * ph}, yaw_to_road,
+                                     encode_label(semantic::kTrafficSign, b.instance), 0.95f));
   return obj;
 }
 
@@ -284,9 +273,11 @@ WorldObject make_bench(PartBuilder& b, const Vector2f& p, float yaw) {
 
 WorldObject make_car(PartBuilder& b, const Vector2f& p, float yaw, int model) {
   // length, width, body top, roof height, cabin length fraction
-  static const float kModel[kCarModels][4] = {
-      {1.65f, 0.95f, 1.45f, 0.55f}, {1.75f, 1.0f, 1.45f, 0.6f}, {1.8f, 1.0f, 1.45f, 0.55f},
-      {1.9f, 1.05f, 1.75f, 0.6f},  {2.0f, 1.2f, 2.2f, 0.85f}};
+  static const float kModel[kCarModels][4] = {{1.65f, 0.95f, 1.45f, 0.55f},
+                                              {1.75f, 1.0f, 1.45f, 0.6f},
+                                              {1.8f, 1.0f, 1.45f, 0.55f},
+                                              {1.9f, 1.05f, 1.75f, 0.6f},
+                                              {2.0f, 1.2f, 2.2f, 0.85f}};
   const float* m = kModel[model % kCarModels];
   const float len = car_length(model), wid = m[0], body_top = m[1], roof = m[2], cabin = m[3];
   const uint32_t label = encode_label(semantic::kCar, b.instance);
@@ -298,8 +289,8 @@ WorldObject make_car(PartBuilder& b, const Vector2f& p, float yaw, int model) {
                                      {0.5f * len, 0.5f * wid, 0.5f * (body_top - 0.3f)}, yaw, label, refl));
   const Vector2f cabin_c = p - 0.08f * len * fwd;
   obj.parts.push_back(Primitive::box(lift(cabin_c, z + 0.5f * (body_top + roof)),
-                                     {0.5f * cabin * len, 0.5f * wid - 0.08f, 0.5f * (roof - body_top)},
-                                     yaw, label, 0.3f));
+                                     {0.5f * cabin * len, 0.5f * wid - 0.08f, 0.5f * (roof - body_top)}, yaw, label,
+                                     0.3f));
   const Vector2f side(-fwd.y(), fwd.x());
   for (float fs : {-0.33f, 0.33f})
     for (float ss : {-0.45f, 0.45f}) {

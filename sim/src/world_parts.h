@@ -27,21 +27,18 @@ struct PartBuilder {
   Rng& rng;
   uint16_t instance;
 
-  float ground(const Eigen::Vector2f& p) const {
-    return static_cast<float>(world.surface_height(p.x(), p.y()));
-  }
+  float ground(const Eigen::Vector2f& p) const { return static_cast<float>(world.surface_height(p.x(), p.y())); }
 };
 
 // Buildings: footprint w x d on a side at (s, o) (front-left corner along the side).
-WorldObject make_building(PartBuilder& b, const SideFrame& side, float s0, float o0, float width,
-                          float depth, float height);
+WorldObject make_building(PartBuilder& b, const SideFrame& side, float s0, float o0, float width, float depth,
+                          float height);
 WorldObject make_tree(PartBuilder& b, const Eigen::Vector2f& p, float scale);
 WorldObject make_bush(PartBuilder& b, const Eigen::Vector2f& p);
 WorldObject make_hedge(PartBuilder& b, const SideFrame& side, float s0, float s1, float o);
 WorldObject make_wall(PartBuilder& b, const SideFrame& side, float s0, float s1, float o);
 WorldObject make_fence(PartBuilder& b, const SideFrame& side, float s0, float s1, float o);
-WorldObject make_street_lamp(PartBuilder& b, const Eigen::Vector2f& p, float yaw_to_road,
-                             float height);
+WorldObject make_street_lamp(PartBuilder& b, const Eigen::Vector2f& p, float yaw_to_road, float height);
 WorldObject make_pole(PartBuilder& b, const Eigen::Vector2f& p);
 WorldObject make_sign(PartBuilder& b, const Eigen::Vector2f& p, float yaw_to_road);
 WorldObject make_bench(PartBuilder& b, const Eigen::Vector2f& p, float yaw);

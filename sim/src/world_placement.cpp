@@ -41,9 +41,9 @@ void add_boundary(World& w, Rng& rng, const SideFrame& side, float s0, float s1,
   if (s1 - s0 < 1.5f) return;
   PartBuilder b = builder(w, rng);
   const double r = rng.uniform();
-  w.objects.push_back(r < 0.45 ? make_hedge(b, side, s0, s1, o)
-                               : r < 0.75 ? make_wall(b, side, s0, s1, o)
-                                          : make_fence(b, side, s0, s1, o));
+  w.objects.push_back(r < 0.45   ? make_hedge(b, side, s0, s1, o)
+                      : r < 0.75 ? make_wall(b, side, s0, s1, o)
+                                 : make_fence(b, side, s0, s1, o));
 }
 
 // Furniture and street trees on the sidewalk of one side. The street's style (lamp design
@@ -101,8 +101,8 @@ void furnish_sidewalk(World& w, const Block& blk, const SideFrame& side, Rng& rn
   scatter(1.0f, 1.2f, [&](PartBuilder& b, float s) { return make_bench(b, side.at(s, sw - 0.5f), side.yaw()); });
 }
 
-void build_lots(World& w, const SideFrame& side, float a, float b_end, float depth_max,
-                Rng& rng, const std::pair<float, float>& heights) {
+void build_lots(World& w, const SideFrame& side, float a, float b_end, float depth_max, Rng& rng,
+                const std::pair<float, float>& heights) {
   const float sw = w.config.sidewalk_width_m;
   const float setback_base = rng.bernoulli(0.5) ? 0.0f : static_cast<float>(rng.uniform(0.5, 4.0));
   float s = a;

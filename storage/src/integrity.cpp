@@ -31,32 +31,28 @@ void sqlite_structure(const MapReader::Impl& impl, std::vector<std::string>* pro
   }
 }
 
-void expect_count(const std::string& what, int64_t found, uint64_t recorded,
-                  std::vector<std::string>* problems) {
+void expect_count(const std::string& what, int64_t found, uint64_t recorded, std::vector<std::string>* problems) {
   if (static_cast<uint64_t>(found) == recorded) return;
-  problems->push_back(what + ": map_info records " + std::to_string(recorded) +
-                      ", the file holds " + std::to_string(found));
+  problems->push_back(what + ": map_info records " + std::to_string(recorded) + ", the file holds " +
+                      std::to_string(found));
 }
 
 void counts(const MapReader::Impl& impl, std::vector<std::string>* problems) {
-  expect_count("segments", count(impl, "SELECT count(*) FROM segments"), impl.segment_count,
+  expect_count("segments", count(impl, "SELECT count(*) FROM segments"), impl.segment_count, problems);
+  expect_count("points", count(impl, "SELECT coalesce(sum(num_points), 0) FROM segments"), impl.point_count, problems);
+  expect_count("keyframes", count(impl, "SELECT count(*) FROM trajectory"), impl.keyframe_count, problems);
+  expect_count("spatial index entries", count(impl, "SELECT count(*) FROM segment_rtree"), impl.segment_count,
                problems);
-  expect_count("points", count(impl, "SELECT coalesce(sum(num_points), 0) FROM segments"),
-               impl.point_count, problems);
-  expect_count("keyframes", count(impl, "SELECT count(*) FROM trajectory"), impl.keyframe_count,
-               problems);
-  expect_count("spatial index entries", count(impl, "SELECT count(*) FROM segment_rtree"),
-               impl.segment_count, problems);
   if (impl.schema_version >= 2) {
     expect_count("point rows", count(impl, "SELECT count(*) FROM segment_points"), impl.segment_count, problems);
-    const int64_t strays = count(impl, "SELECT count(*) FROM segment_points WHERE row NOT IN (SELECT row FROM segments)");
+    const int64_t strays =
+        count(impl, "SELECT count(*) FROM segment_points WHERE row NOT IN (SELECT row FROM segments)");
     if (strays) problems->push_back(std::to_string(strays) + " point rows belong to no segment");
   }
-  const int64_t unindexed = count(
-      impl,
-      "SELECT count(*) FROM segments s LEFT JOIN segment_rtree r ON r.row = s.row "
-      "WHERE r.row IS NULL OR r.min_x != s.cx OR r.max_x != s.cx OR r.min_y != s.cy "
-      "OR r.max_y != s.cy OR r.min_z != s.cz OR r.max_z != s.cz");
+  const int64_t unindexed = count(impl,
+                                  "SELECT count(*) FROM segments s LEFT JOIN segment_rtree r ON r.row = s.row "
+                                  "WHERE r.row IS NULL OR r.min_x != s.cx OR r.max_x != s.cx OR r.min_y != s.cy "
+                                  "OR r.max_y != s.cy OR r.min_z != s.cz OR r.max_z != s.cz");
   if (unindexed) {
     problems->push_back(std::to_string(unindexed) +
                         " segments are missing from the spatial index or indexed elsewhere");
@@ -66,8 +62,7 @@ void counts(const MapReader::Impl& impl, std::vector<std::string>* problems) {
                                 "SELECT count(*) FROM segments WHERE keyframe IS NOT NULL AND "
                                 "keyframe NOT IN (SELECT keyframe FROM trajectory)");
   if (orphans) {
-    problems->push_back(std::to_string(orphans) +
-                        " segments name a keyframe that is not in the trajectory");
+    problems->push_back(std::to_string(orphans) + " segments name a keyframe that is not in the trajectory");
   }
 }
 
@@ -96,8 +91,7 @@ std::vector<std::string> check_integrity(const MapReader::Impl& impl) {
   std::vector<std::string> problems;
   // Each part runs even when another one failed: the report lists everything found.
   const std::function<void(const MapReader::Impl&, std::vector<std::string>*)> parts[] = {
-      sqlite_structure, counts, rows,
-      [](const MapReader::Impl& i, std::vector<std::string>*) { read_classifier(i); },
+      sqlite_structure, counts, rows, [](const MapReader::Impl& i, std::vector<std::string>*) { read_classifier(i); },
       [](const MapReader::Impl& i, std::vector<std::string>* p) { check_surfaces(i, kMaxRowProblems, p); }};
   for (const auto& part : parts) {
     try {

@@ -74,8 +74,7 @@ void append_segment(const Statement& st, int schema_version, const std::string& 
 // centroid as a point box (float32, so exactly the stored centroid); the cube query is
 // widened a little so that float rounding never loses a segment on its boundary, and the
 // exact test runs on the returned centroid.
-std::vector<int64_t> rows_near(const MapReader::Impl& impl, const Eigen::Vector3f& center,
-                               float radius) {
+std::vector<int64_t> rows_near(const MapReader::Impl& impl, const Eigen::Vector3f& center, float radius) {
   Statement st(impl.db.get(),
                "SELECT row, min_x, min_y, min_z FROM segment_rtree WHERE max_x >= ? AND "
                "min_x <= ? AND max_y >= ? AND min_y <= ? AND max_z >= ? AND min_z <= ?",
@@ -87,8 +86,7 @@ std::vector<int64_t> rows_near(const MapReader::Impl& impl, const Eigen::Vector3
   }
   std::vector<int64_t> rows;
   while (st.step()) {
-    const Eigen::Vector3f c(float(st.column_double(1)), float(st.column_double(2)),
-                            float(st.column_double(3)));
+    const Eigen::Vector3f c(float(st.column_double(1)), float(st.column_double(2)), float(st.column_double(3)));
     if ((c - center).squaredNorm() <= radius * radius) rows.push_back(st.column_int(0));
   }
   std::sort(rows.begin(), rows.end());
@@ -124,8 +122,8 @@ Connection open_read_only(const std::string& path) {
   // 2 GB limit Debian's build allows; larger files fall back to reads beyond it).
   // locking_mode EXCLUSIVE: the shared lock taken at the first read is kept, so a lazy point
   // read makes no lock, unlock and change-counter check of its own (system calls that were much
-  // of a read's time; docs/measurements.md, "Map size and storage"). Nothing ever writes a published map in place (writers
-  // rename a new file over it), so the lock holds nobody up.
+  // of a read's time; docs/measurements.md, "Map size and storage"). Nothing ever writes a published map in place
+  // (writers rename a new file over it), so the lock holds nobody up.
   exec(db.get(), "PRAGMA mmap_size = 2147418112; PRAGMA locking_mode = EXCLUSIVE", path);
   return db;
 }
@@ -140,8 +138,7 @@ bool open_connections(MapReader::Impl* impl) {
   impl->loaders.clear();
   for (unsigned i = 1; i < threads; ++i) impl->loaders.push_back(open_read_only(impl->path));
   struct stat after;
-  return ::stat(impl->path.c_str(), &after) == 0 && after.st_dev == before.device &&
-         after.st_ino == before.inode;
+  return ::stat(impl->path.c_str(), &after) == 0 && after.st_dev == before.device && after.st_ino == before.inode;
 }
 
 }  // namespace
@@ -234,9 +231,7 @@ PointCloud MapReader::surface_tile(int32_t tile_x, int32_t tile_y) const {
   return points;
 }
 
-std::vector<std::pair<int32_t, int32_t>> MapReader::surface_tile_keys() const {
-  return read_surface_tile_keys(*impl_);
-}
+std::vector<std::pair<int32_t, int32_t>> MapReader::surface_tile_keys() const { return read_surface_tile_keys(*impl_); }
 
 Segments MapReader::segments_near(const Eigen::Vector3f& center, float radius_m,
                                   std::vector<uint32_t>* keyframe_of_segment) const {
@@ -253,8 +248,8 @@ Segments MapReader::segments_near(const Eigen::Vector3f& center, float radius_m,
   for (int64_t row : rows) {
     st.bind_int(1, row);
     if (!st.step()) {
-      fail(impl_->path, "the map file is corrupted: the spatial index names segment row " +
-                            std::to_string(row) + ", which does not exist");
+      fail(impl_->path, "the map file is corrupted: the spatial index names segment row " + std::to_string(row) +
+                            ", which does not exist");
     }
     append_segment(st, impl_->schema_version, impl_->path, &segments, keyframe_of_segment);
     st.reset();
@@ -272,8 +267,7 @@ std::vector<Keyframe> MapReader::trajectory() const {
     Eigen::Matrix3d r;
     for (int i = 0; i < 9; ++i) r(i / 3, i % 3) = st.column_double(2 + i);
     k.T_map_sensor.linear() = r;
-    k.T_map_sensor.translation() << st.column_double(11), st.column_double(12),
-        st.column_double(13);
+    k.T_map_sensor.translation() << st.column_double(11), st.column_double(12), st.column_double(13);
     keyframes.push_back(k);
   }
   return keyframes;
@@ -289,17 +283,14 @@ MapStats MapReader::stats() const {
   stats.keyframes = keyframes.size();
   for (size_t i = 1; i < keyframes.size(); ++i) {
     stats.trajectory_length_m +=
-        (keyframes[i].T_map_sensor.translation() - keyframes[i - 1].T_map_sensor.translation())
-            .norm();
+        (keyframes[i].T_map_sensor.translation() - keyframes[i - 1].T_map_sensor.translation()).norm();
   }
   Statement st(impl_->db.get(), "SELECT count(*) FROM classifier", impl_->path);
   stats.has_classifier = st.step() && st.column_int(0) > 0;
   return stats;
 }
 
-std::vector<std::string> MapReader::check_integrity() const {
-  return detail::check_integrity(*impl_);
-}
+std::vector<std::string> MapReader::check_integrity() const { return detail::check_integrity(*impl_); }
 
 }  // namespace storage
 }  // namespace segmatch

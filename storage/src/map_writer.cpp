@@ -3,9 +3,9 @@
 #include "file_util.h"
 #include "packed_blobs.h"
 #include "reader_impl.h"
-#include "segment_rows.h"
 #include "schema.h"
 #include "segment_codec.h"
+#include "segment_rows.h"
 #include "sqlite_util.h"
 #include "surface_rows.h"
 
@@ -31,8 +31,7 @@ const char* const kInsertSegment =
     "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)";
 const char* const kInsertPoints = "INSERT INTO segment_points (row, checksum, points) VALUES (?, ?, ?)";
 const char* const kInsertRtree = "INSERT INTO segment_rtree VALUES (?, ?, ?, ?, ?, ?, ?)";
-const char* const kInsertKeyframe =
-    "INSERT INTO trajectory VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)";
+const char* const kInsertKeyframe = "INSERT INTO trajectory VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)";
 
 std::string now_utc_iso8601() {
   const std::time_t now = std::time(nullptr);
@@ -45,11 +44,9 @@ std::string now_utc_iso8601() {
 
 void validate(const MapMetadata& metadata) {
   if (metadata.eigen_dims != kEigenFeatureCount || metadata.esf_dims != kEsfBins) {
-    throw std::invalid_argument("MapWriter: metadata descriptor sizes (" +
-                                std::to_string(metadata.eigen_dims) + ", " +
+    throw std::invalid_argument("MapWriter: metadata descriptor sizes (" + std::to_string(metadata.eigen_dims) + ", " +
                                 std::to_string(metadata.esf_dims) + ") differ from this build's (" +
-                                std::to_string(kEigenFeatureCount) + ", " +
-                                std::to_string(kEsfBins) + ")");
+                                std::to_string(kEigenFeatureCount) + ", " + std::to_string(kEsfBins) + ")");
   }
   if (metadata.frame.empty()) throw std::invalid_argument("MapWriter: metadata.frame is empty");
 }
@@ -57,13 +54,12 @@ void validate(const MapMetadata& metadata) {
 void validate(const Segments& segments, const std::vector<uint32_t>& keyframes) {
   if (!keyframes.empty() && keyframes.size() != segments.size()) {
     throw std::invalid_argument("MapWriter::add_segments: " + std::to_string(keyframes.size()) +
-                                " keyframe indices for " + std::to_string(segments.size()) +
-                                " segments");
+                                " keyframe indices for " + std::to_string(segments.size()) + " segments");
   }
   for (const Segment& segment : segments) {
     if (!segment.centroid.allFinite()) {
-      throw std::invalid_argument("MapWriter::add_segments: segment " +
-                                  std::to_string(segment.id) + " has a non-finite centroid");
+      throw std::invalid_argument("MapWriter::add_segments: segment " + std::to_string(segment.id) +
+                                  " has a non-finite centroid");
     }
   }
 }
@@ -72,13 +68,13 @@ void validate(const std::vector<Keyframe>& keyframes) {
   std::set<uint32_t> seen;
   for (const Keyframe& k : keyframes) {
     if (!seen.insert(k.index).second) {
-      throw std::invalid_argument("MapWriter::set_trajectory: keyframe index " +
-                                  std::to_string(k.index) + " appears twice");
+      throw std::invalid_argument("MapWriter::set_trajectory: keyframe index " + std::to_string(k.index) +
+                                  " appears twice");
     }
     // SQLite would store a NaN as NULL: refuse it here with a message instead.
     if (!std::isfinite(k.time_s) || !k.T_map_sensor.matrix().allFinite()) {
-      throw std::invalid_argument("MapWriter::set_trajectory: keyframe " +
-                                  std::to_string(k.index) + " has a non-finite time or pose");
+      throw std::invalid_argument("MapWriter::set_trajectory: keyframe " + std::to_string(k.index) +
+                                  " has a non-finite time or pose");
     }
   }
 }
@@ -173,7 +169,10 @@ void MapWriter::Impl::insert_row(SegmentRow row) {
   Statement& st = *insert_segment;
   st.bind_int(1, next_row);
   st.bind_int(2, static_cast<int64_t>(row.segment_id));  // uint64 kept bit for bit
-  if (row.keyframe == kNoKeyframe) st.bind_null(3); else st.bind_int(3, row.keyframe);
+  if (row.keyframe == kNoKeyframe)
+    st.bind_null(3);
+  else
+    st.bind_int(3, row.keyframe);
   st.bind_int(4, row.label);
   bind_vector(st, 5, row.centroid);
   bind_vector(st, 8, row.box_min);
@@ -185,7 +184,8 @@ void MapWriter::Impl::insert_row(SegmentRow row) {
   st.run();
   Statement& pt = *insert_points;
   pt.bind_int(1, next_row);
-  pt.bind_int(2, static_cast<int64_t>(points_checksum(next_row, row.num_points, {points.data(), points.size(), false})));
+  pt.bind_int(2,
+              static_cast<int64_t>(points_checksum(next_row, row.num_points, {points.data(), points.size(), false})));
   pt.bind_blob(3, points.data(), points.size());
   pt.run();
 
@@ -203,8 +203,7 @@ void MapWriter::Impl::insert_row(SegmentRow row) {
 
 void MapWriter::Impl::publish() {
   {
-    Statement counts(db.get(),
-                     "UPDATE map_info SET segment_count = ?, point_count = ?, keyframe_count = ?",
+    Statement counts(db.get(), "UPDATE map_info SET segment_count = ?, point_count = ?, keyframe_count = ?",
                      temporary_path);
     counts.bind_int(1, next_row - 1);
     counts.bind_int(2, static_cast<int64_t>(point_count));
@@ -233,8 +232,7 @@ void MapWriter::Impl::publish() {
   fsync_path(parent_folder(path), true);
 }
 
-MapWriter MapWriter::create(const std::string& path, const MapMetadata& metadata,
-                            bool overwrite) {
+MapWriter MapWriter::create(const std::string& path, const MapMetadata& metadata, bool overwrite) {
   validate(metadata);
   check_target(path, overwrite);
   auto impl = std::make_unique<Impl>();
@@ -242,8 +240,7 @@ MapWriter MapWriter::create(const std::string& path, const MapMetadata& metadata
   impl->overwrite = overwrite;
   // pid and a counter: unique among running writers, also two in one process.
   static std::atomic<uint64_t> writers{0};
-  impl->temporary_path =
-      path + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(writers++);
+  impl->temporary_path = path + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(writers++);
   impl->compact_path = impl->temporary_path + ".compact";
   ::unlink(impl->compact_path.c_str());
   ::unlink(impl->temporary_path.c_str());  // left by a killed process that had our pid
@@ -251,16 +248,15 @@ MapWriter MapWriter::create(const std::string& path, const MapMetadata& metadata
   sqlite3* db = impl->db.get();
   // Small pages: a BLOB's overflow chain wastes half a page on average, which with schema 1's
   // 64 KiB pages was about as much as the packed data itself; 1 KiB pages cost nothing
-  // measurable when loading (docs/measurements.md, "Map size and storage"). The journal may live in memory and syncs may
-  // be skipped because a failed build only loses the temporary file, and commit() fsyncs the
-  // finished file itself.
-  exec(db, "PRAGMA page_size = 1024; PRAGMA journal_mode = MEMORY; PRAGMA synchronous = OFF;"
-           "PRAGMA cache_size = -65536; BEGIN",
+  // measurable when loading (docs/measurements.md, "Map size and storage"). The journal may live in memory and syncs
+  // may be skipped because a failed build only loses the temporary file, and commit() fsyncs the finished file itself.
+  exec(db,
+       "PRAGMA page_size = 1024; PRAGMA journal_mode = MEMORY; PRAGMA synchronous = OFF;"
+       "PRAGMA cache_size = -65536; BEGIN",
        impl->temporary_path);
   create_schema(db, impl->temporary_path);
 
-  Statement info(db, "INSERT INTO map_info VALUES (1, ?, ?, ?, ?, ?, ?, ?, 0, 0, 0)",
-                 impl->temporary_path);
+  Statement info(db, "INSERT INTO map_info VALUES (1, ?, ?, ?, ?, ?, ?, ?, 0, 0, 0)", impl->temporary_path);
   info.bind_text(1, metadata.name);
   info.bind_text(2, metadata.frame);
   info.bind_text(3, metadata.created_utc.empty() ? now_utc_iso8601() : metadata.created_utc);
@@ -283,14 +279,12 @@ MapWriter::~MapWriter() = default;
 const std::string& MapWriter::path() const { return impl_->path; }
 const std::string& MapWriter::temporary_path() const { return impl_->temporary_path; }
 
-void MapWriter::add_segments(const Segments& segments,
-                             const std::vector<uint32_t>& keyframe_of_segment) {
+void MapWriter::add_segments(const Segments& segments, const std::vector<uint32_t>& keyframe_of_segment) {
   impl_->require_writable("add_segments");
   validate(segments, keyframe_of_segment);
   impl_->write("add_segments", [&] {
     for (size_t i = 0; i < segments.size(); ++i) {
-      impl_->insert(segments[i], keyframe_of_segment.empty() ? kNoKeyframe
-                                                             : keyframe_of_segment[i]);
+      impl_->insert(segments[i], keyframe_of_segment.empty() ? kNoKeyframe : keyframe_of_segment[i]);
     }
   });
 }
@@ -316,8 +310,7 @@ void MapWriter::set_trajectory(const std::vector<Keyframe>& keyframes) {
 
 void MapWriter::set_classifier(const ClassifierBlob& classifier) {
   impl_->write("set_classifier", [&] {
-    Statement insert(impl_->db.get(), "INSERT OR REPLACE INTO classifier VALUES (1, ?, ?, ?)",
-                     impl_->temporary_path);
+    Statement insert(impl_->db.get(), "INSERT OR REPLACE INTO classifier VALUES (1, ?, ?, ?)", impl_->temporary_path);
     insert.bind_text(1, classifier.format);
     const std::vector<uint8_t> packed = pack_bytes(classifier.bytes);
     insert.bind_blob(2, packed.data(), packed.size());

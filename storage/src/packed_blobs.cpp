@@ -81,7 +81,8 @@ void compress_into(const std::vector<uint8_t>& in, std::vector<uint8_t>* out) {
 std::string decompress(const uint8_t* in, size_t in_size, size_t size, std::vector<uint8_t>* out) {
   const unsigned long long content = ZSTD_getFrameContentSize(in, in_size);
   if (content == ZSTD_CONTENTSIZE_ERROR) return "not a zstd frame";
-  if (content != size) return "packed data holds " + std::to_string(content) + " bytes, expected " + std::to_string(size);
+  if (content != size)
+    return "packed data holds " + std::to_string(content) + " bytes, expected " + std::to_string(size);
   out->resize(size);
   const size_t n = ZSTD_decompressDCtx(contexts().decompress, out->data(), size, in, in_size);
   if (ZSTD_isError(n)) return std::string("cannot decompress: ") + ZSTD_getErrorName(n);
@@ -217,7 +218,8 @@ std::string unpack_esf_sparse(BlobView packed, EsfDescriptor* esf) {
   size_t nonzero = 0;
   for (size_t b = 0; b < kEsfMaskBytes; ++b) nonzero += std::bitset<8>(mask[b]).count();
   if (packed.size != 1 + kEsfMaskBytes + 2 * nonzero)
-    return "ESF blob has " + std::to_string(packed.size) + " bytes, its mask says " + std::to_string(1 + kEsfMaskBytes + 2 * nonzero);
+    return "ESF blob has " + std::to_string(packed.size) + " bytes, its mask says " +
+           std::to_string(1 + kEsfMaskBytes + 2 * nonzero);
   // Without a branch per bin (the mask is a coin toss where a histogram thins out): a zero bin
   // reads the next mantissa and keeps 0; the copy gives that read a place past the last one.
   uint8_t mantissas[2 * kEsfBins + 2] = {};

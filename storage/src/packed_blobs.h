@@ -1,10 +1,10 @@
 // The packed BLOBs of schemas 2 and 3: schema 1's BLOBs compressed with zstd.
 // Points: schema 1's 36-byte header, then the body with x y z delta-coded along the points and
 // split into byte planes (neighbouring points differ by a few centimetres, so the high bytes
-// are nearly constant), without the intensity (packed_blobs.cpp says why), compressed. Unpacking restores schema 1's x y z bytes exactly, so a map decodes to the same
-// coordinates whichever schema holds it. float32 points (schema 1's fallback) are kept whole.
-// ESF (schema 2): the 640 float32 split into byte planes, compressed; lossless. Schema 3 stores
-// ESF quantised and sparse instead (below).
+// are nearly constant), without the intensity (packed_blobs.cpp says why), compressed. Unpacking restores schema 1's x
+// y z bytes exactly, so a map decodes to the same coordinates whichever schema holds it. float32 points (schema 1's
+// fallback) are kept whole. ESF (schema 2): the 640 float32 split into byte planes, compressed; lossless. Schema 3
+// stores ESF quantised and sparse instead (below).
 #pragma once
 
 #include "bytes.h"

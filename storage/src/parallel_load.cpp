@@ -70,9 +70,8 @@ void check_row_span(const MapReader::Impl& impl) {
   const int64_t first = query_int(impl.db.get(), "SELECT min(row) FROM segments", impl.path);
   const int64_t last = query_int(impl.db.get(), "SELECT max(row) FROM segments", impl.path);
   if ((n == 0 && last != 0) || (n > 0 && (first != 1 || last != n))) {
-    fail(impl.path, "the map file is corrupted: map_info records " + std::to_string(n) +
-                        " segments, the rows span " + std::to_string(first) + ".." +
-                        std::to_string(last));
+    fail(impl.path, "the map file is corrupted: map_info records " + std::to_string(n) + " segments, the rows span " +
+                        std::to_string(first) + ".." + std::to_string(last));
   }
 }
 
@@ -86,8 +85,7 @@ Segments load_all_segments(const MapReader::Impl& impl, std::vector<uint32_t>* k
   prefer_huge_pages(out.data(), n * sizeof(Segment));
   out.resize(n);
   if (keyframes) keyframes->assign(n, kNoKeyframe);
-  const uint64_t threads =
-      std::max<uint64_t>(1, std::min<uint64_t>(1 + impl.loaders.size(), n / kMinRowsPerThread));
+  const uint64_t threads = std::max<uint64_t>(1, std::min<uint64_t>(1 + impl.loaders.size(), n / kMinRowsPerThread));
   std::vector<Chunk> chunks(threads);
   for (uint64_t c = 0; c < threads; ++c) {
     chunks[c].db = c == 0 ? impl.db.get() : impl.loaders[c - 1].get();
@@ -107,8 +105,8 @@ Segments load_all_segments(const MapReader::Impl& impl, std::vector<uint32_t>* k
     loaded += chunk.loaded;
   }
   if (loaded != n) {
-    fail(impl.path, "the map file is corrupted: map_info records " + std::to_string(n) +
-                        " segments, the file holds " + std::to_string(loaded));
+    fail(impl.path, "the map file is corrupted: map_info records " + std::to_string(n) + " segments, the file holds " +
+                        std::to_string(loaded));
   }
   return out;
 }

@@ -59,8 +59,7 @@ CREATE TABLE surface_tiles (
   checksum INTEGER NOT NULL, points BLOB NOT NULL, PRIMARY KEY (tile_x, tile_y));
 )sql";
 
-const char* const kTables[] = {"map_info", "segments", "segment_rtree", "trajectory",
-                                       "classifier"};
+const char* const kTables[] = {"map_info", "segments", "segment_rtree", "trajectory", "classifier"};
 const char* const kTablesSince2[] = {"segment_points"};
 const char* const kTablesSince4[] = {"surface_layer", "surface_tiles"};
 
@@ -95,13 +94,11 @@ struct stat regular_file(const std::string& path) {
 void check_version(uint32_t stored, const std::string& path) {
   const int version = static_cast<int32_t>(stored);
   if (version > kSchemaVersion) {
-    fail(path, "map schema version " + std::to_string(version) +
-                   " is newer than this build can read (up to " +
+    fail(path, "map schema version " + std::to_string(version) + " is newer than this build can read (up to " +
                    std::to_string(kSchemaVersion) + "); update segmatch");
   }
   if (version < kOldestReadableSchemaVersion) {
-    fail(path, "map schema version " + std::to_string(version) +
-                   " is older than this build can read (oldest " +
+    fail(path, "map schema version " + std::to_string(version) + " is older than this build can read (oldest " +
                    std::to_string(kOldestReadableSchemaVersion) + "); rebuild the map");
   }
 }
@@ -113,16 +110,14 @@ void check_size(const unsigned char* header, off_t size, const std::string& path
     fail(path, "the map file is corrupted: invalid page size " + std::to_string(page_size));
   }
   if (size % page_size != 0) {
-    fail(path, "the map file is truncated or damaged: " + std::to_string(size) +
-                   " bytes is not a whole number of " + std::to_string(page_size) +
-                   "-byte pages");
+    fail(path, "the map file is truncated or damaged: " + std::to_string(size) + " bytes is not a whole number of " +
+                   std::to_string(page_size) + "-byte pages");
   }
   // The page count at offset 28 is valid when offset 92 matches the change counter.
   const uint64_t pages = be32(header + 28);
   if (be32(header + 92) == be32(header + 24) && uint64_t(size) < pages * page_size) {
-    fail(path, "the map file is truncated: its header says " +
-                   std::to_string(pages * page_size) + " bytes, the file has " +
-                   std::to_string(size));
+    fail(path, "the map file is truncated: its header says " + std::to_string(pages * page_size) +
+                   " bytes, the file has " + std::to_string(size));
   }
 }
 
@@ -146,14 +141,12 @@ MapFileInfo check_map_file(const std::string& path) {
   static const char kMagic[] = "SQLite format 3";  // 16 bytes with its NUL
   if (size < 100 || std::memcmp(header, kMagic, sizeof(kMagic)) != 0) {
     fail(path, "not an SQLite database (no SQLite header), so not a segment map" +
-                   std::string(size < 100 ? " (or truncated to " + std::to_string(size) +
-                                                " bytes)"
-                                          : ""));
+                   std::string(size < 100 ? " (or truncated to " + std::to_string(size) + " bytes)" : ""));
   }
   const uint32_t application_id = be32(header + 68);
   if (application_id != kApplicationId) {
-    fail(path, "an SQLite database of another application, not a segment map (application_id " +
-                   hex32(application_id) + ", expected " + hex32(kApplicationId) + ")");
+    fail(path, "an SQLite database of another application, not a segment map (application_id " + hex32(application_id) +
+                   ", expected " + hex32(kApplicationId) + ")");
   }
   check_version(be32(header + 60), path);
   check_size(header, size, path);

@@ -20,8 +20,16 @@ constexpr uint64_t kP4 = 0x85EBCA77C2B2AE63ull;
 constexpr uint64_t kP5 = 0x27D4EB2F165667C5ull;
 
 uint64_t rotl(uint64_t x, int r) { return (x << r) | (x >> (64 - r)); }
-uint64_t read64(const uint8_t* p) { uint64_t v; std::memcpy(&v, p, 8); return v; }
-uint32_t read32(const uint8_t* p) { uint32_t v; std::memcpy(&v, p, 4); return v; }
+uint64_t read64(const uint8_t* p) {
+  uint64_t v;
+  std::memcpy(&v, p, 8);
+  return v;
+}
+uint32_t read32(const uint8_t* p) {
+  uint32_t v;
+  std::memcpy(&v, p, 4);
+  return v;
+}
 uint64_t round64(uint64_t acc, uint64_t input) { return rotl(acc + input * kP2, 31) * kP1; }
 uint64_t merge64(uint64_t acc, uint64_t v) { return (acc ^ round64(0, v)) * kP1 + kP4; }
 
@@ -124,9 +132,7 @@ Header int16_header(const Bounds& b, double step) {
 
 // Nearest integer (halves up) of |x| <= kMaxQ without a branch on the sign, which random
 // point offsets mispredict half the time, nor a libm call (std::lround is not inlined).
-int16_t round_q(double x) {
-  return static_cast<int16_t>(static_cast<int32_t>(x + (kMaxQ + 1.5)) - int32_t(kMaxQ + 1));
-}
+int16_t round_q(double x) { return static_cast<int16_t>(static_cast<int32_t>(x + (kMaxQ + 1.5)) - int32_t(kMaxQ + 1)); }
 
 // False when a value does not fit (the caller then tries a coarser step).
 bool encode_int16(const PointCloud& points, const Header& h, std::vector<uint8_t>* blob) {
@@ -176,8 +182,15 @@ class Int16Points {
     return {h_->offset[0] + q[0] * h_->scale[0], h_->offset[1] + q[1] * h_->scale[1],
             h_->offset[2] + q[2] * h_->scale[2], h_->offset[3] + q[3] * h_->scale[3]};
   }
-  Int16Points& operator++() { at_ += kSize; return *this; }
-  Int16Points operator++(int) { Int16Points old = *this; at_ += kSize; return old; }
+  Int16Points& operator++() {
+    at_ += kSize;
+    return *this;
+  }
+  Int16Points operator++(int) {
+    Int16Points old = *this;
+    at_ += kSize;
+    return old;
+  }
   bool operator==(const Int16Points& o) const { return at_ == o.at_; }
   bool operator!=(const Int16Points& o) const { return at_ != o.at_; }
 
@@ -214,8 +227,8 @@ std::string decode_points(BlobView blob, uint64_t num_points, PointCloud* points
   }
   const size_t point_size = h.encoding == kFloat32 ? sizeof(Point) : 4 * sizeof(int16_t);
   if (num_points > body_size / point_size || body_size != num_points * point_size) {
-    return "point blob holds " + std::to_string(body_size) + " bytes, expected " +
-           std::to_string(num_points) + " points";
+    return "point blob holds " + std::to_string(body_size) + " bytes, expected " + std::to_string(num_points) +
+           " points";
   }
   if (h.encoding == kFloat32) {
     points->resize(num_points);
@@ -226,8 +239,7 @@ std::string decode_points(BlobView blob, uint64_t num_points, PointCloud* points
   return {};
 }
 
-std::string decode_int16_planes(const uint8_t* header, const uint8_t* planes, uint64_t num_points,
-                                PointCloud* points) {
+std::string decode_int16_planes(const uint8_t* header, const uint8_t* planes, uint64_t num_points, PointCloud* points) {
   Header h;
   std::memcpy(&h, header, sizeof(h));
   if (h.encoding != kInt16) return "unknown point encoding " + std::to_string(h.encoding);
@@ -265,8 +277,8 @@ uint64_t row_checksum(const SegmentRow& row) {
   put(row.box_min.data(), 12);
   put(row.box_max.data(), 12);
   put(&row.num_points, 8);
-  const uint8_t flags = uint8_t(!row.eigen.is_null) | uint8_t(!row.esf.is_null) << 1 |
-                        uint8_t(!row.points.is_null) << 2;
+  const uint8_t flags =
+      uint8_t(!row.eigen.is_null) | uint8_t(!row.esf.is_null) << 1 | uint8_t(!row.points.is_null) << 2;
   put(&flags, 1);
   uint64_t h = xxh64(record, n, 0);
   for (const BlobView& blob : {row.eigen, row.esf, row.points}) {

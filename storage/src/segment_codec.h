@@ -34,8 +34,7 @@ std::string decode_points(BlobView blob, uint64_t num_points, PointCloud* points
 // Schema 2's int16 points in one pass: `header` is schema 1's 36-byte point header, `planes` the
 // x y z deltas in 6 byte planes (packed_blobs.h); the intensity is the header's offset. The
 // same floats as packing and decoding through schema 1's BLOB.
-std::string decode_int16_planes(const uint8_t* header, const uint8_t* planes, uint64_t num_points,
-                                PointCloud* points);
+std::string decode_int16_planes(const uint8_t* header, const uint8_t* planes, uint64_t num_points, PointCloud* points);
 
 // One `segments` row as stored (blobs are views into the caller's memory).
 struct SegmentRow {

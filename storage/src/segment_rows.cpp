@@ -68,8 +68,7 @@ std::string decode_packed_points(int64_t row_id, uint64_t num_points, BlobView b
 
 void decode_segment(const StoredRow& stored, const std::string& path, Segment* segment, bool with_points) {
   const auto corrupted = [&](const std::string& problem) {
-    fail(path, "the map file is corrupted: segment row " + std::to_string(stored.row_id) + ": " +
-                   problem);
+    fail(path, "the map file is corrupted: segment row " + std::to_string(stored.row_id) + ": " + problem);
   };
   segment->points.clear();
   if (stored.schema_version < 2) {  // one checksum over the whole row, points included
@@ -103,8 +102,7 @@ const char* const kSelectPointsSql =
 void decode_points_row(const Statement& st, int64_t row_id, const std::string& path, PointCloud* out) {
   const std::string problem = decode_packed_points(row_id, static_cast<uint64_t>(st.column_int(0)), st.column_blob(1),
                                                    static_cast<uint64_t>(st.column_int(2)), out);
-  if (!problem.empty())
-    fail(path, "the map file is corrupted: segment row " + std::to_string(row_id) + ": " + problem);
+  if (!problem.empty()) fail(path, "the map file is corrupted: segment row " + std::to_string(row_id) + ": " + problem);
 }
 
 SegmentRow plain_row(const StoredRow& stored, const std::string& path, PlainBlobs* buffers) {

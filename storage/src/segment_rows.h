@@ -26,7 +26,7 @@ struct StoredRow {
   int64_t row_id = 0;
   uint64_t checksum = 0;         // schema 1: the whole row; schema 2: all but the points
   uint64_t points_checksum = 0;  // schema 2
-  SegmentRow row;  // blobs point into the statement: valid until its next step()
+  SegmentRow row;                // blobs point into the statement: valid until its next step()
 };
 void read_row(const Statement& st, int schema_version, StoredRow* stored);
 

@@ -4,9 +4,7 @@ namespace segmatch {
 namespace storage {
 namespace detail {
 
-void fail(const std::string& path, const std::string& problem) {
-  throw StorageError(path + ": " + problem);
-}
+void fail(const std::string& path, const std::string& problem) { throw StorageError(path + ": " + problem); }
 
 namespace {
 
@@ -61,12 +59,10 @@ void exec(sqlite3* db, const char* sql, const std::string& path) {
   if (rc == SQLITE_OK) return;
   const std::string text = message ? message : sqlite3_errstr(rc);
   sqlite3_free(message);
-  fail(path, meaning(rc) + " (while running \"" + std::string(sql).substr(0, 60) +
-                 "\"; SQLite: " + text + ")");
+  fail(path, meaning(rc) + " (while running \"" + std::string(sql).substr(0, 60) + "\"; SQLite: " + text + ")");
 }
 
-Statement::Statement(sqlite3* db, const char* sql, const std::string& path)
-    : db_(db), path_(path) {
+Statement::Statement(sqlite3* db, const char* sql, const std::string& path) : db_(db), path_(path) {
   const int rc = sqlite3_prepare_v2(db, sql, -1, &stmt_, nullptr);
   if (rc != SQLITE_OK) {
     fail_sqlite(db, rc, path, "preparing \"" + std::string(sql).substr(0, 60) + "\"");
@@ -86,8 +82,7 @@ void Statement::bind_double(int i, double value) {
 }
 
 void Statement::bind_text(int i, const std::string& value) {
-  const int rc = sqlite3_bind_text64(stmt_, i, value.data(), value.size(), SQLITE_TRANSIENT,
-                                     SQLITE_UTF8);
+  const int rc = sqlite3_bind_text64(stmt_, i, value.data(), value.size(), SQLITE_TRANSIENT, SQLITE_UTF8);
   if (rc != SQLITE_OK) fail_sqlite(db_, rc, path_, "binding a text");
 }
 
@@ -107,8 +102,7 @@ bool Statement::step() {
   const int rc = sqlite3_step(stmt_);
   if (rc == SQLITE_ROW) return true;
   if (rc == SQLITE_DONE) return false;
-  const std::string problem =
-      describe(db_, rc, "running \"" + std::string(sqlite3_sql(stmt_)).substr(0, 60) + "\"");
+  const std::string problem = describe(db_, rc, "running \"" + std::string(sqlite3_sql(stmt_)).substr(0, 60) + "\"");
   // Leave the statement reusable for callers that catch and continue (check_integrity).
   sqlite3_reset(stmt_);
   fail(path_, problem);

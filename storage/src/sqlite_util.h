@@ -21,8 +21,7 @@ namespace detail {
 [[noreturn]] void fail(const std::string& path, const std::string& problem);
 // Turns an SQLite result code (and the connection's message) into a StorageError whose text
 // says what it means for a map file (corrupted, not a database, disk full, read-only...).
-[[noreturn]] void fail_sqlite(sqlite3* db, int rc, const std::string& path,
-                              const std::string& doing);
+[[noreturn]] void fail_sqlite(sqlite3* db, int rc, const std::string& path, const std::string& doing);
 std::string describe(sqlite3* db, int rc, const std::string& doing);
 
 struct ConnectionCloser {

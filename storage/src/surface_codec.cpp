@@ -119,8 +119,8 @@ std::vector<uint8_t> encode_surface_tile(const PointCloud& points, int32_t tile_
   // The tile's centre and the middle of its heights, moved onto the voxel grid (anchored at 0,
   // as a voxel filter's is) so that a voxel's points share a cell.
   const int64_t voxel = voxel_steps(leaf_m);
-  const double cell_m = double(voxel) * kStep, middle[3] = {(tile_x + 0.5) * tile_m, (tile_y + 0.5) * tile_m,
-                                                            (double(z_min) + z_max) / 2};
+  const double cell_m = double(voxel) * kStep,
+               middle[3] = {(tile_x + 0.5) * tile_m, (tile_y + 0.5) * tile_m, (double(z_min) + z_max) / 2};
   double offset[3];
   for (int a = 0; a < 3; ++a) offset[a] = std::round(middle[a] / cell_m) * cell_m;
   std::vector<int16_t> q;

@@ -25,9 +25,7 @@ inline int64_t surface_tile_key(int32_t x, int32_t y) {
   return int64_t{x} * (int64_t{1} << 32) + (int64_t{y} + (int64_t{1} << 31));
 }
 inline int32_t surface_tile_x(int64_t key) { return static_cast<int32_t>(key >> 32); }
-inline int32_t surface_tile_y(int64_t key) {
-  return static_cast<int32_t>((key & 0xFFFFFFFF) - (int64_t{1} << 31));
-}
+inline int32_t surface_tile_y(int64_t key) { return static_cast<int32_t>((key & 0xFFFFFFFF) - (int64_t{1} << 31)); }
 // How far a decoded point may lie outside its tile's square (its quantisation error, float
 // rounding included) when its coordinates are at most `magnitude` metres from the origin.
 inline double surface_tile_slack(double magnitude) { return 0.006 + 2e-7 * magnitude; }

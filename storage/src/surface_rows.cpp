@@ -62,8 +62,10 @@ void write_surfaces(sqlite3* db, const std::string& path, const PointCloud& poin
     keyed[i] = {surface_tile_key(static_cast<int32_t>(x), static_cast<int32_t>(y)), i};
   }
   std::sort(keyed.begin(), keyed.end());
-  Statement insert(db, "INSERT INTO surface_tiles (tile_x, tile_y, point_count, checksum, points) "
-                       "VALUES (?, ?, ?, ?, ?)", path);
+  Statement insert(db,
+                   "INSERT INTO surface_tiles (tile_x, tile_y, point_count, checksum, points) "
+                   "VALUES (?, ?, ?, ?, ?)",
+                   path);
   SurfaceLayer layer{leaf_m, tile_m, 0, 0, 0};
   PointCloud tile;
   for (size_t begin = 0, end = 0; begin < keyed.size(); begin = end) {

@@ -66,7 +66,8 @@ class ScriptedServer {
     reply.request_id = request.request_id;
     reply.status = LocalizeStatus::kNotLocalized;
     reply.reason = "scripted";
-    const std::vector<uint8_t> out = error_reply_ ? encode(ErrorReply{ErrorCode::kInternal, "scripted failure"}) : encode(reply);
+    const std::vector<uint8_t> out =
+        error_reply_ ? encode(ErrorReply{ErrorCode::kInternal, "scripted failure"}) : encode(reply);
     write_all(fd, out.data(), out.size(), deadline_after(5));
   }
   void serve() {

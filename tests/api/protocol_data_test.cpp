@@ -91,14 +91,32 @@ void check_file(const std::string& name, const M& expected, const std::function<
   if (fields) fields(decoded);
 }
 
-const std::set<std::string> kFiles = {
-    "hello.bin", "hello_ok.bin", "ping.bin", "pong.bin", "info.bin", "info_reply.bin",
-    "localize_global.bin", "localize_prior_voxelized.bin", "localize_segments.bin",
-    "localize_reply_localized.bin", "localize_reply_not_localized.bin", "localize_reply_outside_prior.bin",
-    "localize_refusal_code.bin", "localize_reply_refused.bin", "localize_detail.bin", "localize_reply_detail.bin",
-    "localize_reply_estimate.bin", "localize_newest.bin", "localize_segments_newest.bin", "localize_reply_off_map.bin", "error.bin",
-    "localize_segments_track.bin", "localize_reply_tracking_lost.bin", "localize_reply_surfaces.bin", "localize_track.bin",
-    "localize_reply_places.bin"};
+const std::set<std::string> kFiles = {"hello.bin",
+                                      "hello_ok.bin",
+                                      "ping.bin",
+                                      "pong.bin",
+                                      "info.bin",
+                                      "info_reply.bin",
+                                      "localize_global.bin",
+                                      "localize_prior_voxelized.bin",
+                                      "localize_segments.bin",
+                                      "localize_reply_localized.bin",
+                                      "localize_reply_not_localized.bin",
+                                      "localize_reply_outside_prior.bin",
+                                      "localize_refusal_code.bin",
+                                      "localize_reply_refused.bin",
+                                      "localize_detail.bin",
+                                      "localize_reply_detail.bin",
+                                      "localize_reply_estimate.bin",
+                                      "localize_newest.bin",
+                                      "localize_segments_newest.bin",
+                                      "localize_reply_off_map.bin",
+                                      "error.bin",
+                                      "localize_segments_track.bin",
+                                      "localize_reply_tracking_lost.bin",
+                                      "localize_reply_surfaces.bin",
+                                      "localize_track.bin",
+                                      "localize_reply_places.bin"};
 
 }  // namespace
 
@@ -148,8 +166,7 @@ TEST(ProtocolData, LocalizeGlobal) {
   // Revision 5: the same, asking for the reply's refusal code (bit 3).
   r.request_id = 12;
   r.flags = kFlagRefusalCode;
-  check_file<LocalizeRequest>("localize_refusal_code.bin", r,
-                              [](const LocalizeRequest& m) { EXPECT_EQ(m.flags, 8u); });
+  check_file<LocalizeRequest>("localize_refusal_code.bin", r, [](const LocalizeRequest& m) { EXPECT_EQ(m.flags, 8u); });
 }
 
 TEST(ProtocolData, LocalizeWithPriorVoxelizedAndHeading) {
@@ -304,7 +321,8 @@ TEST(ProtocolData, LocalizeDetail) {
 }
 
 // A revision-7 detail block: the window fields, the method and covariance entries (k + first) / scale.
-ReplyDetail detail_with_estimate(float warp_m, float warp_deg, uint32_t points, ReplyMethod method, int first, float scale) {
+ReplyDetail detail_with_estimate(float warp_m, float warp_deg, uint32_t points, ReplyMethod method, int first,
+                                 float scale) {
   ReplyDetail d{warp_m, warp_deg, points, {}};
   ReplyDetail::Estimate e;
   e.method = static_cast<uint8_t>(method);
@@ -335,7 +353,8 @@ TEST(ProtocolData, LocalizeReplyOffMap) {
   off.request_id = 11;  // the answer to localize_newest.bin
   off.status = LocalizeStatus::kNotLocalized;
   off.refusal = RefusalCode::kOffMap;
-  off.reason = "the vehicle's newest scans do not lie on the map's surfaces at the answer (fitness 0.53, at least 0.55)";
+  off.reason =
+      "the vehicle's newest scans do not lie on the map's surfaces at the answer (fitness 0.53, at least 0.55)";
   off.timings = timings();
   check_file<LocalizeReply>("localize_reply_off_map.bin", off, [](const LocalizeReply& m) {
     EXPECT_EQ(static_cast<int>(m.refusal), 9);
@@ -364,7 +383,8 @@ TEST(ProtocolData, LocalizeTrack) {
 TEST(ProtocolData, LocalizeSegmentsTrack) {
   LocalizeSegmentsRequest r;
   r.request_id = 16;
-  r.flags = kSegmentsFlagHasPrior | kSegmentsFlagRefusalCode | kSegmentsFlagDetail | kSegmentsFlagNewestScans | kSegmentsFlagTrack;
+  r.flags = kSegmentsFlagHasPrior | kSegmentsFlagRefusalCode | kSegmentsFlagDetail | kSegmentsFlagNewestScans |
+            kSegmentsFlagTrack;
   r.sensor_position_local = Eigen::Vector3d(1.0, 2.0, 0.5);
   r.T_map_local_prior = pose(0.5, Eigen::Vector3d(100.0, 200.0, 0.0));
   r.prior_radius_m = 3.0;

@@ -39,7 +39,8 @@ LocalizeRequest some_request(uint32_t stride = 4) {
   r.T_map_local_prior = some_pose();
   r.prior_radius_m = 25.0;
   r.point_stride = stride;
-  for (int i = 0; i < 100; ++i) r.points.push_back(Point{i * 0.5f, -i * 0.25f, 1.f + i * 0.01f, stride == 4 ? i / 100.f : 0.f});
+  for (int i = 0; i < 100; ++i)
+    r.points.push_back(Point{i * 0.5f, -i * 0.25f, 1.f + i * 0.01f, stride == 4 ? i / 100.f : 0.f});
   return r;
 }
 
@@ -64,10 +65,14 @@ TEST(Protocol, HeaderIsMagicVersionTypeLengthLittleEndian) {
   const std::vector<uint8_t> f = encode(PingRequest{0x1122334455667788ull});
   ASSERT_EQ(f.size(), kHeaderBytes + 8);
   EXPECT_EQ(std::string(f.begin(), f.begin() + 4), "SGMQ");
-  EXPECT_EQ(f[4], 1); EXPECT_EQ(f[5], 0);           // version 1
-  EXPECT_EQ(f[6], 0x02); EXPECT_EQ(f[7], 0x00);     // PING
-  EXPECT_EQ(f[8], 8); EXPECT_EQ(f[11], 0);          // payload length 8
-  EXPECT_EQ(f[12], 0x88); EXPECT_EQ(f[19], 0x11);   // nonce, little-endian
+  EXPECT_EQ(f[4], 1);
+  EXPECT_EQ(f[5], 0);  // version 1
+  EXPECT_EQ(f[6], 0x02);
+  EXPECT_EQ(f[7], 0x00);  // PING
+  EXPECT_EQ(f[8], 8);
+  EXPECT_EQ(f[11], 0);  // payload length 8
+  EXPECT_EQ(f[12], 0x88);
+  EXPECT_EQ(f[19], 0x11);  // nonce, little-endian
 }
 
 TEST(Protocol, SmallMessagesRoundTrip) {
@@ -135,9 +140,13 @@ TEST(Protocol, LocalizeReplyRoundTrips) {
   EXPECT_EQ(out.refusal, RefusalCode::kOutsidePrior);
   EXPECT_EQ(out.reason, in.reason);
   EXPECT_TRUE(out.T_map_local.isApprox(in.T_map_local, 1e-12));
-  EXPECT_EQ(out.inliers, 9u); EXPECT_EQ(out.support, 14u); EXPECT_EQ(out.confidence, 0.8125f);
+  EXPECT_EQ(out.inliers, 9u);
+  EXPECT_EQ(out.support, 14u);
+  EXPECT_EQ(out.confidence, 0.8125f);
   EXPECT_EQ(out.matched_segment_ids, in.matched_segment_ids);
-  EXPECT_EQ(out.timings.voxel, 1.5f); EXPECT_EQ(out.timings.total, 80.25f); EXPECT_EQ(out.timings.server_total, 81.f);
+  EXPECT_EQ(out.timings.voxel, 1.5f);
+  EXPECT_EQ(out.timings.total, 80.25f);
+  EXPECT_EQ(out.timings.server_total, 81.f);
 }
 
 // Revision 5: the former reserved field of LOCALIZE_REPLY is the refusal code. Every value
@@ -194,11 +203,31 @@ TEST(Protocol, RejectsEveryTruncationAndTrailingBytes) {
       const uint8_t* p = cut.data() + kHeaderBytes;
       DecodeStatus s = DecodeStatus::kOk;
       switch (static_cast<MessageType>(h.type)) {
-        case MessageType::kLocalize: { LocalizeRequest m; s = decode(p, n, kLimits, m); break; }
-        case MessageType::kInfoReply: { InfoReply m; s = decode(p, n, kLimits, m); break; }
-        case MessageType::kError: { ErrorReply m; s = decode(p, n, kLimits, m); break; }
-        case MessageType::kPing: { PingRequest m; s = decode(p, n, kLimits, m); break; }
-        default: { HelloRequest m; s = decode(p, n, kLimits, m); break; }
+        case MessageType::kLocalize: {
+          LocalizeRequest m;
+          s = decode(p, n, kLimits, m);
+          break;
+        }
+        case MessageType::kInfoReply: {
+          InfoReply m;
+          s = decode(p, n, kLimits, m);
+          break;
+        }
+        case MessageType::kError: {
+          ErrorReply m;
+          s = decode(p, n, kLimits, m);
+          break;
+        }
+        case MessageType::kPing: {
+          PingRequest m;
+          s = decode(p, n, kLimits, m);
+          break;
+        }
+        default: {
+          HelloRequest m;
+          s = decode(p, n, kLimits, m);
+          break;
+        }
       }
       EXPECT_NE(s, DecodeStatus::kOk) << "type " << h.type << " cut to " << n;
     }
@@ -307,7 +336,9 @@ TEST(Protocol, DecodeFrameRefusesAnotherMessageType) {
 
 TEST(Protocol, RandomBytesNeverCrashTheDecoders) {
   uint64_t state = 12345;
-  auto next = [&] { return static_cast<uint8_t>((state = state * 6364136223846793005ull + 1442695040888963407ull) >> 56); };
+  auto next = [&] {
+    return static_cast<uint8_t>((state = state * 6364136223846793005ull + 1442695040888963407ull) >> 56);
+  };
   const std::vector<uint8_t> base = encode(some_request());
   size_t accepted = 0;
   for (int trial = 0; trial < 3000; ++trial) {

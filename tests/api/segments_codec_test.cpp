@@ -59,7 +59,8 @@ LocalizeSegmentsRequest some_request(bool esf, size_t segments = 5) {
   r.prior_heading_tolerance_deg = 7.5;
   r.parameters_digest = 0x1122334455667788ull;
   for (size_t i = 0; i < segments; ++i)
-    r.segments.push_back(make_segment(rng, Eigen::Vector3f(100.f + 7.f * i, -20.f, 1.f), 0.5f + 2.f * i, 50 + 30 * i, esf));
+    r.segments.push_back(
+        make_segment(rng, Eigen::Vector3f(100.f + 7.f * i, -20.f, 1.f), 0.5f + 2.f * i, 50 + 30 * i, esf));
   return r;
 }
 
@@ -120,7 +121,8 @@ TEST(SegmentsCodec, LargeSegmentsUseACoarserStepAndStillRoundTrip) {
   ASSERT_EQ(decode_frame(encode(in), kLimits, out), DecodeStatus::kOk);
   // ~100 m from the centroid needs 2^-8 m steps (i16 range 128 m): 2 mm at worst.
   for (size_t k = 0; k < 200; ++k)
-    EXPECT_LE((out.segments[0].points[k].xyz() - in.segments[0].points[k].xyz()).cwiseAbs().maxCoeff(), 0.5f / 256.f + 1e-4f);
+    EXPECT_LE((out.segments[0].points[k].xyz() - in.segments[0].points[k].xyz()).cwiseAbs().maxCoeff(),
+              0.5f / 256.f + 1e-4f);
 }
 
 TEST(SegmentsCodec, DecodedRequestReencodesToTheSameBytes) {
@@ -143,7 +145,8 @@ TEST(SegmentsCodec, LayoutIsTheDocumentedOne) {
   EXPECT_EQ(cx, r.segments[0].centroid.x());
   // The smallest power of two at or above reach / 32767 m, not below 2^-16 m.
   float reach = 0.f;
-  for (const Point& p : r.segments[0].points) reach = std::max(reach, (p.xyz() - r.segments[0].centroid).cwiseAbs().maxCoeff());
+  for (const Point& p : r.segments[0].points)
+    reach = std::max(reach, (p.xyz() - r.segments[0].centroid).cwiseAbs().maxCoeff());
   const int expected = std::max(-16, static_cast<int>(std::ceil(std::log2(reach / 32767.0))));
   EXPECT_EQ(static_cast<int8_t>(f[kOffFirstSegment + 44]), expected) << "reach " << reach;
 }

@@ -46,7 +46,9 @@ struct World {
   }
 };
 
-double sensor_error_m(const Pose3d& T, const World& w) { return (T * w.sensor_query() - w.sensor_map).head<2>().norm(); }
+double sensor_error_m(const Pose3d& T, const World& w) {
+  return (T * w.sensor_query() - w.sensor_map).head<2>().norm();
+}
 double heading_error_deg(const Pose3d& T, const World& w) {
   return Eigen::AngleAxisd(T.linear() * w.T_map_query.linear().transpose()).angle() / kDeg;
 }
@@ -54,10 +56,12 @@ double heading_error_deg(const Pose3d& T, const World& w) {
 TEST(CorrelativeSearch, AWidePriorComesBackWithinACellAndAStep) {
   const World w(true);
   CorrelativeSearchConfig c;
-  for (const auto& [shift, turn] : {std::pair{Eigen::Vector3d(14.0, -3.0, 0.0), 6.0}, {Eigen::Vector3d(-8.5, 9.0, 0.0), -4.0}}) {
+  for (const auto& [shift, turn] :
+       {std::pair{Eigen::Vector3d(14.0, -3.0, 0.0), 6.0}, {Eigen::Vector3d(-8.5, 9.0, 0.0), -4.0}}) {
     const Pose3d prior = w.prior(shift, turn);
     ASSERT_GT(sensor_error_m(prior, w), 8.0);
-    const std::vector<SearchCandidate> peaks = correlative_search(w.query(), w.map, prior, w.sensor_query(), 20.0, 10.0, kWindowM, c);
+    const std::vector<SearchCandidate> peaks =
+        correlative_search(w.query(), w.map, prior, w.sensor_query(), 20.0, 10.0, kWindowM, c);
     ASSERT_FALSE(peaks.empty());
     EXPECT_LE(sensor_error_m(peaks.front().T_map_query, w), c.resolution_m) << shift.transpose();
     EXPECT_LE(heading_error_deg(peaks.front().T_map_query, w), c.angle_step_deg) << shift.transpose();
@@ -65,7 +69,8 @@ TEST(CorrelativeSearch, AWidePriorComesBackWithinACellAndAStep) {
     for (size_t i = 1; i < peaks.size(); ++i) {
       EXPECT_LE(peaks[i].score, peaks[i - 1].score) << "best first";
       EXPECT_GE((peaks[i].T_map_query * w.sensor_query() - peaks.front().T_map_query * w.sensor_query()).norm(),
-                c.min_separation_m - 1e-6) << "distinct peaks";
+                c.min_separation_m - 1e-6)
+          << "distinct peaks";
     }
   }
 }
@@ -89,7 +94,8 @@ double oracle_best(const PointCloud& query, const PointCloud& map, const Pose3d&
   for (const Point& p : query) {
     const Eigen::Vector3d d = p.xyz().cast<double>() - sensor;
     if (d.head<2>().norm() > kWindowM) continue;
-    const std::pair<long, long> k{static_cast<long>(std::floor(d.x() / cell)), static_cast<long>(std::floor(d.y() / cell))};
+    const std::pair<long, long> k{static_cast<long>(std::floor(d.x() / cell)),
+                                  static_cast<long>(std::floor(d.y() / cell))};
     if (first.emplace(k, d).second) offsets.push_back(d);
   }
   EXPECT_LE(offsets.size(), static_cast<size_t>(c.max_query_points)) << "the oracle does not thin";
@@ -100,10 +106,12 @@ double oracle_best(const PointCloud& query, const PointCloud& map, const Pose3d&
         if (occupied.count({x + dx, y + dy})) v = std::max(v, std::exp(-0.5 * double(dx * dx + dy * dy)));
     return v;
   };
-  const int steps = static_cast<int>(std::floor(radius_m / cell)), turns = static_cast<int>(std::floor(tolerance_deg / c.angle_step_deg));
+  const int steps = static_cast<int>(std::floor(radius_m / cell)),
+            turns = static_cast<int>(std::floor(tolerance_deg / c.angle_step_deg));
   double best = 0.0;
   for (int h = -turns; h <= turns; ++h) {
-    const Eigen::Matrix3d R = Eigen::AngleAxisd(h * c.angle_step_deg * kDeg, Eigen::Vector3d::UnitZ()).toRotationMatrix() * prior.linear();
+    const Eigen::Matrix3d R =
+        Eigen::AngleAxisd(h * c.angle_step_deg * kDeg, Eigen::Vector3d::UnitZ()).toRotationMatrix() * prior.linear();
     for (int dx = -steps; dx <= steps; ++dx)
       for (int dy = -steps; dy <= steps; ++dy) {
         if (dx * dx + dy * dy > steps * steps) continue;
@@ -122,9 +130,11 @@ TEST(CorrelativeSearch, ItsBestPeakScoresWhatABruteForceOracleFinds) {
   const World w(true);
   CorrelativeSearchConfig c;
   c.max_query_points = 100000;  // no thinning: the oracle keeps every cell's point
-  for (const auto& [shift, turn] : {std::pair{Eigen::Vector3d(3.0, 2.0, 0.0), 2.0}, {Eigen::Vector3d(-1.5, -2.5, 0.0), -1.0}}) {
+  for (const auto& [shift, turn] :
+       {std::pair{Eigen::Vector3d(3.0, 2.0, 0.0), 2.0}, {Eigen::Vector3d(-1.5, -2.5, 0.0), -1.0}}) {
     const Pose3d prior = w.prior(shift, turn);
-    const std::vector<SearchCandidate> peaks = correlative_search(w.query(), w.map, prior, w.sensor_query(), 4.0, 3.0, kWindowM, c);
+    const std::vector<SearchCandidate> peaks =
+        correlative_search(w.query(), w.map, prior, w.sensor_query(), 4.0, 3.0, kWindowM, c);
     ASSERT_FALSE(peaks.empty());
     EXPECT_NEAR(peaks.front().score, oracle_best(w.query(), w.map, prior, w.sensor_query(), 4.0, 3.0, c), 1e-6);
     EXPECT_GT(peaks.front().score, 0.75) << "near the truth the query lies on the map (less a sub-cell offset)";
@@ -134,7 +144,8 @@ TEST(CorrelativeSearch, ItsBestPeakScoresWhatABruteForceOracleFinds) {
 TEST(CorrelativeSearch, AStreetOfIdenticalPolesHasPeaksAPoleSpacingApart) {
   const World w(false);  // poles every 6 m and nothing else
   const Pose3d prior = w.prior(Eigen::Vector3d(2.0, 1.0, 0.0), 0.0);
-  const std::vector<SearchCandidate> peaks = correlative_search(w.query(), w.map, prior, w.sensor_query(), 15.0, 5.0, kWindowM, {});
+  const std::vector<SearchCandidate> peaks =
+      correlative_search(w.query(), w.map, prior, w.sensor_query(), 15.0, 5.0, kWindowM, {});
   ASSERT_GE(peaks.size(), 2u);
   EXPECT_NEAR(peaks[1].score, peaks[0].score, 0.2 * peaks[0].score) << "look-alikes score alike";
   const Eigen::Vector3d a = peaks[0].T_map_query * w.sensor_query(), b = peaks[1].T_map_query * w.sensor_query();
@@ -146,7 +157,8 @@ TEST(CorrelativeSearch, StaysWithinThePriorAndNeedsPoints) {
   const Pose3d prior = w.prior(Eigen::Vector3d(14.0, -3.0, 0.0), 6.0);
   // The truth is 14.3 m and 6 degrees away, outside a 5 m, 2 degree prior: whatever the peaks
   // are, they stay inside it.
-  for (const SearchCandidate& p : correlative_search(w.query(), w.map, prior, w.sensor_query(), 5.0, 2.0, kWindowM, {})) {
+  for (const SearchCandidate& p :
+       correlative_search(w.query(), w.map, prior, w.sensor_query(), 5.0, 2.0, kWindowM, {})) {
     EXPECT_LE((p.T_map_query * w.sensor_query() - prior * w.sensor_query()).head<2>().norm(), 5.0 + 1e-9);
     EXPECT_LE(Eigen::AngleAxisd(p.T_map_query.linear() * prior.linear().transpose()).angle() / kDeg, 2.0 + 1e-9);
   }

@@ -21,7 +21,9 @@ const Localizer& street_localizer() {
   return localizer;
 }
 
-PointCloud street_query() { return test::transformed(test::pole_street(true), Pose3d(Eigen::Translation3d(0.3, -0.2, 0))); }
+PointCloud street_query() {
+  return test::transformed(test::pole_street(true), Pose3d(Eigen::Translation3d(0.3, -0.2, 0)));
+}
 
 TEST(Deadline, NeverAndNonPositiveDurationsDoNotPass) {
   EXPECT_FALSE(Deadline().passed());
@@ -63,7 +65,8 @@ TEST(Deadline, APassedDeadlineStopsASegmentsQueryBeforeRetrieval) {
 TEST(Deadline, ADistantDeadlineGivesTheSameAnswerAsNone) {
   const PointCloud query = street_query();
   const LocalizationResult none = street_localizer().localize(query, kSensor);
-  const LocalizationResult distant = street_localizer().localize(query, kSensor, CloudKind::kRaw, nullptr, Deadline::after_s(3600));
+  const LocalizationResult distant =
+      street_localizer().localize(query, kSensor, CloudKind::kRaw, nullptr, Deadline::after_s(3600));
   ASSERT_TRUE(none.localized()) << none.reason;
   EXPECT_TRUE(distant.localized()) << distant.reason;
   EXPECT_EQ(distant.refusal, Refusal::kNone);

@@ -48,9 +48,9 @@ PointCloud pole_cloud(int n, uint64_t seed) {
   PointCloud cloud;
   for (int i = 0; i < n; ++i) {
     const double a = rng.uniform(0, 6.283185307179586);
-    cloud.push_back(make_point(Eigen::Vector3f(static_cast<float>(0.15 * std::cos(a)),
-                                               static_cast<float>(0.15 * std::sin(a)),
-                                               static_cast<float>(rng.uniform(0, 3)))));
+    cloud.push_back(
+        make_point(Eigen::Vector3f(static_cast<float>(0.15 * std::cos(a)), static_cast<float>(0.15 * std::sin(a)),
+                                   static_cast<float>(rng.uniform(0, 3)))));
   }
   return cloud;
 }
@@ -115,9 +115,9 @@ TEST(EigenFeatures, PlaneIsPlanar) {
   Rng rng(2);
   PointCloud cloud;
   for (int i = 0; i < 4000; ++i) {
-    cloud.push_back(make_point(Eigen::Vector3f(static_cast<float>(rng.uniform(-5, 5)),
-                                               static_cast<float>(rng.uniform(-5, 5)),
-                                               static_cast<float>(rng.normal(0, 0.01)))));
+    cloud.push_back(
+        make_point(Eigen::Vector3f(static_cast<float>(rng.uniform(-5, 5)), static_cast<float>(rng.uniform(-5, 5)),
+                                   static_cast<float>(rng.normal(0, 0.01)))));
   }
   const EigenFeatures f = eigen_features(transformed(cloud, some_motion()));
   EXPECT_GT(f[kPlanarity], 0.95f);
@@ -137,12 +137,15 @@ TEST(EigenFeatures, IsotropicCloudIsScattered) {
 TEST(EigenFeatures, AnisotropicGaussianMatchesClosedForm) {
   // Sigmas 3, 2, 1 -> variances 9, 4, 1 -> normalised eigenvalues 9/14, 4/14, 1/14,
   // whatever the orientation of the cloud.
-  const PointCloud cloud =
-      transformed(gaussian_cloud(50000, {1.f, 3.f, 2.f}, 4), some_motion());
+  const PointCloud cloud = transformed(gaussian_cloud(50000, {1.f, 3.f, 2.f}, 4), some_motion());
   const double l1 = 9.0 / 14, l2 = 4.0 / 14, l3 = 1.0 / 14;
-  const double expected[kEigenFeatureCount] = {
-      (l1 - l2) / l1, (l2 - l3) / l1, l3 / l1, std::cbrt(l1 * l2 * l3), (l1 - l3) / l1,
-      -(l1 * std::log(l1) + l2 * std::log(l2) + l3 * std::log(l3)), l3};
+  const double expected[kEigenFeatureCount] = {(l1 - l2) / l1,
+                                               (l2 - l3) / l1,
+                                               l3 / l1,
+                                               std::cbrt(l1 * l2 * l3),
+                                               (l1 - l3) / l1,
+                                               -(l1 * std::log(l1) + l2 * std::log(l2) + l3 * std::log(l3)),
+                                               l3};
   const EigenFeatures f = eigen_features(cloud);
   for (int i = 0; i < kEigenFeatureCount; ++i) {
     EXPECT_NEAR(f[static_cast<size_t>(i)], expected[i], 0.01) << "feature " << i;
@@ -209,10 +212,8 @@ TEST(EsfDescriptor, DistinguishesShapes) {
   const EsfDescriptor box2 = esf_descriptor(box_cloud(1000, 13), 2000, 2);
   const EsfDescriptor sph1 = esf_descriptor(sphere_cloud(1000, 14), 2000, 1);
   const EsfDescriptor sph2 = esf_descriptor(sphere_cloud(1000, 15), 2000, 2);
-  const float same = std::min({intersection(pole1, pole2), intersection(box1, box2),
-                               intersection(sph1, sph2)});
-  const float different = std::max({intersection(pole1, box1), intersection(pole1, sph1),
-                                     intersection(box1, sph1)});
+  const float same = std::min({intersection(pole1, pole2), intersection(box1, box2), intersection(sph1, sph2)});
+  const float different = std::max({intersection(pole1, box1), intersection(pole1, sph1), intersection(box1, sph1)});
   // Measured: same >= 0.89, different <= 0.58 (box vs sphere is the closest pair).
   EXPECT_GT(same, 0.8f);
   EXPECT_LT(different, same - 0.15f);

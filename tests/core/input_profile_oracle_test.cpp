@@ -74,8 +74,7 @@ TEST(InputProfileOracle, PoseAgreementEqualsBruteForce) {
     for (const Point& q : b) {
       const Eigen::Vector3f p = T_a_b * q.xyz();
       bool hit = false;
-      for (const Point& r : a)
-        hit = hit || (std::isfinite(r.x) && static_cast<double>((r.xyz() - p).norm()) < 0.75);
+      for (const Point& r : a) hit = hit || (std::isfinite(r.x) && static_cast<double>((r.xyz() - p).norm()) < 0.75);
       near += hit;
     }
     EXPECT_EQ(pose_agreement(a, Pose3d::Identity(), b, T_world_b, 0.75),

@@ -14,8 +14,8 @@ namespace {
 PointCloud random_scan(Rng& rng, int n, double extent) {
   PointCloud scan(n);
   for (auto& p : scan) {
-    p = {float(rng.uniform(-extent, extent)), float(rng.uniform(-extent, extent)),
-         float(rng.uniform(-2.0, 2.0)), float(rng.uniform())};
+    p = {float(rng.uniform(-extent, extent)), float(rng.uniform(-extent, extent)), float(rng.uniform(-2.0, 2.0)),
+         float(rng.uniform())};
   }
   return scan;
 }

@@ -31,7 +31,8 @@ TEST(Localizer, LocalizesAStreetOfDistinctObjectsAtTheTruePose) {
   const PointCloud map_cloud = pole_street(true);
   const Localizer localizer(c, extract_segments(map_cloud, Eigen::Vector3f(25, 0, 2), c.segmentation));
   const Pose3d T = T_query_map();
-  const LocalizationResult r = localizer.localize(transformed(map_cloud, T), (T.cast<float>() * Eigen::Vector3f(25, 0, 2)));
+  const LocalizationResult r =
+      localizer.localize(transformed(map_cloud, T), (T.cast<float>() * Eigen::Vector3f(25, 0, 2)));
   ASSERT_TRUE(r.localized()) << r.reason;
   const Pose3d error = r.T_map_query * T;  // identity if exact
   EXPECT_LT(error.translation().norm(), 0.02);
@@ -94,7 +95,9 @@ TEST(Localizer, APriorDoesNotSettleLookAlikesJustBeyondIt) {
   prior.radius_m = 2.0;
   prior.max_rotation_deg = 3.0;
   const LocalizationResult fair = localizer.localize(query, sensor, CloudKind::kRaw, &prior);
-  EXPECT_FALSE(fair.localized()) << to_string(fair.method) << " support " << fair.support << " runner-up " << fair.runner_up_support << " inliers " << fair.inliers.size() << " hyp " << fair.hypotheses;
+  EXPECT_FALSE(fair.localized()) << to_string(fair.method) << " support " << fair.support << " runner-up "
+                                 << fair.runner_up_support << " inliers " << fair.inliers.size() << " hyp "
+                                 << fair.hypotheses;
   EXPECT_EQ(fair.refusal, Refusal::kAmbiguous) << fair.reason;
   EXPECT_NE(fair.reason.find("within the prior"), std::string::npos) << fair.reason;
 

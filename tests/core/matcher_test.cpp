@@ -114,8 +114,7 @@ TEST(MatcherTest, L2FilterKeepsExactlyThoseBelowThreshold) {
   const FeatureScaling s = FeatureScaling::fit(targets);
   std::set<std::pair<int, int>> want, got;
   for (const auto& c : candidates)
-    if (s.distance(queries[c.query].eigen, targets[c.target].eigen) < 1.5f)
-      want.insert({c.query, c.target});
+    if (s.distance(queries[c.query].eigen, targets[c.target].eigen) < 1.5f) want.insert({c.query, c.target});
   for (const auto& m : kept) {
     got.insert({m.query, m.target});
     const float d = s.distance(queries[m.query].eigen, targets[m.target].eigen);
@@ -153,8 +152,10 @@ TEST(MatcherTest, RandomForestClassifiesHeldOutPairs) {
     for (float floor : {0.f, 0.3f, 0.5f, 0.72f, 0.81f, 1.f}) {
       rf.probabilities_at_least(rows.data(), all.size(), floor, at_least.data());
       for (size_t r = 0; r < all.size(); ++r) {
-        if (all[r] >= floor) EXPECT_EQ(at_least[r], all[r]) << "row " << r << " floor " << floor;
-        else EXPECT_EQ(at_least[r], -1.f) << "row " << r << " floor " << floor;
+        if (all[r] >= floor)
+          EXPECT_EQ(at_least[r], all[r]) << "row " << r << " floor " << floor;
+        else
+          EXPECT_EQ(at_least[r], -1.f) << "row " << r << " floor " << floor;
       }
     }
 
@@ -179,17 +180,15 @@ TEST(MatcherTest, TrainNeedsBothClasses) {
   const PairSet objects = make_objects(5, 5);
   RandomForestMatcher rf;
   std::vector<std::pair<const Segment*, const Segment*>> pairs = {{&objects.a[0], &objects.b[0]},
-                                                                   {&objects.a[1], &objects.b[1]}};
+                                                                  {&objects.a[1], &objects.b[1]}};
   EXPECT_THROW(rf.train(pairs, {true, true}), std::invalid_argument);
   EXPECT_THROW(rf.train(pairs, {false, false}), std::invalid_argument);
   EXPECT_THROW(rf.train(pairs, {true}), std::invalid_argument);
   EXPECT_FALSE(rf.trained());
   EXPECT_THROW(rf.probability(objects.a[0], objects.b[0]), std::logic_error);
   MatcherConfig config;
-  EXPECT_THROW(filter_matches(objects.a, objects.b, {{0, 0, 0.f}}, config, &rf),
-               std::invalid_argument);
-  EXPECT_THROW(filter_matches(objects.a, objects.b, {{0, 0, 0.f}}, config, nullptr),
-               std::invalid_argument);
+  EXPECT_THROW(filter_matches(objects.a, objects.b, {{0, 0, 0.f}}, config, &rf), std::invalid_argument);
+  EXPECT_THROW(filter_matches(objects.a, objects.b, {{0, 0, 0.f}}, config, nullptr), std::invalid_argument);
 }
 
 TEST(MatcherTest, SaveLoadRoundTripGivesIdenticalProbabilities) {
@@ -206,12 +205,10 @@ TEST(MatcherTest, SaveLoadRoundTripGivesIdenticalProbabilities) {
     }
   EXPECT_EQ(loaded.save(), bytes);
   // Eigen-only model keeps its flag and refuses a shapes configuration.
-  const RandomForestMatcher eigen_only =
-      RandomForestMatcher::load(train_forest(make_objects(50, 8), false).save());
+  const RandomForestMatcher eigen_only = RandomForestMatcher::load(train_forest(make_objects(50, 8), false).save());
   EXPECT_FALSE(eigen_only.config().use_shapes);
   MatcherConfig shapes_config;
-  EXPECT_THROW(filter_matches(test.a, test.b, {{0, 0, 0.f}}, shapes_config, &eigen_only),
-               std::invalid_argument);
+  EXPECT_THROW(filter_matches(test.a, test.b, {{0, 0, 0.f}}, shapes_config, &eigen_only), std::invalid_argument);
 }
 
 TEST(MatcherTest, LoadGarbageThrowsWithMessage) {

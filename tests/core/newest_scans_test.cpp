@@ -107,7 +107,8 @@ TEST(NewestScans, OntoTheSurfaceLayerTheGroundHoldsHeightRollAndPitch) {
   Street s;
   const Localizer segments_only = s.localizer();
   const PointCloud surfaces = test::with_ground(s.map_cloud);
-  const Localizer layered(s.config, segments_only.targets(), nullptr, nullptr, std::make_shared<test::InMemorySurfaces>(surfaces));
+  const Localizer layered(s.config, segments_only.targets(), nullptr, nullptr,
+                          std::make_shared<test::InMemorySurfaces>(surfaces));
   LocalizationResult off = answer_off(s.T_query.inverse(), s.sensor_query(), 0.0, 0.0);
   Pose3d tilt = Pose3d::Identity();  // 0.6 deg of roll and 0.12 m of height about the sensor
   const Eigen::Vector3d at = s.sensor_map.cast<double>();
@@ -137,7 +138,8 @@ TEST(NewestScans, SeeingWhatTheSurfaceLayerNeverSawRefusesTheAnswerAsOffMap) {
   const Eigen::Vector3f sensor = s.sensor_query().cast<float>();
   const LocalizationResult answer = answer_off(s.T_query.inverse(), s.sensor_query(), 0.1, 0.2);
 
-  const Localizer layered(s.config, segments_only.targets(), nullptr, nullptr, std::make_shared<test::InMemorySurfaces>(surfaces));
+  const Localizer layered(s.config, segments_only.targets(), nullptr, nullptr,
+                          std::make_shared<test::InMemorySurfaces>(surfaces));
   LocalizationResult r = answer;
   layered.refine_to_newest_scans(newest, sensor, r);
   EXPECT_FALSE(r.localized());
@@ -163,7 +165,8 @@ TEST(NewestScans, SeeingWhatTheSurfaceLayerNeverSawRefusesTheAnswerAsOffMap) {
 
   Street off_switch;
   off_switch.config.newest.refuse_off_map = false;
-  const Localizer lenient(off_switch.config, segments_only.targets(), nullptr, nullptr, std::make_shared<test::InMemorySurfaces>(surfaces));
+  const Localizer lenient(off_switch.config, segments_only.targets(), nullptr, nullptr,
+                          std::make_shared<test::InMemorySurfaces>(surfaces));
   for (const Localizer* l : {&lenient, &segments_only}) {
     LocalizationResult kept = answer;
     l->refine_to_newest_scans(newest, sensor, kept);

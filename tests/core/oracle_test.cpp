@@ -4,8 +4,8 @@
 // exactly on cell boundaries, lattices at exactly the clustering distance, coordinates near
 // +-1e6 m); and one segment's ESF descriptor pinned bit for bit.
 #include "segmatch/core/description/descriptors.h"
-#include "segmatch/core/preprocess/preprocess.h"
 #include "segmatch/core/detail/random.h"
+#include "segmatch/core/preprocess/preprocess.h"
 #include "segmatch/core/segmentation/segmenter.h"
 
 #include <gtest/gtest.h>
@@ -71,7 +71,8 @@ TEST(EuclideanOracle, RandomCloudsEqualBruteForce) {
     const double side = 1.0 + 0.7 * double(seed);  // from one blob to many small clusters
     PointCloud cloud;
     for (int i = 0; i < n; ++i)
-      cloud.push_back({float(rng.uniform(-side, side)), float(rng.uniform(-side, side)), float(rng.uniform(0, 0.5 * side)), 0.f});
+      cloud.push_back(
+          {float(rng.uniform(-side, side)), float(rng.uniform(-side, side)), float(rng.uniform(0, 0.5 * side)), 0.f});
     expect_clusters_equal_brute_force(cloud, 0.2f, "seed " + std::to_string(seed));
   }
 }
@@ -89,7 +90,8 @@ TEST(EuclideanOracle, LatticesAtTheDistanceAndOnCellBoundaries) {
           for (int k = 0; k < 3; ++k)
             if ((i * 7 + j * 3 + k) % 5 != 0)  // holes, so that some lattice points stand alone
               cloud.push_back({offset + spacing * float(i), offset + spacing * float(j), spacing * float(k), 0.f});
-      expect_clusters_equal_brute_force(cloud, d, "offset " + std::to_string(offset) + ", spacing " + std::to_string(spacing));
+      expect_clusters_equal_brute_force(cloud, d,
+                                        "offset " + std::to_string(offset) + ", spacing " + std::to_string(spacing));
     }
 }
 
@@ -104,7 +106,8 @@ struct Voxel {
 std::map<std::array<int64_t, 3>, Voxel> brute_force_voxels(const PointCloud& cloud, double leaf) {
   std::map<std::array<int64_t, 3>, Voxel> voxels;
   for (const Point& p : cloud) {
-    const std::array<int64_t, 3> key = {int64_t(std::floor(double(p.x) / leaf)), int64_t(std::floor(double(p.y) / leaf)),
+    const std::array<int64_t, 3> key = {int64_t(std::floor(double(p.x) / leaf)),
+                                        int64_t(std::floor(double(p.y) / leaf)),
                                         int64_t(std::floor(double(p.z) / leaf))};
     Voxel& v = voxels[key];
     ++v.n, v.x += p.x, v.y += p.y, v.z += p.z;
@@ -127,10 +130,12 @@ void expect_voxels_equal_brute_force(const PointCloud& cloud, float leaf, int mi
     const float got[3] = {out[k].x, out[k].y, out[k].z};
     for (int a = 0; a < 3; ++a) {
       // The centroid is kept in float: within two float steps of the exact mean.
-      const double step = std::max(1e-7, double(std::nextafter(std::abs(float(mean[a])), INFINITY) - std::abs(float(mean[a]))));
+      const double step =
+          std::max(1e-7, double(std::nextafter(std::abs(float(mean[a])), INFINITY) - std::abs(float(mean[a]))));
       ASSERT_NEAR(got[a], mean[a], 2 * step) << what << ", voxel " << k << " axis " << a;
       // ... and in the voxel its points are in (the output order is the voxels' key order).
-      ASSERT_EQ(int64_t(std::floor(double(got[a]) / leaf)), expected[k].first[a]) << what << ", voxel " << k << " axis " << a;
+      ASSERT_EQ(int64_t(std::floor(double(got[a]) / leaf)), expected[k].first[a])
+          << what << ", voxel " << k << " axis " << a;
     }
   }
 }
@@ -165,9 +170,11 @@ TEST(VoxelFilterOracle, FarFromTheOriginEqualsBruteForce) {
       Rng rng(seed);
       PointCloud cloud;
       for (int i = 0; i < 4000; ++i)
-        cloud.push_back({offset + float(rng.uniform(-20, 20)), offset + float(rng.uniform(-20, 20)), float(rng.uniform(0, 5)), 0.f});
+        cloud.push_back({offset + float(rng.uniform(-20, 20)), offset + float(rng.uniform(-20, 20)),
+                         float(rng.uniform(0, 5)), 0.f});
       expect_voxels_equal_brute_force(cloud, 0.1f, 1, "offset " + std::to_string(offset));
-      expect_voxels_equal_brute_force(boundary_cloud(0.1f, offset, seed), 0.1f, 2, "boundaries at " + std::to_string(offset));
+      expect_voxels_equal_brute_force(boundary_cloud(0.1f, offset, seed), 0.1f, 2,
+                                      "boundaries at " + std::to_string(offset));
     }
 }
 
@@ -197,7 +204,8 @@ TEST(EsfOracle, AFixedSegmentIsPinnedBitForBit) {
   for (int k = 0; k < 30; ++k) cloud.push_back({2.5f, 1.0f, 0.1f * float(k), 0.f});
   const DescriptorConfig defaults;
   const EsfDescriptor d = esf_descriptor(cloud, defaults.esf_samples, defaults.esf_seed);
-  std::printf("[esf] fingerprint 0x%016llx, bins 0 %a 100 %a 400 %a\n", (unsigned long long)fingerprint(d), d[0], d[100], d[400]);
+  std::printf("[esf] fingerprint 0x%016llx, bins 0 %a 100 %a 400 %a\n", (unsigned long long)fingerprint(d), d[0],
+              d[100], d[400]);
   EXPECT_EQ(fingerprint(d), 0x614dedea7f58911bull);
 }
 

@@ -1,8 +1,8 @@
 // Cold start (place_recognition.h, Localizer::recognize_place): Scan Context descriptors of a
 // generated street, the places of a map along its trajectory, and a query without a prior
 // localized by the place it resembles, or refused.
-#include "segmatch/core/localization/localizer.h"
 #include "segmatch/core/localization/place_recognition.h"
+#include "segmatch/core/localization/localizer.h"
 #include "support/street_scene.h"
 
 #include <gtest/gtest.h>
@@ -40,7 +40,8 @@ struct MappedStreet {
     return t;
   }();
   PlaceIndex places(const PlaceRecognitionConfig& config = {}) const {
-    return build_place_index(trajectory, [this](const Eigen::Vector3d& c, double r) { return surfaces->near(c, r); }, config);
+    return build_place_index(
+        trajectory, [this](const Eigen::Vector3d& c, double r) { return surfaces->near(c, r); }, config);
   }
   // The vehicle's odometry frame: map points into it.
   Pose3d T_query = [] {
@@ -85,13 +86,14 @@ TEST(PlaceRecognition, TheIndexFindsThePlaceAndTheHeadingOfAQueryFromAnotherLane
   const Eigen::Vector3d truth_map(31.4, 1.3, 2.0);
   const Eigen::Vector3d sensor_query = m.T_query * truth_map;
   const PointCloud scan = crop_cylinder(transformed(m.layer, m.T_query), sensor_query, 40.0);
-  const std::vector<PlaceCandidate> found = index.query(describe_place(scan, sensor_query, 0.0, index.config()), sensor_query);
+  const std::vector<PlaceCandidate> found =
+      index.query(describe_place(scan, sensor_query, 0.0, index.config()), sensor_query);
   ASSERT_FALSE(found.empty());
   const PlaceCandidate& best = found.front();
   EXPECT_LT((best.T_map_query * sensor_query - truth_map).head<2>().norm(), 1.5);
   const double heading_error_deg =
       std::abs(std::remainder(yaw_of(best.T_map_query) - yaw_of(m.T_query.inverse()), 2.0 * M_PI)) / kDeg;
-  EXPECT_LT(heading_error_deg, 6.1);  // a sector
+  EXPECT_LT(heading_error_deg, 6.1);                                       // a sector
   EXPECT_NEAR((best.T_map_query * sensor_query).z(), truth_map.z(), 0.2);  // ground on ground
   for (size_t i = 1; i < found.size(); ++i) EXPECT_GE(found[i].distance, found[i - 1].distance);
 }
@@ -100,7 +102,8 @@ TEST(PlaceRecognition, ColdStartLocalizesAScanWithoutAPriorByThePlaceItShows) {
   const MappedStreet m;
   const LocalizerConfig config = config_with_ground();
   const Segments targets = extract_segments(m.layer, Eigen::Vector3f(25.f, 0.f, 2.f), config.segmentation);
-  const Localizer localizer(config, targets, nullptr, nullptr, m.surfaces, ready_places(std::make_shared<const PlaceIndex>(m.places(config.places))));
+  const Localizer localizer(config, targets, nullptr, nullptr, m.surfaces,
+                            ready_places(std::make_shared<const PlaceIndex>(m.places(config.places))));
   const Eigen::Vector3d truth_map(22.6, -0.8, 2.0);
   const Eigen::Vector3d s = m.T_query * truth_map;
   const PointCloud scan = crop_cylinder(transformed(m.layer, m.T_query), s, 35.0);
@@ -157,8 +160,8 @@ TEST(PlaceRecognition, ColdStartKeepsTheScanToWhatTheMapsSensorSaw) {
   refused.reason = "segment matching refused it";
   refused.query = extract_segments(scan, s.cast<float>(), config.segmentation);
   auto cold_start = [&](const LocalizerConfig& c) {
-    auto index = std::make_shared<const PlaceIndex>(
-        build_place_index(m.trajectory, [&](const Eigen::Vector3d& centre, double r) { return surfaces->near(centre, r); }, c.places));
+    auto index = std::make_shared<const PlaceIndex>(build_place_index(
+        m.trajectory, [&](const Eigen::Vector3d& centre, double r) { return surfaces->near(centre, r); }, c.places));
     const Localizer localizer(c, targets, nullptr, nullptr, surfaces, ready_places(index));
     return localizer.recognize_place(refused, scan, scan, s.cast<float>());
   };
@@ -176,7 +179,8 @@ TEST(PlaceRecognition, AScanOfAnUnmappedStreetIsRefusedWithTheReason) {
   const MappedStreet m;
   const LocalizerConfig config = config_with_ground();
   const Segments targets = extract_segments(m.layer, Eigen::Vector3f(25.f, 0.f, 2.f), config.segmentation);
-  const Localizer localizer(config, targets, nullptr, nullptr, m.surfaces, ready_places(std::make_shared<const PlaceIndex>(m.places(config.places))));
+  const Localizer localizer(config, targets, nullptr, nullptr, m.surfaces,
+                            ready_places(std::make_shared<const PlaceIndex>(m.places(config.places))));
   // Another street: the poles on the other side, other objects, its own ground.
   PointCloud elsewhere;
   for (int i = 0; i < 10; ++i) test::add_cylinder(elsewhere, 5.f * i + 2.f, -5.f, 0.2f, 6.f);
@@ -200,8 +204,9 @@ TEST(PlaceRecognition, AScanOfAnUnmappedStreetIsRefusedWithTheReason) {
 TEST(PlaceRecognition, ABuildStopsWhenCancelledAndAReadyFutureHoldsTheIndex) {
   const MappedStreet m;
   std::atomic<bool> stop{true};
-  const PlaceIndex none = build_place_index(m.trajectory, [&m](const Eigen::Vector3d& c, double r) { return m.surfaces->near(c, r); },
-                                            PlaceRecognitionConfig{}, &stop);
+  const PlaceIndex none = build_place_index(
+      m.trajectory, [&m](const Eigen::Vector3d& c, double r) { return m.surfaces->near(c, r); },
+      PlaceRecognitionConfig{}, &stop);
   EXPECT_EQ(none.size(), 0u);
   const PlacesFuture ready = ready_places(std::make_shared<const PlaceIndex>(m.places()));
   ASSERT_TRUE(ready.valid());

@@ -60,9 +60,8 @@ TEST(VoxelFilter, KnownCountsOnAGrid) {
 }
 
 TEST(VoxelFilter, MajorityLabelPerVoxel) {
-  const PointCloud cloud = {{0.01f, 0.01f, 0.01f, 0.f}, {0.02f, 0.01f, 0.01f, 0.f},
-                            {0.03f, 0.01f, 0.01f, 0.f}, {1.01f, 0.01f, 0.01f, 0.f},
-                            {1.02f, 0.01f, 0.01f, 0.f}, {1.03f, 0.01f, 0.01f, 0.f},
+  const PointCloud cloud = {{0.01f, 0.01f, 0.01f, 0.f}, {0.02f, 0.01f, 0.01f, 0.f}, {0.03f, 0.01f, 0.01f, 0.f},
+                            {1.01f, 0.01f, 0.01f, 0.f}, {1.02f, 0.01f, 0.01f, 0.f}, {1.03f, 0.01f, 0.01f, 0.f},
                             {2.01f, 0.01f, 0.01f, 0.f}, {2.02f, 0.01f, 0.01f, 0.f}};
   const std::vector<uint32_t> labels = {7, 5, 5, 0, 0, 3, 9, 4};
   std::vector<uint32_t> labels_out;
@@ -70,8 +69,7 @@ TEST(VoxelFilter, MajorityLabelPerVoxel) {
   ASSERT_EQ(out.size(), 3u);
   EXPECT_EQ(labels_out, (std::vector<uint32_t>{5, 3, 4}));  // majority, non-zero, tie->small
   const std::vector<uint32_t> wrong_size = {1, 2};
-  EXPECT_THROW(voxel_filter(cloud, VoxelGridConfig{}, &wrong_size, &labels_out),
-               std::invalid_argument);
+  EXPECT_THROW(voxel_filter(cloud, VoxelGridConfig{}, &wrong_size, &labels_out), std::invalid_argument);
 }
 
 TEST(VoxelFilter, OutputIsDeterministicAndSortedByVoxel) {
@@ -83,8 +81,7 @@ TEST(VoxelFilter, OutputIsDeterministicAndSortedByVoxel) {
   cloud.push_back({NAN, 0.f, 0.f, 0.f});
   const PointCloud a = voxel_filter(cloud, VoxelGridConfig{});
   PointCloud shuffled = cloud;
-  for (size_t i = shuffled.size() - 1; i > 0; --i)
-    std::swap(shuffled[i], shuffled[rng.index(i + 1)]);
+  for (size_t i = shuffled.size() - 1; i > 0; --i) std::swap(shuffled[i], shuffled[rng.index(i + 1)]);
   const PointCloud b = voxel_filter(shuffled, VoxelGridConfig{});
   ASSERT_EQ(a.size(), b.size());
   ASSERT_GT(a.size(), 100u);

@@ -48,7 +48,8 @@ PointCloud street(uint64_t seed, double noise_m = 0.0) {
     s.face({x, 9 + setback, 0}, {0, 1.0 + (k + 4) % 3, 0}, {0, 0, 8}, 40);  // facade steps, both sides
     s.face({x, -9 - setback, 0}, {0, -1.0 - (k + 5) % 3, 0}, {0, 0, 6}, 40);
   }
-  s.face({-40, -12, 0}, {80, 0, 0}, {0, 24, 0}, 4);  // ground: it holds z here (car roofs and kerbs do in real segments)
+  s.face({-40, -12, 0}, {80, 0, 0}, {0, 24, 0},
+         4);  // ground: it holds z here (car roofs and kerbs do in real segments)
   for (double x : {-25.0, -12.0, 4.0, 17.0, 30.0}) s.box({x, 5.5, 0}, {4.2, 1.8, 1.5}, 20);
   for (double x : {-30.0, -5.0, 11.0, 26.0}) s.box({x, -7.0, 0}, {0.3, 0.3, 5}, 40);
   return s.cloud;
@@ -87,8 +88,9 @@ double rotation_error_deg(const Pose3d& a, const Pose3d& b) {
 const Pose3d kTruth = pose(3.0, -1.0, 25.0);
 const Eigen::Vector3d kSensor(0, 0, 1.8);
 
-RegistrationResult run(const PointCloud& map, const PointCloud& query_map_frame, const Pose3d& prior, double radius_m = 5.0,
-                       const RegistrationConfig& config = {}, const CovarianceConfig& covariance = {}) {
+RegistrationResult run(const PointCloud& map, const PointCloud& query_map_frame, const Pose3d& prior,
+                       double radius_m = 5.0, const RegistrationConfig& config = {},
+                       const CovarianceConfig& covariance = {}) {
   return register_to_map(transformed(query_map_frame, kTruth.inverse()), map, prior, kSensor, radius_m, 10.0, 0.15f,
                          config, RefineConfig{}, covariance);
 }

@@ -1,6 +1,6 @@
 // Candidate retrieval (paper III-D): exact kNN in z-scored eigen-feature space.
-#include "segmatch/core/detail/random.h"
 #include "segmatch/core/matching/retrieval.h"
+#include "segmatch/core/detail/random.h"
 
 #include <gtest/gtest.h>
 
@@ -25,8 +25,7 @@ Segments random_segments(int n, uint64_t seed) {
   return out;
 }
 
-std::vector<std::pair<int, float>> brute_force(const Segments& targets, const EigenFeatures& q,
-                                               int k) {
+std::vector<std::pair<int, float>> brute_force(const Segments& targets, const EigenFeatures& q, int k) {
   // Population statistics of the targets, computed independently of FeatureScaling.
   std::array<double, kEigenFeatureCount> mean{}, sd{};
   for (int d = 0; d < kEigenFeatureCount; ++d) {

@@ -148,8 +148,7 @@ TEST(Segmenter, OutputIsIndependentOfPointOrder) {
   s.box(1.15f, 0.f, 0.f, 1.f, 0.5f, 3);
   Rng rng(5);
   PointCloud shuffled = s.cloud;
-  for (size_t i = shuffled.size() - 1; i > 0; --i)
-    std::swap(shuffled[i], shuffled[rng.index(i + 1)]);
+  for (size_t i = shuffled.size() - 1; i > 0; --i) std::swap(shuffled[i], shuffled[rng.index(i + 1)]);
   for (auto config : {euclidean(), region_growing()}) {
     config.min_points = 20;  // region growing cuts the boxes into their faces
     const auto canonical = [&](const PointCloud& cloud) {

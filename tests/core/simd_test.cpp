@@ -69,7 +69,8 @@ TEST(Simd, ComparisonMasksAndSelect) {
       ASSERT_EQ(simd::le_bits(a, b), le) << i << " " << j;
       ASSERT_EQ(simd::lt_bits(a, b), lt) << i << " " << j;
       int32_t picked[4];
-      simd::store(picked, simd::select_lt(a, b, simd::make(1, 2, 3, 4), simd::splat(int32_t(-7)) + simd::splat(int32_t(1))));
+      simd::store(picked,
+                  simd::select_lt(a, b, simd::make(1, 2, 3, 4), simd::splat(int32_t(-7)) + simd::splat(int32_t(1))));
       for (int k = 0; k < 4; ++k) ASSERT_EQ(picked[k], v[i + k] < v[j + k] ? k + 1 : -6);
     }
 }

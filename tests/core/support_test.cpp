@@ -1,8 +1,8 @@
 // Hypothesis ranking beyond the paper: distinct verified hypotheses, support of a pose, and
 // labelled training pairs.
+#include "segmatch/core/verification/support.h"
 #include "segmatch/core/detail/random.h"
 #include "segmatch/core/matching/retrieval.h"
-#include "segmatch/core/verification/support.h"
 #include "segmatch/core/training/training.h"
 #include "segmatch/core/verification/verification.h"
 
@@ -26,8 +26,7 @@ Pose3d shift(double x, double y) { return test::pose_at(x, y); }
 TEST(CentroidIndex, NearestWithinEqualsBruteForce) {
   Rng rng(5);
   Segments segments;
-  for (int i = 0; i < 500; ++i)
-    segments.push_back(at(rng.uniform(-50, 50), rng.uniform(-50, 50), rng.uniform(0, 5)));
+  for (int i = 0; i < 500; ++i) segments.push_back(at(rng.uniform(-50, 50), rng.uniform(-50, 50), rng.uniform(0, 5)));
   const CentroidIndex index(segments, 1.0f);
   for (int k = 0; k < 2000; ++k) {
     const Eigen::Vector3f p(rng.uniform(-52, 52), rng.uniform(-52, 52), rng.uniform(-1, 6));
@@ -116,8 +115,7 @@ TEST(TrainingPairs, PositivesAreTheSameInstanceNearbyNegativesOtherInstances) {
   EXPECT_EQ(pairs.positives, 1u);
   EXPECT_EQ(pairs.negatives, 1u);
   ASSERT_EQ(pairs.pairs.size(), 2u);
-  for (size_t i = 0; i < pairs.pairs.size(); ++i)
-    EXPECT_EQ(pairs.same_object[i], pairs.pairs[i].second == &targets[0]);
+  for (size_t i = 0; i < pairs.pairs.size(); ++i) EXPECT_EQ(pairs.same_object[i], pairs.pairs[i].second == &targets[0]);
   config.max_centroid_distance_m = 0.0f;  // instance only
   pairs = label_pairs_by_instance(queries, targets, index, config);
   EXPECT_EQ(pairs.positives, 2u);
@@ -126,10 +124,10 @@ TEST(TrainingPairs, PositivesAreTheSameInstanceNearbyNegativesOtherInstances) {
 
 TEST(TrainingPairs, RealDataLabelsByCentroidDistanceAndLeavesTheMiddleOut) {
   Segments queries{at(0, 0, 0, 0u), at(100, 0, 0, 0u)};
-  Segments targets{at(0.4f, 0, 0, 0u),   // within 1.5 m: the same object seen again
-                   at(2.5f, 0, 0, 0u),   // 1.5..4 m: a neighbouring piece or a pose error, left out
-                   at(9.0f, 0, 0, 0u),   // beyond 4 m: negative
-                   at(100, 1, 0, 0u)};   // the second query's positive
+  Segments targets{at(0.4f, 0, 0, 0u),  // within 1.5 m: the same object seen again
+                   at(2.5f, 0, 0, 0u),  // 1.5..4 m: a neighbouring piece or a pose error, left out
+                   at(9.0f, 0, 0, 0u),  // beyond 4 m: negative
+                   at(100, 1, 0, 0u)};  // the second query's positive
   FeatureIndex index;
   index.build(targets);
   TrainingPairConfig config;

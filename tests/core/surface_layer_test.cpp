@@ -39,7 +39,8 @@ TEST(SurfaceLayer, OnePointPerVoxelInTheWorldFrameWithinRange) {
     EXPECT_NEAR(p.z, 0.2f, 1e-4f) << "the ground 1.8 m below a sensor at 2 m";
     EXPECT_LE(std::hypot(p.x - 100.f, p.y + 50.f), 10.f + 0.5f) << "cut at max_range_m (plus a voxel)";
     EXPECT_EQ(p.intensity, 0.f);
-    EXPECT_TRUE(voxels.emplace(int(std::floor(p.x / 0.5f)), int(std::floor(p.y / 0.5f)), int(std::floor(p.z / 0.5f))).second)
+    EXPECT_TRUE(
+        voxels.emplace(int(std::floor(p.x / 0.5f)), int(std::floor(p.y / 0.5f)), int(std::floor(p.z / 0.5f))).second)
         << "one point per voxel";
   }
   // A disc of radius 10 m holds about pi * 10^2 / 0.25 voxels of 0.5 m, give or take the

@@ -29,7 +29,8 @@ struct Street {
   }();
   Segments map_segments() const { return extract_segments(map_cloud, sensor_map, config.segmentation); }
   Localizer layered() const {
-    return Localizer(config, map_segments(), nullptr, nullptr, std::make_shared<test::InMemorySurfaces>(test::with_ground(map_cloud)));
+    return Localizer(config, map_segments(), nullptr, nullptr,
+                     std::make_shared<test::InMemorySurfaces>(test::with_ground(map_cloud)));
   }
   Eigen::Vector3d sensor_query() const { return T_query * sensor_map.cast<double>(); }
   PointCloud newest() const { return transformed(test::with_ground(map_cloud), T_query); }
@@ -51,14 +52,17 @@ struct Street {
     p.max_rotation_deg = 5.0;
     return p;
   }
-  double error_m(const LocalizationResult& r) const { return (r.T_map_query * sensor_query() - sensor_map.cast<double>()).norm(); }
+  double error_m(const LocalizationResult& r) const {
+    return (r.T_map_query * sensor_query() - sensor_map.cast<double>()).norm();
+  }
 };
 
 TEST(SurfaceTracking, RegistersTheNewestScansFromATrackersPrior) {
   const Street s;
   const Localizer localizer = s.layered();
   for (const auto& [shift_m, turn_deg] : {std::pair{0.0, 0.0}, {0.8, 2.0}, {-1.2, -3.0}}) {
-    const LocalizationResult r = localizer.track(s.query_segments(), s.newest(), s.sensor_query().cast<float>(), s.prior(shift_m, turn_deg));
+    const LocalizationResult r =
+        localizer.track(s.query_segments(), s.newest(), s.sensor_query().cast<float>(), s.prior(shift_m, turn_deg));
     ASSERT_TRUE(r.localized()) << shift_m << " m: " << r.reason;
     EXPECT_EQ(r.method, LocalizationMethod::kSurfaces);
     EXPECT_LT(s.error_m(r), 0.02) << shift_m << " m";
@@ -80,8 +84,10 @@ TEST(SurfaceTracking, RefusesByNameWhatItCannotAnswer) {
     EXPECT_TRUE(r.covariance.isZero()) << why;
   };
   const Localizer no_layer(s.config, s.map_segments());
-  lost(no_layer.track(s.query_segments(), s.newest(), sensor, s.prior(0.3, 0.0)), "no surface layer", "map without a layer");
-  lost(layered.track(s.query_segments(), s.newest(), sensor, s.prior(0.3, 0.0, 60.0)), "wider than", "a prior beyond the search's 40 m");
+  lost(no_layer.track(s.query_segments(), s.newest(), sensor, s.prior(0.3, 0.0)), "no surface layer",
+       "map without a layer");
+  lost(layered.track(s.query_segments(), s.newest(), sensor, s.prior(0.3, 0.0, 60.0)), "wider than",
+       "a prior beyond the search's 40 m");
   Street no_search = s;
   no_search.config.search.enabled = false;
   lost(no_search.layered().track(s.query_segments(), s.newest(), sensor, s.prior(0.3, 0.0, 20.0)), "wider than",
@@ -105,7 +111,8 @@ TEST(SurfaceTracking, AWrongPriorNeverBecomesAFix) {
   const Street s;
   const Localizer localizer = s.layered();
   for (double shift_m : {4.0, -5.0, 8.0, 15.0}) {
-    const LocalizationResult r = localizer.track(s.query_segments(), s.newest(), s.sensor_query().cast<float>(), s.prior(shift_m, 0.0));
+    const LocalizationResult r =
+        localizer.track(s.query_segments(), s.newest(), s.sensor_query().cast<float>(), s.prior(shift_m, 0.0));
     EXPECT_FALSE(r.localized() && s.error_m(r) > 1.0) << shift_m << " m: a false fix " << s.error_m(r) << " m off";
     EXPECT_FALSE(r.localized()) << shift_m << " m: the truth is outside the prior's 3 m";
   }
@@ -117,9 +124,11 @@ TEST(SurfaceTracking, WidePriorsAreSearchedThenRegistered) {
   const Street s;
   const Localizer localizer = s.layered();
   const Eigen::Vector3f sensor = s.sensor_query().cast<float>();
-  ASSERT_GT(20.0, s.config.registration.max_prior_radius_m) << "the test is about priors registration alone does not take";
+  ASSERT_GT(20.0, s.config.registration.max_prior_radius_m)
+      << "the test is about priors registration alone does not take";
   for (const auto& [shift_m, turn_deg] : {std::pair{12.0, 0.0}, {-15.0, 4.0}}) {
-    const LocalizationResult r = localizer.track(s.query_segments(), s.newest(), sensor, s.prior(shift_m, turn_deg, 20.0));
+    const LocalizationResult r =
+        localizer.track(s.query_segments(), s.newest(), sensor, s.prior(shift_m, turn_deg, 20.0));
     ASSERT_TRUE(r.localized()) << shift_m << " m: " << r.reason;
     EXPECT_EQ(r.method, LocalizationMethod::kSurfaces);
     EXPECT_LT(s.error_m(r), 0.05) << shift_m << " m";
@@ -143,9 +152,11 @@ TEST(SurfaceTracking, ALookAlikeInAWidePriorIsRefusedNotAnswered) {
   PointCloud layer = test::with_ground(s.map_cloud);
   const PointCloud twin_ground = transformed(test::with_ground({}), Pose3d(Eigen::Translation3d(0.0, 45.0, 0.0)));
   layer.insert(layer.end(), twin_ground.begin(), twin_ground.end());
-  const Localizer localizer(s.config, s.map_segments(), nullptr, nullptr, std::make_shared<test::InMemorySurfaces>(layer));
+  const Localizer localizer(s.config, s.map_segments(), nullptr, nullptr,
+                            std::make_shared<test::InMemorySurfaces>(layer));
   // The vehicle sees its own block: the query is the original block alone.
-  Segments query = extract_segments(transformed(block, s.T_query), s.sensor_query().cast<float>(), s.config.segmentation);
+  Segments query =
+      extract_segments(transformed(block, s.T_query), s.sensor_query().cast<float>(), s.config.segmentation);
   for (Segment& g : query) g.points.clear();
   const PointCloud newest = transformed(test::with_ground(block), s.T_query);
   PosePrior prior = s.prior(0.0, 0.0, 25.0);  // 25 m around a centre 32 m from the truth, 13 m from the twin
@@ -176,7 +187,8 @@ TEST(SurfaceTracking, ObjectsThatFitBetterElsewhereRefuseTheAnswer) {
   Segments query = s.query_segments();
   const size_t here = query.size();
   const Pose3d moved = s.T_query * Pose3d(Eigen::Translation3d(6.0, 0.0, 0.0));
-  for (Segment g : extract_segments(transformed(s.map_cloud, moved), s.sensor_query().cast<float>(), s.config.segmentation)) {
+  for (Segment g :
+       extract_segments(transformed(s.map_cloud, moved), s.sensor_query().cast<float>(), s.config.segmentation)) {
     g.points.clear();
     query.push_back(g);
   }
@@ -222,8 +234,9 @@ TEST(SurfaceTracking, AFallbackRefusalKeepsTrackingsReason) {
   const Street s;
   const Localizer localizer = s.layered();
   // A prior turned 20 degrees from the truth, with a 5 degree tolerance: neither path may answer.
-  const LocalizationResult r = localizer.localize_tracking_first(transformed(s.map_cloud, s.T_query), s.sensor_query().cast<float>(),
-                                                                 CloudKind::kRaw, s.newest(), s.prior(0.0, 20.0), Deadline{});
+  const LocalizationResult r =
+      localizer.localize_tracking_first(transformed(s.map_cloud, s.T_query), s.sensor_query().cast<float>(),
+                                        CloudKind::kRaw, s.newest(), s.prior(0.0, 20.0), Deadline{});
   ASSERT_FALSE(r.localized()) << "answered " << s.error_m(r) << " m off";
   EXPECT_NE(r.reason.find(" (tracking on the surface layer: "), std::string::npos) << r.reason;
   LocalizationResult answered;
@@ -244,12 +257,15 @@ TEST(SurfaceTracking, TrackingFirstDescribesOnlyTheSegmentsItChecks) {
     return (a.centroid - s.sensor_map).norm() < (b.centroid - s.sensor_map).norm();
   });
   targets.resize(targets.size() - 4);
-  const Localizer localizer(s.config, targets, nullptr, nullptr, std::make_shared<test::InMemorySurfaces>(test::with_ground(s.map_cloud)));
+  const Localizer localizer(s.config, targets, nullptr, nullptr,
+                            std::make_shared<test::InMemorySurfaces>(test::with_ground(s.map_cloud)));
   const PointCloud cloud = transformed(s.map_cloud, s.T_query);
   const Eigen::Vector3f sensor = s.sensor_query().cast<float>();
   const PosePrior prior = s.prior(0.8, 2.0);
-  const LocalizationResult lazy = localizer.localize_tracking_first(cloud, sensor, CloudKind::kRaw, s.newest(), prior, Deadline{});
-  const LocalizationResult full = localizer.track(extract_segments(cloud, sensor, s.config.segmentation), s.newest(), sensor, prior);
+  const LocalizationResult lazy =
+      localizer.localize_tracking_first(cloud, sensor, CloudKind::kRaw, s.newest(), prior, Deadline{});
+  const LocalizationResult full =
+      localizer.track(extract_segments(cloud, sensor, s.config.segmentation), s.newest(), sensor, prior);
   ASSERT_TRUE(lazy.localized()) << lazy.reason;
   ASSERT_TRUE(full.localized()) << full.reason;
   EXPECT_TRUE(lazy.T_map_query.isApprox(full.T_map_query, 0.0)) << "the same pose, bit for bit";
@@ -267,7 +283,8 @@ TEST(SurfaceTracking, TrackingFirstDescribesOnlyTheSegmentsItChecks) {
   EXPECT_LT(described, lazy.query.size()) << "the scene has segments the pose does not check";
   // A prior turned 20 degrees (5 allowed): tracking refuses, the segments path gets every
   // segment described.
-  const LocalizationResult refused = localizer.localize_tracking_first(cloud, sensor, CloudKind::kRaw, s.newest(), s.prior(0.0, 20.0), Deadline{});
+  const LocalizationResult refused =
+      localizer.localize_tracking_first(cloud, sensor, CloudKind::kRaw, s.newest(), s.prior(0.0, 20.0), Deadline{});
   ASSERT_FALSE(refused.localized());
   ASSERT_FALSE(refused.query.empty());
   for (const Segment& g : refused.query) EXPECT_TRUE(g.has_eigen);

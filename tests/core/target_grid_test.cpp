@@ -24,7 +24,8 @@ PointCloud random_cloud(Rng& rng, int n, float side, float cell, bool on_boundar
   PointCloud cloud;
   for (int i = 0; i < n; ++i) {
     Point p{float(rng.uniform(-side, side)), float(rng.uniform(-side, side)), float(rng.uniform(-1, 1)), 0.f};
-    if (on_boundaries && i % 2 == 0) p.x = cell * float(rng.uniform_int(-20, 20)), p.z = cell * float(rng.uniform_int(-3, 3));
+    if (on_boundaries && i % 2 == 0)
+      p.x = cell * float(rng.uniform_int(-20, 20)), p.z = cell * float(rng.uniform_int(-3, 3));
     cloud.push_back(p);
   }
   return cloud;
@@ -36,7 +37,8 @@ void expect_grid_equals_brute_force(const PointCloud& target, float cell, Rng& r
   for (int q = 0; q < 400; ++q) {
     const Eigen::Vector3f p = q % 3 == 0 ? grid.point(uint32_t(rng.uniform_int(0, int(grid.size()) - 1))) +
                                                Eigen::Vector3f(0.f, float(rng.uniform(-0.1, 0.1)), 0.f)
-                                         : Eigen::Vector3f(float(rng.uniform(-6, 6)), float(rng.uniform(-6, 6)), float(rng.uniform(-1.5, 1.5)));
+                                         : Eigen::Vector3f(float(rng.uniform(-6, 6)), float(rng.uniform(-6, 6)),
+                                                           float(rng.uniform(-1.5, 1.5)));
     const float max2 = q % 2 ? cell * cell : 4.f * cell * cell;
     uint32_t want = detail::FlatHashMap::kMissing;
     float want_d = 0.f;

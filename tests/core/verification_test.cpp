@@ -1,6 +1,6 @@
 // Geometric verification (paper III-E) and ICP refinement.
-#include "segmatch/core/detail/random.h"
 #include "segmatch/core/verification/verification.h"
+#include "segmatch/core/detail/random.h"
 
 #include <gtest/gtest.h>
 
@@ -15,10 +15,10 @@ constexpr double kDeg = M_PI / 180.0;
 
 Pose3d true_pose() {
   Pose3d T = Pose3d::Identity();
-  T.linear() = (Eigen::AngleAxisd(40 * kDeg, Eigen::Vector3d::UnitZ()) *
-                Eigen::AngleAxisd(2 * kDeg, Eigen::Vector3d::UnitX()) *
-                Eigen::AngleAxisd(-3 * kDeg, Eigen::Vector3d::UnitY()))
-                   .toRotationMatrix();
+  T.linear() =
+      (Eigen::AngleAxisd(40 * kDeg, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(2 * kDeg, Eigen::Vector3d::UnitX()) *
+       Eigen::AngleAxisd(-3 * kDeg, Eigen::Vector3d::UnitY()))
+          .toRotationMatrix();
   T.translation() = Eigen::Vector3d(35.0, -22.0, 1.5);
   return T;
 }
@@ -145,8 +145,7 @@ TEST(VerificationTest, FindsTheTrueSetAmongThousandsOfCandidatesOnAWideMap) {
       candidates.push_back({i, i, 1.f});
       truth.insert({i, i});
     }
-    for (int k = 0; k < 4000; ++k)
-      candidates.push_back({rng.uniform_int(0, 59), rng.uniform_int(8, 2999), 0.5f});
+    for (int k = 0; k < 4000; ++k) candidates.push_back({rng.uniform_int(0, 59), rng.uniform_int(8, 2999), 0.5f});
     const VerificationResult r = verify_matches(queries, map, candidates, {});
     ASSERT_TRUE(r.found) << place;
     EXPECT_EQ(as_set(r.inliers), truth) << place;
@@ -159,7 +158,8 @@ TEST(VerificationTest, FindsTheTrueSetAmongThousandsOfCandidatesOnAWideMap) {
 TEST(VerificationTest, BeyondMaxCandidatesTheBestScoredAreVerified) {
   Scene s = make_scene(10, 400, 0.02, 31);
   Rng rng(32);
-  for (Match& m : s.candidates) m.score = s.truth.count({m.query, m.target}) ? 0.9f : static_cast<float>(rng.uniform(0.0, 0.8));
+  for (Match& m : s.candidates)
+    m.score = s.truth.count({m.query, m.target}) ? 0.9f : static_cast<float>(rng.uniform(0.0, 0.8));
   VerificationConfig bounded;
   bounded.max_candidates = 60;
   const VerificationResult r = verify_matches(s.queries, s.targets, s.candidates, bounded);
@@ -168,7 +168,8 @@ TEST(VerificationTest, BeyondMaxCandidatesTheBestScoredAreVerified) {
   // The oracle: the 60 best by score, in candidate order (ties: the earlier first).
   std::vector<size_t> order(s.candidates.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return s.candidates[a].score > s.candidates[b].score; });
+  std::stable_sort(order.begin(), order.end(),
+                   [&](size_t a, size_t b) { return s.candidates[a].score > s.candidates[b].score; });
   order.resize(60);
   std::sort(order.begin(), order.end());
   Matches subset;
@@ -178,7 +179,8 @@ TEST(VerificationTest, BeyondMaxCandidatesTheBestScoredAreVerified) {
   const VerificationResult oracle = verify_matches(s.queries, s.targets, subset, unbounded);
   ASSERT_EQ(r.hypotheses.size(), oracle.hypotheses.size());
   EXPECT_TRUE(r.T_target_query.isApprox(oracle.T_target_query, 0.0));
-  for (size_t h = 0; h < r.hypotheses.size(); ++h) EXPECT_EQ(as_set(r.hypotheses[h].inliers), as_set(oracle.hypotheses[h].inliers));
+  for (size_t h = 0; h < r.hypotheses.size(); ++h)
+    EXPECT_EQ(as_set(r.hypotheses[h].inliers), as_set(oracle.hypotheses[h].inliers));
   // At the bound (410 candidates, bound 410) and without one, the same answer.
   VerificationConfig at;
   at.max_candidates = static_cast<int>(s.candidates.size());
@@ -213,8 +215,7 @@ PointCloud sample_scene(uint64_t seed, int per_m2) {
     const int n = static_cast<int>(u.norm() * v.norm() * per_m2);
     for (int i = 0; i < n; ++i) {
       const Eigen::Vector3d p = o + rng.uniform() * u + rng.uniform() * v;
-      cloud.push_back({static_cast<float>(p.x()), static_cast<float>(p.y()),
-                       static_cast<float>(p.z()), 0.f});
+      cloud.push_back({static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()), 0.f});
     }
   };
   auto box = [&](Eigen::Vector3d lo, Eigen::Vector3d size) {
@@ -225,9 +226,9 @@ PointCloud sample_scene(uint64_t seed, int per_m2) {
     face(lo + X, Y, Z);
     face(lo + Z, X, Y);
   };
-  face({-10, -10, 0}, {20, 0, 0}, {0, 20, 0});   // ground
-  face({-10, 9, 0}, {20, 0, 0}, {0, 0, 4});      // wall along x
-  face({9, -10, 0}, {0, 19, 0}, {0, 0, 3});      // wall along y
+  face({-10, -10, 0}, {20, 0, 0}, {0, 20, 0});  // ground
+  face({-10, 9, 0}, {20, 0, 0}, {0, 0, 4});     // wall along x
+  face({9, -10, 0}, {0, 19, 0}, {0, 0, 3});     // wall along y
   box({-4, -3, 0}, {2, 1.5, 1.6});
   box({3, 2, 0}, {1, 3, 2.5});
   return cloud;
@@ -246,17 +247,16 @@ PointCloud transformed(const PointCloud& in, const Pose3d& T) {
 
 Pose3d perturbation() {
   Pose3d P = Pose3d::Identity();
-  P.linear() = Eigen::AngleAxisd(2 * kDeg, Eigen::Vector3d(0.3, -0.2, 1.0).normalized())
-                   .toRotationMatrix();
+  P.linear() = Eigen::AngleAxisd(2 * kDeg, Eigen::Vector3d(0.3, -0.2, 1.0).normalized()).toRotationMatrix();
   P.translation() = Eigen::Vector3d(0.2, -0.2, 0.1);  // 0.3 m
   return P;
 }
 
 TEST(RefineTest, PointToPlaneCorrectsSmallPerturbation) {
   const Pose3d T = true_pose();
-  const PointCloud target = transformed(sample_scene(11, 40), T);   // map frame
-  const PointCloud query = sample_scene(12, 40);                     // other samples, query frame
-  const Pose3d initial = T * perturbation();  // perturbed in the query frame
+  const PointCloud target = transformed(sample_scene(11, 40), T);  // map frame
+  const PointCloud query = sample_scene(12, 40);                   // other samples, query frame
+  const Pose3d initial = T * perturbation();                       // perturbed in the query frame
   const RefineResult r = refine_alignment(query, target, initial, {});
   EXPECT_TRUE(r.converged);
   EXPECT_LT((r.T_target_query.translation() - T.translation()).norm(), 0.01);

@@ -11,9 +11,9 @@
 
 #include <algorithm>
 #include <cmath>
-#include <string>
 #include <limits>
 #include <random>
+#include <string>
 
 using namespace segmatch;
 
@@ -76,13 +76,14 @@ void expect_same(const PointCloud& expected, const std::vector<uint32_t>& expect
     const float tol = 2e-5f + 2.0f * (std::nextafter(m, std::numeric_limits<float>::infinity()) - m);
     const bool same = std::abs(got[i].x - expected[i].x) <= tol && std::abs(got[i].y - expected[i].y) <= tol &&
                       std::abs(got[i].z - expected[i].z) <= tol &&
-                      std::abs(got[i].intensity - expected[i].intensity) <= 1e-5f && got_labels[i] == expected_labels[i];
+                      std::abs(got[i].intensity - expected[i].intensity) <= 1e-5f &&
+                      got_labels[i] == expected_labels[i];
     if (!same) {
       ++bad;
       ADD_FAILURE() << what << ": voxel " << i << " expected (" << expected[i].x << ", " << expected[i].y << ", "
-                    << expected[i].z << ", i " << expected[i].intensity << ", label " << expected_labels[i]
-                    << ") got (" << got[i].x << ", " << got[i].y << ", " << got[i].z << ", i " << got[i].intensity
-                    << ", label " << got_labels[i] << ")";
+                    << expected[i].z << ", i " << expected[i].intensity << ", label " << expected_labels[i] << ") got ("
+                    << got[i].x << ", " << got[i].y << ", " << got[i].z << ", i " << got[i].intensity << ", label "
+                    << got_labels[i] << ")";
     }
   }
 }
@@ -100,8 +101,8 @@ size_t drive_and_compare(const Scene& scene, LocalCloudConfig lc, double step_m,
   PointCloud points;
   std::vector<uint32_t> labels;
   for (int k = 0; k < scans; ++k) {
-    const Pose3d T = pose(scene.offset.x() + (k < turn ? k : 2 * turn - k) * step_m, scene.offset.y() + 0.3 * std::sin(0.2 * k),
-                          scene.offset.z() + 1.73, 0.05 * k);
+    const Pose3d T = pose(scene.offset.x() + (k < turn ? k : 2 * turn - k) * step_m,
+                          scene.offset.y() + 0.3 * std::sin(0.2 * k), scene.offset.z() + 1.73, 0.05 * k);
     scene.scan(T, 30.0, 6000, 100 + k, &points, &labels);
     if (with_nan) points[k % points.size()].x = std::numeric_limits<float>::quiet_NaN();
     const bool labelled = !(some_without_labels && k % 4 == 1);
@@ -194,7 +195,7 @@ TEST(VoxelAccumulator, VoxelsCutByTheCylinderKeepOnlyTheirPointsInside) {
   const PointCloud scan = {
       {9.91f, 1.01f, 0.05f, 1.f}, {9.92f, 1.02f, 0.05f, 1.f}, {9.99f, 1.09f, 0.05f, 1.f},  // 2 in, 1 out
       {9.81f, 1.51f, 0.05f, 1.f}, {9.89f, 1.59f, 0.05f, 1.f}, {9.88f, 1.58f, 0.05f, 1.f},  // 1 in, 2 out
-      {0.51f, 0.51f, 0.05f, 1.f}, {0.52f, 0.52f, 0.05f, 3.f},                                // well inside
+      {0.51f, 0.51f, 0.05f, 1.f}, {0.52f, 0.52f, 0.05f, 3.f},                              // well inside
   };
   for (const Point& p : {scan[0], scan[1], scan[3]}) ASSERT_LE(std::hypot(p.x, p.y), 10.0f);
   for (const Point& p : {scan[2], scan[4], scan[5]}) ASSERT_GT(std::hypot(p.x, p.y), 10.0f);

@@ -89,10 +89,12 @@ TEST(Deploy, HealthCheckSendsTheToken) {
   ASSERT_FALSE(::testing::Test::HasFatalFailure());
   std::ofstream(dir + "/wrong") << "wrong-token\n";
   Balancer balancer(haproxy, dir, {replica.port, replica.port}, dir + "/wrong");
-  ASSERT_TRUE(wait_until([&] {
-    const std::string log = read_text(balancer.log);
-    return count_of(log, "replica1 is DOWN") > 0 && count_of(log, "replica2 is DOWN") > 0;
-  }, 20))
+  ASSERT_TRUE(wait_until(
+      [&] {
+        const std::string log = read_text(balancer.log);
+        return count_of(log, "replica1 is DOWN") > 0 && count_of(log, "replica2 is DOWN") > 0;
+      },
+      20))
       << read_text(balancer.log);
   EXPECT_NE(read_text(balancer.log).find("Layer7"), std::string::npos) << read_text(balancer.log);
   EXPECT_THROW(api::Client("127.0.0.1", balancer.port, client_options(token)).ping(), api::ClientError);
@@ -130,7 +132,8 @@ TEST(Deploy, SystemdUnitCommandLineStartsTheServer) {
   EXPECT_EQ(argv[0], "/usr/bin/segmatch-server");
   argv[0] = std::string(SEGMATCH_BIN_DIR) + "/segmatch-server";
   ChildProcess server(argv, dir + "/out", dir + "/log");
-  ASSERT_TRUE(wait_until([&] { return read_text(dir + "/out").find("listening on") != std::string::npos || !server.running(); }, 60));
+  ASSERT_TRUE(wait_until(
+      [&] { return read_text(dir + "/out").find("listening on") != std::string::npos || !server.running(); }, 60));
   ASSERT_NE(read_text(dir + "/out").find("listening on"), std::string::npos) << read_text(dir + "/log");
   api::Client client("127.0.0.1", port, client_options(token));
   EXPECT_EQ(client.ping(7), 7u);
@@ -167,15 +170,17 @@ TEST(Deploy, QueryLocalizeExitsByStatus) {
   io::write_kitti_bin(dir + "/fix.bin", fix.request.points);
   io::write_kitti_bin(dir + "/nothing.bin", PointCloud{Point{1.f, 2.f, 3.f, 0.f}, Point{4.f, 5.f, 6.f, 0.f}});
   const Eigen::Vector3d& s = fix.request.sensor_position_local;
-  const std::string query = std::string(SEGMATCH_BIN_DIR) + "/segmatch-query --server 127.0.0.1:" +
-                            std::to_string(replica.port) + " --token-file " + dir + "/token localize ";
+  const std::string query = std::string(SEGMATCH_BIN_DIR) +
+                            "/segmatch-query --server 127.0.0.1:" + std::to_string(replica.port) + " --token-file " +
+                            dir + "/token localize ";
   const CommandResult found = run_command(query + dir + "/fix.bin --sensor " + std::to_string(s.x()) + "," +
                                           std::to_string(s.y()) + "," + std::to_string(s.z()));
   EXPECT_EQ(found.code, 0) << found.output;
   EXPECT_EQ(found.output.rfind("localized ", 0), 0u) << found.output;
   const CommandResult refused = run_command(query + dir + "/nothing.bin");
   EXPECT_EQ(refused.code, 3) << refused.output;
-  EXPECT_NE(refused.output.find("TOO_FEW_SEGMENTS: "), std::string::npos) << "the typed reason by default: " << refused.output;
+  EXPECT_NE(refused.output.find("TOO_FEW_SEGMENTS: "), std::string::npos)
+      << "the typed reason by default: " << refused.output;
   const CommandResult coded = run_command(query + dir + "/nothing.bin --refusal-code");  // the old spelling
   EXPECT_EQ(coded.code, 3) << coded.output;
   EXPECT_NE(coded.output.find("TOO_FEW_SEGMENTS: "), std::string::npos) << coded.output;
@@ -233,11 +238,14 @@ TEST(Deploy, SixteenVehiclesThroughHaproxySurviveAKilledReplica) {
   // request (its in-flight gauge, read just before), and started again on its port.
   ASSERT_TRUE(wait_until([&] { return done * 3 >= kVehicles * static_cast<int>(queries.size()); }, 300));
   double served_before_kill = 0;
-  ASSERT_TRUE(wait_until([&] {
-    const std::string metrics = replicas[0]->scrape();
-    served_before_kill = localize_count(metrics);
-    return metric(metrics, "segmatch_in_flight_requests") >= 1;
-  }, 60)) << "replica 1 never had a request in flight";
+  ASSERT_TRUE(wait_until(
+      [&] {
+        const std::string metrics = replicas[0]->scrape();
+        served_before_kill = localize_count(metrics);
+        return metric(metrics, "segmatch_in_flight_requests") >= 1;
+      },
+      60))
+      << "replica 1 never had a request in flight";
   EXPECT_EQ(replicas[0]->process->signal_and_wait(SIGKILL), 128 + SIGKILL);
   const int done_at_kill = done;
   replicas[0]->start();
@@ -255,7 +263,8 @@ TEST(Deploy, SixteenVehiclesThroughHaproxySurviveAKilledReplica) {
   const int done_at_reload = done;
   ASSERT_EQ(::kill(replicas[1]->process->pid(), SIGHUP), 0);
   const std::string replica2_log = dir + "/r2.log";
-  EXPECT_TRUE(wait_until([&] { return read_text(replica2_log).find("reloaded: map 'tiny-3 v2'") != std::string::npos; }, 60))
+  EXPECT_TRUE(
+      wait_until([&] { return read_text(replica2_log).find("reloaded: map 'tiny-3 v2'") != std::string::npos; }, 60))
       << read_text(replica2_log);
   for (std::thread& t : vehicles) t.join();
   EXPECT_EQ(api::Client("127.0.0.1", replicas[1]->port, client_options(token)).info().map_name, "tiny-3 v2");
@@ -264,11 +273,12 @@ TEST(Deploy, SixteenVehiclesThroughHaproxySurviveAKilledReplica) {
   const auto [unanswered, localized] = tally_answers(answers, reference);
   const double served_after_restart = localize_count(replicas[0]->scrape());
   const double served_by_2 = localize_count(replicas[1]->scrape()) - static_cast<double>(queries.size());
-  std::printf("[deploy] %d queries from %d vehicles through HAProxy, %d localized, %d unanswered, %d sent again "
-              "after the SIGKILL (at query %d); replica 1 answered %.0f before it and %.0f after its restart, replica 2 "
-              "%.0f (its map reloaded by SIGHUP at query %d)\n",
-              total, kVehicles + kLateVehicles, localized, unanswered, retries.load(), done_at_kill, served_before_kill,
-              served_after_restart, served_by_2, done_at_reload);
+  std::printf(
+      "[deploy] %d queries from %d vehicles through HAProxy, %d localized, %d unanswered, %d sent again "
+      "after the SIGKILL (at query %d); replica 1 answered %.0f before it and %.0f after its restart, replica 2 "
+      "%.0f (its map reloaded by SIGHUP at query %d)\n",
+      total, kVehicles + kLateVehicles, localized, unanswered, retries.load(), done_at_kill, served_before_kill,
+      served_after_restart, served_by_2, done_at_reload);
   EXPECT_EQ(unanswered, 0);
   EXPECT_GE(retries, 1) << "no request was lost with the killed replica";
   EXPECT_GT(served_before_kill, 0);

@@ -19,7 +19,9 @@
 
 namespace segmatch::testing {
 
-inline std::string source_path(const std::string& relative) { return std::string(SEGMATCH_SOURCE_DIR) + "/" + relative; }
+inline std::string source_path(const std::string& relative) {
+  return std::string(SEGMATCH_SOURCE_DIR) + "/" + relative;
+}
 
 // HAProxy from PATH or /usr/sbin (Debian installs it there, outside a user's PATH); empty when
 // it is not installed.
@@ -104,7 +106,8 @@ inline std::string documented_block(const std::string& markdown_path) {
 }
 
 inline void replace_all(std::string& text, const std::string& from, const std::string& to) {
-  for (size_t at = text.find(from); at != std::string::npos; at = text.find(from, at + to.size())) text.replace(at, from.size(), to);
+  for (size_t at = text.find(from); at != std::string::npos; at = text.find(from, at + to.size()))
+    text.replace(at, from.size(), to);
 }
 
 // KEY=VALUE lines of a systemd environment file (comments and blank lines skipped).
@@ -121,7 +124,8 @@ inline std::map<std::string, std::string> read_env_file(const std::string& path)
 
 // The unit's ExecStart= (with its continuation lines) split into words, ${VAR} replaced from
 // `env` as systemd does; a variable missing from `env` fails the test.
-inline std::vector<std::string> unit_exec_start(const std::string& unit_path, const std::map<std::string, std::string>& env) {
+inline std::vector<std::string> unit_exec_start(const std::string& unit_path,
+                                                const std::map<std::string, std::string>& env) {
   std::istringstream in(test::read_text(unit_path));
   std::string command;
   bool inside = false;
@@ -155,7 +159,10 @@ inline std::vector<std::string> unit_exec_start(const std::string& unit_path, co
 struct Replica {
   // Serves its own copy of the world's map, DIR/NAME.sqlite (a reload renames a new map over it).
   Replica(const std::string& dir, const std::string& name)
-      : dir(dir), name(name), map(dir + "/" + name + ".sqlite"), port(test::free_loopback_port()),
+      : dir(dir),
+        name(name),
+        map(dir + "/" + name + ".sqlite"),
+        port(test::free_loopback_port()),
         metrics_port(test::free_loopback_port()) {
     std::filesystem::copy_file(test_world().map_path, map, std::filesystem::copy_options::overwrite_existing);
     start();
@@ -164,22 +171,24 @@ struct Replica {
     const std::string binary = std::string(SEGMATCH_BIN_DIR) + "/segmatch-server";
     ASSERT_TRUE(std::filesystem::exists(binary)) << binary << " is not built";
     process = std::make_unique<test::ChildProcess>(
-        std::vector<std::string>{binary, "--map", map, "--listen", "127.0.0.1", "--port",
-                                 std::to_string(port), "--workers", "1", "--token-file", dir + "/token",
-                                 "--metrics-port", std::to_string(metrics_port), "--stats-interval-s", "0",
-                                 "--log-requests", "off"},
+        std::vector<std::string>{binary, "--map", map, "--listen", "127.0.0.1", "--port", std::to_string(port),
+                                 "--workers", "1", "--token-file", dir + "/token", "--metrics-port",
+                                 std::to_string(metrics_port), "--stats-interval-s", "0", "--log-requests", "off"},
         dir + "/" + name + ".out", dir + "/" + name + ".log");
-    ASSERT_TRUE(test::wait_until([&] { return read_out().find("listening on") != std::string::npos || !process->running(); }, 120));
+    ASSERT_TRUE(test::wait_until(
+        [&] { return read_out().find("listening on") != std::string::npos || !process->running(); }, 120));
     ASSERT_NE(read_out().find("listening on"), std::string::npos) << test::read_text(dir + "/" + name + ".log");
   }
   std::string read_out() const { return test::read_text(dir + "/" + name + ".out"); }
   std::string scrape() const {
-    return test::run_command("curl -s --max-time 5 http://127.0.0.1:" + std::to_string(metrics_port) + "/metrics").output;
+    return test::run_command("curl -s --max-time 5 http://127.0.0.1:" + std::to_string(metrics_port) + "/metrics")
+        .output;
   }
   // True once the balancer's health check has passed `checks` times on this process (each check
   // ends with a PING answered ok).
   bool health_checked(int checks) const {
-    return test::wait_until([&] { return metric(scrape(), R"(segmatch_requests_total\{status="ok",type="PING"\})") >= checks; }, 30);
+    return test::wait_until(
+        [&] { return metric(scrape(), R"(segmatch_requests_total\{status="ok",type="PING"\})") >= checks; }, 30);
   }
 
   std::string dir, name, map;
@@ -190,18 +199,24 @@ struct Replica {
 // HAProxy in the foreground with deploy/haproxy/haproxy.cfg; its log (state changes, one line per
 // connection) goes to `log`.
 struct Balancer {
-  Balancer(const std::string& haproxy, const std::string& dir, std::vector<uint16_t> replicas, const std::string& token_file)
+  Balancer(const std::string& haproxy, const std::string& dir, std::vector<uint16_t> replicas,
+           const std::string& token_file)
       : port(test::free_loopback_port()), log(dir + "/haproxy.log") {
     const test::CommandResult hello = test::run_command(source_path("deploy/haproxy/hello-hex.sh") + " " + token_file);
     EXPECT_EQ(hello.code, 0) << hello.output;
     process = std::make_unique<test::ChildProcess>(
-        std::vector<std::string>{haproxy, "-db", "-f", source_path("deploy/haproxy/haproxy.cfg")}, dir + "/haproxy.out", log,
+        std::vector<std::string>{haproxy, "-db", "-f", source_path("deploy/haproxy/haproxy.cfg")}, dir + "/haproxy.out",
+        log,
         std::vector<std::string>{"SEGMATCH_LB_BIND=127.0.0.1:" + std::to_string(port),
                                  "SEGMATCH_REPLICA1=127.0.0.1:" + std::to_string(replicas.at(0)),
                                  "SEGMATCH_REPLICA2=127.0.0.1:" + std::to_string(replicas.at(1)),
                                  "SEGMATCH_HELLO_HEX=" + hello.output.substr(0, hello.output.find('\n'))});
     // Listening once a plain TCP connection is accepted.
-    EXPECT_TRUE(test::wait_until([&] { return test::run_command("bash -c 'exec 3<>/dev/tcp/127.0.0.1/" + std::to_string(port) + "'").code == 0; }, 20))
+    EXPECT_TRUE(test::wait_until(
+        [&] {
+          return test::run_command("bash -c 'exec 3<>/dev/tcp/127.0.0.1/" + std::to_string(port) + "'").code == 0;
+        },
+        20))
         << test::read_text(log);
   }
   uint16_t port;

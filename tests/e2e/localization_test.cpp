@@ -79,31 +79,34 @@ Outcome query_along(const Localizer& localizer, const World& world, const Traver
   schedule.seed = seed;
   // Exact simulated poses: nothing drifts, so no age limit (it is there for a vehicle's odometry
   // and would only thin these clouds: docs/how-defaults-were-chosen.md).
-  for_each_voxelized_cloud(caster, hdl64e(), t, without_age_limit(LocalCloudConfig{}), localizer.config().segmentation.voxel, schedule,
-                           [&](const SimulatedLocalCloud& lc) {
-    PointCloud cloud = lc.cloud;
-    for (Point& p : cloud) {
-      const Eigen::Vector3f q = T_query_world.cast<float>() * p.xyz();
-      p.x = q.x(), p.y = q.y(), p.z = q.z();
-    }
-    const Pose3d T_query_sensor = T_query_world * lc.T_world_sensor;
-    const LocalizationResult r =
-        localizer.localize(cloud, T_query_sensor.translation().cast<float>(), CloudKind::kVoxelized);
-    ++o.queries;
-    std::printf("[e2e]   frame %4zu: %3zu segments, %5zu candidates, %4zu matches, %2zu inliers, support %2zu/%2zu: %s %s\n",
-                lc.frame, r.query_segments, r.candidates, r.matches, r.inliers.size(), r.support, r.runner_up_support,
-                to_string(r.status), r.reason.c_str());
-    if (!r.localized()) return;
-    ++o.localized;
-    const Pose3d T_map_sensor = r.T_map_query * T_query_sensor;  // map frame = world frame
-    const double err_m = (T_map_sensor.translation() - lc.T_world_sensor.translation()).norm();
-    const double err_deg =
-        Eigen::AngleAxisd(T_map_sensor.linear().transpose() * lc.T_world_sensor.linear()).angle() * 180.0 / M_PI;
-    o.errors_m.push_back(err_m);
-    o.errors_deg.push_back(err_deg);
-    o.accurate += err_m <= 0.2 && err_deg <= 1.0;
-    o.false_positives += err_m > 1.0 || err_deg > 3.0;
-  });
+  for_each_voxelized_cloud(
+      caster, hdl64e(), t, without_age_limit(LocalCloudConfig{}), localizer.config().segmentation.voxel, schedule,
+      [&](const SimulatedLocalCloud& lc) {
+        PointCloud cloud = lc.cloud;
+        for (Point& p : cloud) {
+          const Eigen::Vector3f q = T_query_world.cast<float>() * p.xyz();
+          p.x = q.x(), p.y = q.y(), p.z = q.z();
+        }
+        const Pose3d T_query_sensor = T_query_world * lc.T_world_sensor;
+        const LocalizationResult r =
+            localizer.localize(cloud, T_query_sensor.translation().cast<float>(), CloudKind::kVoxelized);
+        ++o.queries;
+        std::printf(
+            "[e2e]   frame %4zu: %3zu segments, %5zu candidates, %4zu matches, %2zu inliers, support %2zu/%2zu: %s "
+            "%s\n",
+            lc.frame, r.query_segments, r.candidates, r.matches, r.inliers.size(), r.support, r.runner_up_support,
+            to_string(r.status), r.reason.c_str());
+        if (!r.localized()) return;
+        ++o.localized;
+        const Pose3d T_map_sensor = r.T_map_query * T_query_sensor;  // map frame = world frame
+        const double err_m = (T_map_sensor.translation() - lc.T_world_sensor.translation()).norm();
+        const double err_deg =
+            Eigen::AngleAxisd(T_map_sensor.linear().transpose() * lc.T_world_sensor.linear()).angle() * 180.0 / M_PI;
+        o.errors_m.push_back(err_m);
+        o.errors_deg.push_back(err_deg);
+        o.accurate += err_m <= 0.2 && err_deg <= 1.0;
+        o.false_positives += err_m > 1.0 || err_deg > 3.0;
+      });
   return o;
 }
 

@@ -23,17 +23,17 @@ QueryOutcome at(double odometer_m, bool correct, bool mapped = true) {
 
 TEST(Px, GapsBetweenTrueLocalizations) {
   // Localized at 10, 20 and 70 m of a 100 m drive that starts at 0: gaps 10, 10, 50, 30.
-  const std::vector<QueryOutcome> o = {at(0, false), at(10, true), at(20, true), at(40, false),
-                                       at(70, true), at(100, false)};
+  const std::vector<QueryOutcome> o = {at(0, false),  at(10, true), at(20, true),
+                                       at(40, false), at(70, true), at(100, false)};
   const PxCurve c = px_curve(o);
   ASSERT_EQ(c.gaps_m.size(), 4u);
   EXPECT_DOUBLE_EQ(c.total_m, 100.0);
   EXPECT_DOUBLE_EQ(c.p_of(0.0), 1.0);
   EXPECT_DOUBLE_EQ(c.p_of(10.0), 1.0);
-  EXPECT_DOUBLE_EQ(c.p_of(10.5), 0.8);   // the 50 and 30 m gaps
+  EXPECT_DOUBLE_EQ(c.p_of(10.5), 0.8);  // the 50 and 30 m gaps
   EXPECT_DOUBLE_EQ(c.p_of(31.0), 0.5);
   EXPECT_DOUBLE_EQ(c.p_of(51.0), 0.0);
-  EXPECT_DOUBLE_EQ(c.x95_m, 50.0);       // only above the longest gap is P <= 5 %
+  EXPECT_DOUBLE_EQ(c.x95_m, 50.0);  // only above the longest gap is P <= 5 %
 }
 
 TEST(Px, UnmappedStretchesDoNotCount) {

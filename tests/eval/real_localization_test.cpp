@@ -31,7 +31,8 @@ struct Case {
 void PrintTo(const Case& c, std::ostream* os) { *os << c.recording; }
 
 nlohmann::json localize(const Case& c) {
-  const fs::path dir = fs::temp_directory_path() / ("segmatch_real_" + std::string(c.recording) + "_" + std::to_string(getpid()));
+  const fs::path dir =
+      fs::temp_directory_path() / ("segmatch_real_" + std::string(c.recording) + "_" + std::to_string(getpid()));
   fs::remove_all(dir);
   fs::create_directories(dir);
   const std::string input = kReal + "/" + c.recording;
@@ -39,8 +40,9 @@ nlohmann::json localize(const Case& c) {
                                                  " --output " + (dir / "map.sqlite").string());
   EXPECT_EQ(built.code, 0) << built.output;
   EXPECT_NE(built.output.find("sensor class:"), std::string::npos) << built.output;
-  const auto run = segmatch::test::run_command(kBin + "/segmatch-eval localize --quiet --map " + (dir / "map.sqlite").string() +
-                                               " --query " + input + " " + c.query_range + " --out " + (dir / "report").string());
+  const auto run =
+      segmatch::test::run_command(kBin + "/segmatch-eval localize --quiet --map " + (dir / "map.sqlite").string() +
+                                  " --query " + input + " " + c.query_range + " --out " + (dir / "report").string());
   EXPECT_EQ(run.code, 0) << run.output;
   std::ifstream in(dir / "report" / "localization.json");
   nlohmann::json j = in ? nlohmann::json::parse(in) : nlohmann::json::object();
@@ -54,7 +56,8 @@ class RealLocalization : public ::testing::TestWithParam<Case> {};
 
 TEST_P(RealLocalization, DefaultProfileLocalizesWithoutFalsePoses) {
   const Case& c = GetParam();
-  if (!fs::exists(kReal + "/" + c.recording)) GTEST_SKIP() << kReal << "/" << c.recording << " is absent (real data is not in the repository)";
+  if (!fs::exists(kReal + "/" + c.recording))
+    GTEST_SKIP() << kReal << "/" << c.recording << " is absent (real data is not in the repository)";
   const nlohmann::json j = localize(c);
   ASSERT_TRUE(j.contains("queries")) << "no report";
   const double queries = j["queries"].get<double>(), localized = j["localized"].get<double>();

@@ -50,8 +50,10 @@ void expect_trajectories_for_evo(const eval::LocalizationRun& run) {
   std::string e_line, r_line;
   for (const eval::QueryOutcome& o : run.outcomes) {
     if (!o.localized) continue;
-    do std::getline(estimated, e_line); while (!e_line.empty() && e_line[0] == '#');
-    do std::getline(reference, r_line); while (!r_line.empty() && r_line[0] == '#');
+    do std::getline(estimated, e_line);
+    while (!e_line.empty() && e_line[0] == '#');
+    do std::getline(reference, r_line);
+    while (!r_line.empty() && r_line[0] == '#');
     const std::vector<double> e = tum_columns(e_line), r = tum_columns(r_line);
     ASSERT_EQ(e.size(), 8u) << e_line;
     ASSERT_EQ(r.size(), 8u) << r_line;
@@ -111,7 +113,8 @@ class RegressionMap : public ::testing::Test {
     server::MapLoadOptions load;
     load.points = points;
     const auto map = server::load_map(config.map_path, load);
-    return eval::run_localization(config, [&](const api::LocalizeRequest& q) { return server::localize_request(*map, q); });
+    return eval::run_localization(config,
+                                  [&](const api::LocalizeRequest& q) { return server::localize_request(*map, q); });
   }
   static fs::path* world_;
 };
@@ -141,8 +144,9 @@ TEST_F(RegressionMap, TodaysCodeGivesTheGoldenAnswers) {
     EXPECT_LE(dr, kRotationToleranceDeg) << "frame " << now.frame;
     same += dt <= kTranslationToleranceM && dr <= kRotationToleranceDeg;
   }
-  std::printf("[regression] %zu queries, %zu localized in the golden run, %zu still at the same pose; %zu localized now\n",
-              run.outcomes.size(), golden_localized, same, run.summary.localized);
+  std::printf(
+      "[regression] %zu queries, %zu localized in the golden run, %zu still at the same pose; %zu localized now\n",
+      run.outcomes.size(), golden_localized, same, run.summary.localized);
   EXPECT_GE(golden_localized, 3u) << "the golden run should localize: regenerate the map";
   expect_trajectories_for_evo(run);
 }

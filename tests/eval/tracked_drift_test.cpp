@@ -30,9 +30,9 @@ double median(std::vector<double> v) {
 }
 
 nlohmann::json localize(const fs::path& dir, const std::string& options, const std::string& report) {
-  const auto run = segmatch::test::run_command(kBin + "/segmatch-eval localize --quiet --map " + (dir / "map.sqlite").string() +
-                                               " --sim " + (dir / "world").string() + " --every-m 10 " + options +
-                                               " -o " + (dir / report).string());
+  const auto run = segmatch::test::run_command(kBin + "/segmatch-eval localize --quiet --map " +
+                                               (dir / "map.sqlite").string() + " --sim " + (dir / "world").string() +
+                                               " --every-m 10 " + options + " -o " + (dir / report).string());
   EXPECT_EQ(run.code, 0) << run.output;
   EXPECT_NE(run.output.find("local clouds: the vehicle's odometry"), std::string::npos) << run.output;
   std::ifstream in(dir / report / "localization.json");
@@ -45,11 +45,14 @@ TEST(TrackedDrift, AKilometreWithDriftingOdometryKeepsItsErrorsAndNoneIsFalse) {
   const fs::path dir = fs::temp_directory_path() / ("segmatch_tracked_drift_" + std::to_string(getpid()));
   fs::remove_all(dir);
   // 20 m/s: a scan every 2 m, half the scans of the demo's speed for the same streets.
-  const auto sim = segmatch::test::run_command(kBin + "/segmatch-sim --preset demo --seed 1 --speed-mps 20 --length-01-m 1000 "
-                                               "--no-labels --no-images --out " + (dir / "world").string());
+  const auto sim = segmatch::test::run_command(kBin +
+                                               "/segmatch-sim --preset demo --seed 1 --speed-mps 20 --length-01-m 1000 "
+                                               "--no-labels --no-images --out " +
+                                               (dir / "world").string());
   ASSERT_EQ(sim.code, 0) << sim.output;
-  const auto built = segmatch::test::run_command(kBin + "/segmatch-mapbuilder --input " + (dir / "world/sequences/00").string() +
-                                                 " --output " + (dir / "map.sqlite").string());
+  const auto built =
+      segmatch::test::run_command(kBin + "/segmatch-mapbuilder --input " + (dir / "world/sequences/00").string() +
+                                  " --output " + (dir / "map.sqlite").string());
   ASSERT_EQ(built.code, 0) << built.output;
   const nlohmann::json tracked = localize(dir, "--track", "tracked"), global = localize(dir, "", "global");
   fs::remove_all(dir);

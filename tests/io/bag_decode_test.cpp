@@ -73,8 +73,12 @@ TEST(BagPointCloud2, Float64XyzAndUint8IntensityWithoutIntensityField) {
   c.point_step = 32;
   c.row_step = 32;
   c.fields = {{"x", 0, 8}, {"y", 8, 8}, {"z", 16, 8}, {"intensity", 24, 2}};
-  c.data = PointRecord(32, false).set<double>(0, 1e6 + 0.5).set<double>(8, -2.25).set<double>(16, 0.125)
-               .set<uint8_t>(24, 200).bytes;
+  c.data = PointRecord(32, false)
+               .set<double>(0, 1e6 + 0.5)
+               .set<double>(8, -2.25)
+               .set<double>(16, 0.125)
+               .set<uint8_t>(24, 200)
+               .bytes;
   const PointCloud2Message m = decode_point_cloud2(c.cdr());
   ASSERT_EQ(m.cloud.points.size(), 1u);
   EXPECT_EQ(m.cloud.points[0].x, 1e6f + 0.5f);

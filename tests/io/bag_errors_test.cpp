@@ -65,8 +65,8 @@ TEST(BagErrors, WrongMagicAndNotABag) {
   std::string bytes = small_recording(dir, McapCompression::kNone);
   bytes[1] = 'X';
   test::write_bytes(dir.file("bad.mcap"), bytes);
-  EXPECT_TRUE(ThrowsIoError([&] { BagReader::open(dir.file("bad.mcap")); },
-                            {dir.file("bad.mcap"), "wrong magic at offset 0"}));
+  EXPECT_TRUE(
+      ThrowsIoError([&] { BagReader::open(dir.file("bad.mcap")); }, {dir.file("bad.mcap"), "wrong magic at offset 0"}));
   test::write_bytes(dir.file("scan.bin"), std::string(64, '\0'));
   EXPECT_FALSE(BagReader::is_bag(dir.file("scan.bin")));
   EXPECT_TRUE(ThrowsIoError([&] { BagReader::open(dir.file("scan.bin")); }, {"scan.bin", "not a bag"}));
@@ -88,7 +88,8 @@ TEST(BagErrors, ChunksThatCannotBeDecompressed) {
   EXPECT_TRUE(ThrowsIoError([&] { BagReader::open(path); },
                             {path, "Chunk record at offset 29", "compression 'bz2' is not supported"}));
   test::write_bytes(path, chunk_file("zstd", std::string(40, '\x55'), 1000));
-  EXPECT_TRUE(ThrowsIoError([&] { BagReader::open(path); }, {"Chunk record at offset 29", "zstd decompression failed"}));
+  EXPECT_TRUE(
+      ThrowsIoError([&] { BagReader::open(path); }, {"Chunk record at offset 29", "zstd decompression failed"}));
   test::write_bytes(path, chunk_file("lz4", std::string(40, '\x55'), 1000));
   EXPECT_TRUE(ThrowsIoError([&] { BagReader::open(path); }, {"Chunk record at offset 29", "lz4 decompression failed"}));
   // A forged size: 40 bytes cannot expand to 1 TB, and nothing that large is allocated.
@@ -117,8 +118,9 @@ TEST(BagErrors, UncompressedSizeDisagreeingWithTheZstdFrame) {
     for (const BagTopic& t : bag->topics())
       for (const BagMessageRef& ref : bag->messages(t.name)) bag->data(ref);
   };
-  EXPECT_TRUE(ThrowsIoError(read_all, {"Chunk record at offset " + std::to_string(at), "the zstd frame holds " +
-                             std::to_string(size) + " bytes, uncompressed_size says " + std::to_string(size * 2)}));
+  EXPECT_TRUE(ThrowsIoError(read_all, {"Chunk record at offset " + std::to_string(at),
+                                       "the zstd frame holds " + std::to_string(size) +
+                                           " bytes, uncompressed_size says " + std::to_string(size * 2)}));
 }
 
 TEST(BagErrors, LengthsPastTheEndAndMissingChannels) {
@@ -163,8 +165,10 @@ TEST(BagErrors, RandomByteDamageGivesOnlyIoErrors) {
   test::TempDir dir;
   std::mt19937 rng(7);
   const std::string path = dir.file("damaged.mcap");
-  for (auto [compression, chunked] : {std::pair{McapCompression::kZstd, true}, {McapCompression::kLz4, true},
-                                      {McapCompression::kNone, true}, {McapCompression::kNone, false}}) {
+  for (auto [compression, chunked] : {std::pair{McapCompression::kZstd, true},
+                                      {McapCompression::kLz4, true},
+                                      {McapCompression::kNone, true},
+                                      {McapCompression::kNone, false}}) {
     const std::string bytes = small_recording(dir, compression, chunked);
     for (int trial = 0; trial < 300; ++trial) {
       std::string damaged = bytes;
@@ -189,14 +193,16 @@ TEST(BagErrors, TheSummaryIndexesWhatAScanFinds) {
   scanned.replace(footer + 9, 8, McapBytes::u64(0));
   std::string miscounted = bytes;
   size_t statistics = static_cast<size_t>(le64(bytes, footer + 9));  // summary_start
-  while (statistics < footer && bytes[statistics] != 0x0B) statistics += 9 + static_cast<size_t>(le64(bytes, statistics + 1));
+  while (statistics < footer && bytes[statistics] != 0x0B)
+    statistics += 9 + static_cast<size_t>(le64(bytes, statistics + 1));
   ASSERT_LT(statistics, footer) << "the writer puts a Statistics record in the summary";
   miscounted.replace(statistics + 9, 8, McapBytes::u64(le64(bytes, statistics + 9) + 1));
   const auto listing = [](const std::string& path) {
     const std::unique_ptr<BagReader> bag = BagReader::open(path);
     std::string out;
     for (const BagTopic& t : bag->topics())
-      for (const BagMessageRef& ref : bag->messages(t.name)) out += t.name + std::to_string(ref.log_time_ns) + bag->data(ref);
+      for (const BagMessageRef& ref : bag->messages(t.name))
+        out += t.name + std::to_string(ref.log_time_ns) + bag->data(ref);
     return out;
   };
   test::write_bytes(dir.file("summary.mcap"), bytes);

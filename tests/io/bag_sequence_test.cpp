@@ -56,7 +56,8 @@ TEST(BagSequence, PosesInterpolatedAtEachCloudsStampAndCloudsOutsideSkipped) {
   const Sequence seq = Sequence::open(write_drive(dir, false));
   EXPECT_EQ(seq.layout(), SequenceLayout::kBag);
   ASSERT_EQ(seq.size(), 3u) << "0.5 s and 9 s lie outside the odometry's 1..4 s";
-  EXPECT_NE(seq.source_note().find("2 clouds outside the poses' time span skipped"), std::string::npos) << seq.source_note();
+  EXPECT_NE(seq.source_note().find("2 clouds outside the poses' time span skipped"), std::string::npos)
+      << seq.source_note();
   EXPECT_NE(seq.source_note().find("/odom"), std::string::npos) << seq.source_note();
   for (size_t i = 0; i < 3; ++i) {
     const double t = 1.5 + static_cast<double>(i);

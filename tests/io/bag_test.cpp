@@ -104,13 +104,12 @@ TEST_P(McapRoundTrip, SummaryPointsAtTheRightRecords) {
   EXPECT_EQ(groups[0x08] > 1, GetParam().options.chunked);
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Bag, McapRoundTrip,  // "Bag/": the Bag* filter runs them with the other bag tests
-    ::testing::Values(WriterCase{"Zstd", {true, McapCompression::kZstd, 8000}},
-                      WriterCase{"Lz4", {true, McapCompression::kLz4, 8000}},
-                      WriterCase{"UncompressedChunks", {true, McapCompression::kNone, 8000}},
-                      WriterCase{"Unchunked", {false, McapCompression::kNone, 8000}}),
-    [](const ::testing::TestParamInfo<WriterCase>& info) { return std::string(info.param.name); });
+INSTANTIATE_TEST_SUITE_P(Bag, McapRoundTrip,  // "Bag/": the Bag* filter runs them with the other bag tests
+                         ::testing::Values(WriterCase{"Zstd", {true, McapCompression::kZstd, 8000}},
+                                           WriterCase{"Lz4", {true, McapCompression::kLz4, 8000}},
+                                           WriterCase{"UncompressedChunks", {true, McapCompression::kNone, 8000}},
+                                           WriterCase{"Unchunked", {false, McapCompression::kNone, 8000}}),
+                         [](const ::testing::TestParamInfo<WriterCase>& info) { return std::string(info.param.name); });
 
 TEST(BagMcap, SchemaCarriesTheDependentDefinitions) {
   test::TempDir dir;
@@ -151,7 +150,8 @@ TEST(BagMcap, UnknownRecordsAreSkippedAndNonCdrTopicsRefusedByName) {
 }
 
 // A rosbag2 SQLite bag as rosbag2 (Iron and later) creates it.
-void make_db3(const std::string& path, const std::vector<std::tuple<int, std::string, std::string, std::string>>& topics,
+void make_db3(const std::string& path,
+              const std::vector<std::tuple<int, std::string, std::string, std::string>>& topics,
               const std::vector<std::tuple<int, int64_t, std::string>>& messages) {
   sqlite3* db = nullptr;
   ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
@@ -207,8 +207,12 @@ TEST(BagDb3, TopicsAndMessagesInTimeOrder) {
   const PointCloud cloud = test::random_cloud(50, 3);
   // Inserted out of time order; stamps 1 and 2 share a log time (row order decides).
   make_db3(dir.file("bag_0.db3"), kDb3Topics,
-           {{2, 300, odometry_at(3)}, {2, 100, odometry_at(0)}, {2, 200, odometry_at(1)}, {2, 200, odometry_at(2)},
-            {1, 150, encode_point_cloud2(header, cloud)}, {3, 160, "{\"level\": 0}"}});
+           {{2, 300, odometry_at(3)},
+            {2, 100, odometry_at(0)},
+            {2, 200, odometry_at(1)},
+            {2, 200, odometry_at(2)},
+            {1, 150, encode_point_cloud2(header, cloud)},
+            {3, 160, "{\"level\": 0}"}});
   const std::unique_ptr<BagReader> bag = BagReader::open(dir.file("bag_0.db3"));
   ASSERT_EQ(bag->topics().size(), 3u);
   EXPECT_EQ(bag->topics()[1].name, "/odom");
@@ -241,7 +245,8 @@ std::string metadata_yaml(const std::string& storage, const std::vector<std::str
                      "\n  duration:\n    nanoseconds: 900\n  message_count: 10\n  topics_with_message_count:\n"
                      "    - topic_metadata:\n        name: /odom\n        type: nav_msgs/msg/Odometry\n"
                      "        serialization_format: cdr\n      message_count: 10\n"
-                     "  compression_format: \"" + compression + "\"\n  compression_mode: \"\"\n  relative_file_paths:\n";
+                     "  compression_format: \"" +
+                     compression + "\"\n  compression_mode: \"\"\n  relative_file_paths:\n";
   for (const std::string& f : files) yaml += "    - " + f + "\n";
   yaml += "  files:\n";
   for (const std::string& f : files) yaml += "    - path: " + f + "\n      message_count: 5\n";
@@ -255,9 +260,9 @@ TEST(BagFolder, MetadataYamlListsTwoDb3Files) {
   // The split files overlap in time (a message received late lands in the second file).
   make_db3(folder + "/rosbag2_drive_0.db3", kDb3Topics,
            {{2, 0, odometry_at(0)}, {2, 10, odometry_at(1)}, {2, 30, odometry_at(3)}});
-  make_db3(folder + "/rosbag2_drive_1.db3", {kDb3Topics[1]},
-           {{2, 20, odometry_at(2)}, {2, 40, odometry_at(4)}});
-  test::write_bytes(folder + "/metadata.yaml", metadata_yaml("sqlite3", {"rosbag2_drive_0.db3", "rosbag2_drive_1.db3"}));
+  make_db3(folder + "/rosbag2_drive_1.db3", {kDb3Topics[1]}, {{2, 20, odometry_at(2)}, {2, 40, odometry_at(4)}});
+  test::write_bytes(folder + "/metadata.yaml",
+                    metadata_yaml("sqlite3", {"rosbag2_drive_0.db3", "rosbag2_drive_1.db3"}));
   EXPECT_TRUE(BagReader::is_bag(folder));
   const std::unique_ptr<BagReader> bag = BagReader::open(folder);
   ASSERT_EQ(bag->topics().size(), 3u);

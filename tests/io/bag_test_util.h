@@ -38,9 +38,7 @@ class Cdr {
     out_.push_back('\0');
     return *this;
   }
-  Cdr& header(int32_t sec, uint32_t nanosec, const std::string& frame) {
-    return put(sec).put(nanosec).str(frame);
-  }
+  Cdr& header(int32_t sec, uint32_t nanosec, const std::string& frame) { return put(sec).put(nanosec).str(frame); }
   Cdr& raw(const std::string& bytes) {
     out_ += bytes;
     return *this;
@@ -116,8 +114,8 @@ class McapBytes {
   }
   static std::string chunk(const std::string& compression, const std::string& records, uint64_t uncompressed,
                            uint32_t crc = 0) {
-    return record(0x06, u64(0) + u64(0) + u64(uncompressed) + u32(crc) + str(compression) +
-                            u64(records.size()) + records);
+    return record(0x06,
+                  u64(0) + u64(0) + u64(uncompressed) + u32(crc) + str(compression) + u64(records.size()) + records);
   }
   McapBytes& add(const std::string& bytes) {
     out_ += bytes;

@@ -37,8 +37,8 @@ TEST(KittiBin, TruncatedFileIsRejected) {
   test::TempDir dir;
   write_kitti_bin(dir.file("000003.bin"), test::random_cloud(10, 2));
   std::filesystem::resize_file(dir.file("000003.bin"), 155);
-  EXPECT_TRUE(ThrowsIoError([&] { read_kitti_bin(dir.file("000003.bin")); },
-                            {"000003.bin", "155 bytes", "multiple of 16"}));
+  EXPECT_TRUE(
+      ThrowsIoError([&] { read_kitti_bin(dir.file("000003.bin")); }, {"000003.bin", "155 bytes", "multiple of 16"}));
 }
 
 TEST(KittiBin, NonFinitePointsAreDroppedAndCounted) {
@@ -62,8 +62,7 @@ TEST(KittiLabels, RoundTripAndTruncation) {
   write_kitti_labels(dir.file("000000.label"), labels);
   EXPECT_EQ(read_kitti_labels(dir.file("000000.label")), labels);
   std::filesystem::resize_file(dir.file("000000.label"), 1999);
-  EXPECT_TRUE(ThrowsIoError([&] { read_kitti_labels(dir.file("000000.label")); },
-                            {"000000.label", "multiple of 4"}));
+  EXPECT_TRUE(ThrowsIoError([&] { read_kitti_labels(dir.file("000000.label")); }, {"000000.label", "multiple of 4"}));
 }
 
 TEST(CloudIo, MissingFileIsNamed) {
@@ -107,38 +106,27 @@ TEST(CloudIo, DispatchByExtension) {
 TEST(CloudIo, UnknownExtensionIsNamed) {
   test::TempDir dir;
   test::write_bytes(dir.file("cloud.xyz"), "1 2 3\n");
-  EXPECT_TRUE(ThrowsIoError([&] { read_cloud(dir.file("cloud.xyz")); },
-                            {"cloud.xyz", "'.xyz'", "extension"}));
-  EXPECT_TRUE(
-      ThrowsIoError([&] { write_cloud(dir.file("cloud.las"), {}); }, {"cloud.las", "extension"}));
+  EXPECT_TRUE(ThrowsIoError([&] { read_cloud(dir.file("cloud.xyz")); }, {"cloud.xyz", "'.xyz'", "extension"}));
+  EXPECT_TRUE(ThrowsIoError([&] { write_cloud(dir.file("cloud.las"), {}); }, {"cloud.las", "extension"}));
   EXPECT_TRUE(ThrowsIoError([&] { read_cloud(dir.file("noext")); }, {"noext", "extension"}));
 }
 
 TEST(CloudIo, WriteIntoMissingFolderFails) {
   test::TempDir dir;
   const std::string path = dir.file("no/such/folder/scan.bin");
-  EXPECT_TRUE(ThrowsIoError([&] { write_kitti_bin(path, test::random_cloud(3, 6)); },
-                            {path, "cannot open"}));
+  EXPECT_TRUE(ThrowsIoError([&] { write_kitti_bin(path, test::random_cloud(3, 6)); }, {path, "cannot open"}));
 }
 
 TEST(CloudIo, DiskFullIsReported) {
   if (!std::filesystem::exists("/dev/full")) GTEST_SKIP() << "/dev/full not available";
   const PointCloud cloud = test::random_cloud(20000, 7);  // larger than any stdio buffer
-  EXPECT_TRUE(
-      ThrowsIoError([&] { write_kitti_bin("/dev/full", cloud); }, {"/dev/full", "No space"}));
-  EXPECT_TRUE(ThrowsIoError([&] { write_pcd("/dev/full", cloud, PcdEncoding::kAscii); },
-                            {"/dev/full", "No space"}));
-  EXPECT_TRUE(ThrowsIoError([&] { write_pcd("/dev/full", cloud, PcdEncoding::kBinaryCompressed); },
-                            {"/dev/full"}));
+  EXPECT_TRUE(ThrowsIoError([&] { write_kitti_bin("/dev/full", cloud); }, {"/dev/full", "No space"}));
+  EXPECT_TRUE(ThrowsIoError([&] { write_pcd("/dev/full", cloud, PcdEncoding::kAscii); }, {"/dev/full", "No space"}));
+  EXPECT_TRUE(ThrowsIoError([&] { write_pcd("/dev/full", cloud, PcdEncoding::kBinaryCompressed); }, {"/dev/full"}));
   EXPECT_TRUE(ThrowsIoError([&] { write_ply("/dev/full", cloud); }, {"/dev/full", "No space"}));
   // Small outputs stay in the stdio buffer until close: the close must be checked too.
-  EXPECT_TRUE(ThrowsIoError(
-      [&] {
-        write_kitti_labels("/dev/full", {1, 2, 3});
-      },
-      {"/dev/full", "No space"}));
-  EXPECT_TRUE(ThrowsIoError([&] { write_kitti_poses("/dev/full", Poses(2, Pose3d::Identity())); },
-                            {"/dev/full"}));
+  EXPECT_TRUE(ThrowsIoError([&] { write_kitti_labels("/dev/full", {1, 2, 3}); }, {"/dev/full", "No space"}));
+  EXPECT_TRUE(ThrowsIoError([&] { write_kitti_poses("/dev/full", Poses(2, Pose3d::Identity())); }, {"/dev/full"}));
 }
 
 // Garbage of every size must give IoError (or, rarely, a valid empty cloud), never a crash.
@@ -149,11 +137,8 @@ TEST(CloudIo, RandomGarbageNeverCrashes) {
     std::string bytes(rng() % 600, '\0');
     for (char& c : bytes) c = static_cast<char>(rng());
     if (round % 3 == 0)
-      bytes =
-          "# .PCD v0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 9\nDATA binary_compressed\n" +
-          bytes;
-    if (round % 3 == 1)
-      bytes = "ply\nformat binary_big_endian 1.0\nelement vertex 5\nproperty float x\n" + bytes;
+      bytes = "# .PCD v0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 9\nDATA binary_compressed\n" + bytes;
+    if (round % 3 == 1) bytes = "ply\nformat binary_big_endian 1.0\nelement vertex 5\nproperty float x\n" + bytes;
     for (const std::string name : {"g.bin", "g.pcd", "g.ply", "g.label"}) {
       test::write_bytes(dir.file(name), bytes);
       EXPECT_TRUE(SucceedsOrThrowsIoError([&] {
@@ -202,8 +187,7 @@ TEST(CloudIo, CorruptedBytesNeverCrash) {
     const std::string original = test::read_bytes(dir.file(name));
     for (int round = 0; round < 300; ++round) {
       std::string bytes = original;
-      for (int k = 0; k < 1 + round % 4; ++k)
-        bytes[rng() % bytes.size()] = static_cast<char>(rng());
+      for (int k = 0; k < 1 + round % 4; ++k) bytes[rng() % bytes.size()] = static_cast<char>(rng());
       test::write_bytes(dir.file("x_" + name), bytes);
       EXPECT_TRUE(SucceedsOrThrowsIoError([&] { read_cloud(dir.file("x_" + name)); })) << name;
     }

@@ -91,14 +91,12 @@ inline PointCloud random_cloud(size_t n, uint32_t seed) {
 inline std::vector<uint32_t> random_labels(size_t n, uint32_t seed) {
   std::mt19937 rng(seed);
   std::vector<uint32_t> labels(n);
-  for (uint32_t& l : labels)
-    l = encode_label(static_cast<uint16_t>(rng() % 260), static_cast<uint16_t>(rng() % 50));
+  for (uint32_t& l : labels) l = encode_label(static_cast<uint16_t>(rng() % 260), static_cast<uint16_t>(rng() % 50));
   return labels;
 }
 
 inline bool same_points(const PointCloud& a, const PointCloud& b) {
-  return a.size() == b.size() &&
-         (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(Point)) == 0);
+  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(Point)) == 0);
 }
 
 // Runs fn and checks that it throws IoError whose message contains every part.
@@ -110,8 +108,7 @@ template <typename Fn>
     const std::string message = e.what();
     for (const std::string& part : parts) {
       if (message.find(part) == std::string::npos) {
-        return ::testing::AssertionFailure()
-               << "IoError message \"" << message << "\" lacks \"" << part << "\"";
+        return ::testing::AssertionFailure() << "IoError message \"" << message << "\" lacks \"" << part << "\"";
       }
     }
     return ::testing::AssertionSuccess() << message;

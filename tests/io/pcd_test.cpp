@@ -16,13 +16,11 @@ using test::ThrowsIoError;
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
-std::string pcd_header(const std::string& fields, const std::string& sizes,
-                       const std::string& types, const std::string& counts, size_t points,
-                       const std::string& data) {
-  return "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS " + fields + "\nSIZE " +
-         sizes + "\nTYPE " + types + "\nCOUNT " + counts + "\nWIDTH " + std::to_string(points) +
-         "\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS " + std::to_string(points) + "\nDATA " +
-         data + "\n";
+std::string pcd_header(const std::string& fields, const std::string& sizes, const std::string& types,
+                       const std::string& counts, size_t points, const std::string& data) {
+  return "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS " + fields + "\nSIZE " + sizes + "\nTYPE " +
+         types + "\nCOUNT " + counts + "\nWIDTH " + std::to_string(points) +
+         "\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS " + std::to_string(points) + "\nDATA " + data + "\n";
 }
 
 class PcdRoundTrip : public ::testing::TestWithParam<PcdEncoding> {};
@@ -74,18 +72,15 @@ std::string encoding_name(const ::testing::TestParamInfo<PcdEncoding>& info) {
 }
 
 INSTANTIATE_TEST_SUITE_P(AllEncodings, PcdRoundTrip,
-                         ::testing::Values(PcdEncoding::kAscii, PcdEncoding::kBinary,
-                                           PcdEncoding::kBinaryCompressed),
+                         ::testing::Values(PcdEncoding::kAscii, PcdEncoding::kBinary, PcdEncoding::kBinaryCompressed),
                          encoding_name);
 
 TEST(Pcd, LabelCountMustMatchPoints) {
   test::TempDir dir;
   const std::vector<uint32_t> labels(3, 1);
-  EXPECT_TRUE(ThrowsIoError(
-      [&] {
-        write_pcd(dir.file("l.pcd"), test::random_cloud(4, 1), PcdEncoding::kBinary, &labels);
-      },
-      {"l.pcd", "3 labels for 4 points"}));
+  EXPECT_TRUE(
+      ThrowsIoError([&] { write_pcd(dir.file("l.pcd"), test::random_cloud(4, 1), PcdEncoding::kBinary, &labels); },
+                    {"l.pcd", "3 labels for 4 points"}));
 }
 
 TEST(Pcd, CompressedIsSmallerOnRepetitiveData) {
@@ -94,8 +89,7 @@ TEST(Pcd, CompressedIsSmallerOnRepetitiveData) {
   for (size_t i = 0; i < cloud.size(); ++i) cloud[i] = {float(i % 50), 2.0f, -1.5f, 0.25f};
   write_pcd(dir.file("bin.pcd"), cloud, PcdEncoding::kBinary);
   write_pcd(dir.file("lzf.pcd"), cloud, PcdEncoding::kBinaryCompressed);
-  EXPECT_LT(std::filesystem::file_size(dir.file("lzf.pcd")) * 5,
-            std::filesystem::file_size(dir.file("bin.pcd")));
+  EXPECT_LT(std::filesystem::file_size(dir.file("lzf.pcd")) * 5, std::filesystem::file_size(dir.file("bin.pcd")));
   EXPECT_TRUE(test::same_points(read_pcd(dir.file("lzf.pcd")).points, cloud));
 }
 
@@ -139,9 +133,9 @@ TEST(Pcd, BinaryCompressedStoresOneArrayPerField) {
 // The shape PCL writes for PointXYZRGBNormal + label + a 33-bin FPFH histogram.
 TEST(Pcd, ExtraFieldsAreSkipped) {
   test::TempDir dir;
-  std::string file = pcd_header(
-      "normal_x normal_y normal_z x rgb fpfh y label z curvature intensity",
-      "4 4 4 4 4 4 4 4 4 4 4", "F F F F F F F U F F F", "1 1 1 1 1 33 1 1 1 1 1", 2, "binary");
+  std::string file =
+      pcd_header("normal_x normal_y normal_z x rgb fpfh y label z curvature intensity", "4 4 4 4 4 4 4 4 4 4 4",
+                 "F F F F F F F U F F F", "1 1 1 1 1 33 1 1 1 1 1", 2, "binary");
   for (int i = 0; i < 2; ++i) {
     for (float n : {0.0f, 0.6f, 0.8f}) test::append_raw(&file, n);
     test::append_raw(&file, 1.5f + i);               // x
@@ -183,16 +177,14 @@ TEST(Pcd, DoubleXyzAndU2IntensityInAnotherOrder) {
 
 TEST(Pcd, MissingIntensityAndShortIntensityName) {
   test::TempDir dir;
-  test::write_bytes(dir.file("xyz.pcd"),
-                    pcd_header("x y z", "4 4 4", "F F F", "1 1 1", 1, "ascii") + "1 2 3\n");
+  test::write_bytes(dir.file("xyz.pcd"), pcd_header("x y z", "4 4 4", "F F F", "1 1 1", 1, "ascii") + "1 2 3\n");
   const CloudData xyz = read_pcd(dir.file("xyz.pcd"));
   EXPECT_FALSE(xyz.has_intensity);
   ASSERT_EQ(xyz.points.size(), 1u);
   EXPECT_EQ(xyz.points[0].intensity, 0.0f);
   EXPECT_EQ(xyz.points[0].z, 3.0f);
-  test::write_bytes(
-      dir.file("i.pcd"),
-      pcd_header("x y z i", "4 4 4 1", "F F F U", "1 1 1 1", 1, "ascii") + "1 2 3 200\n");
+  test::write_bytes(dir.file("i.pcd"),
+                    pcd_header("x y z i", "4 4 4 1", "F F F U", "1 1 1 1", 1, "ascii") + "1 2 3 200\n");
   const CloudData i = read_pcd(dir.file("i.pcd"));
   EXPECT_TRUE(i.has_intensity);
   EXPECT_EQ(i.points[0].intensity, 200.0f);
@@ -229,11 +221,12 @@ TEST(Pcd, HandWrittenAscii) {
 // int64 (undefined behaviour); it is now refused like any other invalid label.
 TEST(Pcd, AsciiIntegerLabelBeyondInt64IsRefused) {
   test::TempDir dir;
-  test::write_bytes(dir.file("a.pcd"), pcd_header("x y z label", "4 4 4 4", "F F F U", "1 1 1 1", 2, "ascii") +
-                                           "1 2 3 7\n4 5 6 9.3e18\n");
-  EXPECT_TRUE(ThrowsIoError([&] { read_pcd(dir.file("a.pcd")); }, {"a.pcd", "line 13", "9.3e+18 is not a valid uint32 label"}));
-  test::write_bytes(dir.file("b.pcd"), pcd_header("x y z label", "4 4 4 4", "F F F I", "1 1 1 1", 1, "ascii") +
-                                           "1 2 3 -1\n");
+  test::write_bytes(dir.file("a.pcd"),
+                    pcd_header("x y z label", "4 4 4 4", "F F F U", "1 1 1 1", 2, "ascii") + "1 2 3 7\n4 5 6 9.3e18\n");
+  EXPECT_TRUE(
+      ThrowsIoError([&] { read_pcd(dir.file("a.pcd")); }, {"a.pcd", "line 13", "9.3e+18 is not a valid uint32 label"}));
+  test::write_bytes(dir.file("b.pcd"),
+                    pcd_header("x y z label", "4 4 4 4", "F F F I", "1 1 1 1", 1, "ascii") + "1 2 3 -1\n");
   EXPECT_EQ(read_pcd(dir.file("b.pcd")).labels, std::vector<uint32_t>{0xFFFFFFFFu});  // low 32 bits, as PCL
 }
 
@@ -249,22 +242,16 @@ TEST(Pcd, TruncatedBinaryNamesTheSizes) {
 
 TEST(Pcd, TruncatedAscii) {
   test::TempDir dir;
-  test::write_bytes(dir.file("a.pcd"),
-                    pcd_header("x y z", "4 4 4", "F F F", "1 1 1", 3, "ascii") + "1 2 3\n4 5 6\n");
-  EXPECT_TRUE(ThrowsIoError([&] { read_pcd(dir.file("a.pcd")); },
-                            {"a.pcd", "truncated", "3 points", "only 2"}));
+  test::write_bytes(dir.file("a.pcd"), pcd_header("x y z", "4 4 4", "F F F", "1 1 1", 3, "ascii") + "1 2 3\n4 5 6\n");
+  EXPECT_TRUE(ThrowsIoError([&] { read_pcd(dir.file("a.pcd")); }, {"a.pcd", "truncated", "3 points", "only 2"}));
 }
 
 TEST(Pcd, AsciiLineWithWrongValueCount) {
   test::TempDir dir;
-  test::write_bytes(dir.file("a.pcd"),
-                    pcd_header("x y z", "4 4 4", "F F F", "1 1 1", 2, "ascii") + "1 2 3\n4 5\n");
-  EXPECT_TRUE(ThrowsIoError([&] { read_pcd(dir.file("a.pcd")); },
-                            {"a.pcd line 13", "expected 3 values, got 2"}));
-  test::write_bytes(dir.file("b.pcd"),
-                    pcd_header("x y z", "4 4 4", "F F F", "1 1 1", 1, "ascii") + "1 two 3\n");
-  EXPECT_TRUE(ThrowsIoError([&] { read_pcd(dir.file("b.pcd")); },
-                            {"b.pcd line 12", "'two' is not a number"}));
+  test::write_bytes(dir.file("a.pcd"), pcd_header("x y z", "4 4 4", "F F F", "1 1 1", 2, "ascii") + "1 2 3\n4 5\n");
+  EXPECT_TRUE(ThrowsIoError([&] { read_pcd(dir.file("a.pcd")); }, {"a.pcd line 13", "expected 3 values, got 2"}));
+  test::write_bytes(dir.file("b.pcd"), pcd_header("x y z", "4 4 4", "F F F", "1 1 1", 1, "ascii") + "1 two 3\n");
+  EXPECT_TRUE(ThrowsIoError([&] { read_pcd(dir.file("b.pcd")); }, {"b.pcd line 12", "'two' is not a number"}));
 }
 
 TEST(Pcd, CorruptCompressedData) {
@@ -275,8 +262,7 @@ TEST(Pcd, CorruptCompressedData) {
   std::string wrong_size = bytes;
   wrong_size[data + 4] ^= 0x10;  // uncompressed size no longer matches the header
   test::write_bytes(dir.file("size.pcd"), wrong_size);
-  EXPECT_TRUE(ThrowsIoError([&] { read_pcd(dir.file("size.pcd")); },
-                            {"size.pcd", "corrupt", "uncompressed size"}));
+  EXPECT_TRUE(ThrowsIoError([&] { read_pcd(dir.file("size.pcd")); }, {"size.pcd", "corrupt", "uncompressed size"}));
   std::string bad_stream = bytes;
   bad_stream[data + 8] = static_cast<char>(0xE0);  // back reference before the start
   test::write_bytes(dir.file("stream.pcd"), bad_stream);
@@ -305,8 +291,7 @@ TEST(Pcd, BadHeaders) {
   };
   for (const Case& c : cases) {
     test::write_bytes(dir.file("bad.pcd"), c.content);
-    EXPECT_TRUE(ThrowsIoError([&] { read_pcd(dir.file("bad.pcd")); }, {"bad.pcd", c.expected}))
-        << c.content;
+    EXPECT_TRUE(ThrowsIoError([&] { read_pcd(dir.file("bad.pcd")); }, {"bad.pcd", c.expected})) << c.content;
   }
 }
 

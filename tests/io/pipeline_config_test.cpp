@@ -78,10 +78,8 @@ TEST(PipelineConfig, MistakesAreNamed) {
   EXPECT_NE(error_of(R"({"preset": "velodyne"})").find("unknown preset \"velodyne\""), std::string::npos);
   EXPECT_NE(error_of(R"({"voxels": {}})").find("unknown section \"voxels\""), std::string::npos);
   EXPECT_NE(error_of(R"({"voxel": {"leaf": 0.1}})").find("unknown key \"voxel.leaf\""), std::string::npos);
-  EXPECT_NE(error_of(R"({"voxel": {"leaf_m": "big"}})").find("\"voxel.leaf_m\" must be a number"),
-            std::string::npos);
-  EXPECT_NE(error_of(R"({"retrieval": {"k": 2.5}})").find("\"retrieval.k\" must be a whole number"),
-            std::string::npos);
+  EXPECT_NE(error_of(R"({"voxel": {"leaf_m": "big"}})").find("\"voxel.leaf_m\" must be a number"), std::string::npos);
+  EXPECT_NE(error_of(R"({"retrieval": {"k": 2.5}})").find("\"retrieval.k\" must be a whole number"), std::string::npos);
   EXPECT_NE(error_of(R"({"descriptors": {"esf_seed": -1}})").find("must not be negative"), std::string::npos);
   EXPECT_NE(error_of(R"({"matcher": {"type": "svm"}})").find("l2, random_forest"), std::string::npos);
   EXPECT_NE(error_of(R"({"voxel": {"leaf_m": -1}})").find("invalid value"), std::string::npos);
@@ -125,14 +123,16 @@ TEST(PipelineConfig, StoredMapParametersKeepTheBehaviourTheyWereBuiltWith) {
   using segmatch::io::PipelineConfig;
   const PipelineConfig today = segmatch::io::pipeline_preset("kitti-hdl64");
   EXPECT_EQ(today.localizer.refine.max_segment_points, 20000);
-  EXPECT_EQ(segmatch::io::parse_map_parameters(segmatch::io::to_json(today), "new map").localizer.refine.max_segment_points,
-            20000);
+  EXPECT_EQ(
+      segmatch::io::parse_map_parameters(segmatch::io::to_json(today), "new map").localizer.refine.max_segment_points,
+      20000);
   const std::string old_map = R"({"preset": "kitti-hdl64", "refine": {"max_query_points": 2000}})";
   EXPECT_EQ(segmatch::io::parse_map_parameters(old_map, "old map").localizer.refine.max_segment_points, 0);
   // ... and answers for its whole cloud, as it did: the recent window came after it.
   EXPECT_EQ(segmatch::io::parse_map_parameters(old_map, "old map").localizer.refine.recent_window_m, 0.0f);
-  EXPECT_EQ(segmatch::io::parse_map_parameters(segmatch::io::to_json(today), "new map").localizer.refine.recent_window_m,
-            today.localizer.refine.recent_window_m);
+  EXPECT_EQ(
+      segmatch::io::parse_map_parameters(segmatch::io::to_json(today), "new map").localizer.refine.recent_window_m,
+      today.localizer.refine.recent_window_m);
   EXPECT_EQ(segmatch::io::parse_pipeline_config(old_map, "a config file").localizer.refine.max_segment_points, 20000)
       << "a config file that leaves it out gets today's default";
 }

@@ -142,8 +142,7 @@ TEST(Ply, TruncatedAscii) {
   test::write_bytes(dir.file("a.ply"),
                     "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
                     "property float z\nend_header\n1 2 3\n4 5 6\n7 8\n");
-  EXPECT_TRUE(
-      ThrowsIoError([&] { read_ply(dir.file("a.ply")); }, {"a.ply", "truncated", "item 2 of 3"}));
+  EXPECT_TRUE(ThrowsIoError([&] { read_ply(dir.file("a.ply")); }, {"a.ply", "truncated", "item 2 of 3"}));
 }
 
 // Found by fuzzing (scripts/fuzz.sh ply): an ascii element with no properties and a count of
@@ -160,8 +159,7 @@ TEST(Ply, AsciiElementWithoutPropertiesTakesNoTokensWhateverItsCount) {
 
 TEST(Ply, BadFiles) {
   test::TempDir dir;
-  const std::string vertex =
-      "element vertex 1\nproperty float x\nproperty float y\nproperty float z\n";
+  const std::string vertex = "element vertex 1\nproperty float x\nproperty float y\nproperty float z\n";
   struct Case {
     std::string content, expected;
   };
@@ -174,8 +172,7 @@ TEST(Ply, BadFiles) {
       {"ply\nformat binary_middle_endian 1.0\n" + vertex + "end_header\n", "unknown format"},
       {"ply\nformat ascii 1.0\nelement vertex 1\nproperty float128 x\nend_header\n",
        "unknown property type 'float128'"},
-      {"ply\nformat ascii 1.0\nproperty float x\nend_header\n",
-       "property declared before any element"},
+      {"ply\nformat ascii 1.0\nproperty float x\nend_header\n", "property declared before any element"},
       {"ply\nformat ascii 1.0\nelement face 1\nproperty list uchar int "
        "vertex_indices\nend_header\n3 0 1 2\n",
        "no vertex element"},
@@ -188,8 +185,7 @@ TEST(Ply, BadFiles) {
   };
   for (const Case& c : cases) {
     test::write_bytes(dir.file("bad.ply"), c.content);
-    EXPECT_TRUE(ThrowsIoError([&] { read_ply(dir.file("bad.ply")); }, {"bad.ply", c.expected}))
-        << c.content;
+    EXPECT_TRUE(ThrowsIoError([&] { read_ply(dir.file("bad.ply")); }, {"bad.ply", c.expected})) << c.content;
   }
 }
 
@@ -201,8 +197,7 @@ TEST(Ply, HugeListLengthIsTruncationNotAllocation) {
       "element vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
   test::append_raw<uint32_t>(&file, 0xFFFFFFF0u);
   test::write_bytes(dir.file("list.ply"), file + "abcd");
-  EXPECT_TRUE(ThrowsIoError([&] { read_ply(dir.file("list.ply")); },
-                            {"list.ply", "truncated", "'face' item 0"}));
+  EXPECT_TRUE(ThrowsIoError([&] { read_ply(dir.file("list.ply")); }, {"list.ply", "truncated", "'face' item 0"}));
 }
 
 }  // namespace

@@ -29,17 +29,15 @@ Poses random_poses(size_t n, uint32_t seed) {
 // KITTI odometry sequence 00's velodyne-to-camera calibration.
 Pose3d kitti00_T_cam0_velo() {
   Eigen::Matrix<double, 3, 4, Eigen::RowMajor> m;
-  m << 4.276802385584e-04, -9.999672484946e-01, -8.084491683471e-03, -1.198459927713e-02,
-      -7.210626507497e-03, 8.081198471645e-03, -9.999413164504e-01, -5.403984729748e-02,
-      9.999738645903e-01, 4.859485810390e-04, -7.206933692422e-03, -2.921968648686e-01;
+  m << 4.276802385584e-04, -9.999672484946e-01, -8.084491683471e-03, -1.198459927713e-02, -7.210626507497e-03,
+      8.081198471645e-03, -9.999413164504e-01, -5.403984729748e-02, 9.999738645903e-01, 4.859485810390e-04,
+      -7.206933692422e-03, -2.921968648686e-01;
   Pose3d T = Pose3d::Identity();
   T.matrix().topRows<3>() = m;
   return T;
 }
 
-double max_difference(const Pose3d& a, const Pose3d& b) {
-  return (a.matrix() - b.matrix()).cwiseAbs().maxCoeff();
-}
+double max_difference(const Pose3d& a, const Pose3d& b) { return (a.matrix() - b.matrix()).cwiseAbs().maxCoeff(); }
 
 TEST(KittiPoses, RoundTripIsExact) {
   test::TempDir dir;
@@ -54,11 +52,10 @@ TEST(KittiPoses, RoundedRotationsAreReorthonormalised) {
   test::TempDir dir;
   // Riverside02's second pose as SLAM tools print it (6 significant digits), plus blank lines
   // at the end and CRLF.
-  test::write_bytes(
-      dir.file("poses.txt"),
-      "1 0 0 0 0 1 0 0 0 0 1 0\r\n"
-      "0.999903 -0.0116068 -0.00770509 -1.9494 0.0115921 0.999931 -0.00195905 -0.0144169 "
-      "0.0077273 0.00186954 0.999968 0.0611163\r\n\r\n\n");
+  test::write_bytes(dir.file("poses.txt"),
+                    "1 0 0 0 0 1 0 0 0 0 1 0\r\n"
+                    "0.999903 -0.0116068 -0.00770509 -1.9494 0.0115921 0.999931 -0.00195905 -0.0144169 "
+                    "0.0077273 0.00186954 0.999968 0.0611163\r\n\r\n\n");
   const Poses poses = read_kitti_poses(dir.file("poses.txt"));
   ASSERT_EQ(poses.size(), 2u);
   const Eigen::Matrix3d R = poses[1].linear();
@@ -100,8 +97,7 @@ TEST(KittiCalib, RoundTripAndKittiLayout) {
   const KittiCalib calib = read_kitti_calib(dir.file("calib.txt"));
   // The file keeps 13 significant digits; reading re-orthonormalises KITTI's 1e-7 errors.
   EXPECT_LT(max_difference(calib.T_cam0_velo, kitti00_T_cam0_velo()), 1e-6);
-  EXPECT_LT(max_difference(calib.T_cam0_velo, read_kitti_calib(dir.file("calib.txt")).T_cam0_velo),
-            1e-15);
+  EXPECT_LT(max_difference(calib.T_cam0_velo, read_kitti_calib(dir.file("calib.txt")).T_cam0_velo), 1e-15);
 }
 
 TEST(KittiCalib, ObjectStyleKeyAndErrors) {
@@ -112,8 +108,7 @@ TEST(KittiCalib, ObjectStyleKeyAndErrors) {
   EXPECT_EQ(T.translation().x(), 0.5);
   EXPECT_NEAR(T.linear()(2, 0), 1.0, 1e-15);
   test::write_bytes(dir.file("calib.txt"), "P0: 1 0 0 0 0 1 0 0 0 0 1 0\n");
-  EXPECT_TRUE(
-      ThrowsIoError([&] { read_kitti_calib(dir.file("calib.txt")); }, {"calib.txt", "no 'Tr:'"}));
+  EXPECT_TRUE(ThrowsIoError([&] { read_kitti_calib(dir.file("calib.txt")); }, {"calib.txt", "no 'Tr:'"}));
   test::write_bytes(dir.file("calib.txt"), "P0: 1\nTr: 1 0 0 0 0 1 0 0 0 0 1\n");
   EXPECT_TRUE(ThrowsIoError([&] { read_kitti_calib(dir.file("calib.txt")); },
                             {"calib.txt line 2", "expected 12 numbers, got 11"}));
@@ -144,8 +139,7 @@ TEST(FrameChange, YawAboutCameraYIsYawAboutMinusLidarZ) {
   T_cam0_cam1.linear() = Eigen::AngleAxisd(angle, Eigen::Vector3d::UnitY()).toRotationMatrix();
   const Poses lidar = camera_to_lidar_poses({T_cam0_cam1}, axis_permutation_T_cam0_velo());
   // Camera y is velodyne -z, so the same turn is a rotation by -angle about velodyne z...
-  const Eigen::Matrix3d expected_R =
-      Eigen::AngleAxisd(-angle, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  const Eigen::Matrix3d expected_R = Eigen::AngleAxisd(-angle, Eigen::Vector3d::UnitZ()).toRotationMatrix();
   EXPECT_LT((lidar[0].linear() - expected_R).norm(), 1e-12);
   // ...and the lever arm moves the LiDAR: R^T (R_y t - t) with t = (0.1, -0.2, 0.3).
   const Eigen::Vector3d t(0.1, -0.2, 0.3);
@@ -180,21 +174,18 @@ TEST(Tum, RoundTrip) {
   const StampedPoses back = read_tum(dir.file("traj.tum"));
   ASSERT_EQ(back.poses.size(), 20u);
   EXPECT_EQ(back.times, poses.times);
-  for (size_t i = 0; i < 20; ++i)
-    EXPECT_LT(max_difference(back.poses[i], poses.poses[i]), 1e-9) << i;
+  for (size_t i = 0; i < 20; ++i) EXPECT_LT(max_difference(back.poses[i], poses.poses[i]), 1e-9) << i;
 }
 
 TEST(Tum, CommentsAndUnnormalisedQuaternions) {
   test::TempDir dir;
   // qw last; (0, 0, 2, 2) normalises to a 90 degree turn about z.
-  test::write_bytes(dir.file("t.txt"),
-                    "# timestamp tx ty tz qx qy qz qw\n\n10.5 1 2 3 0 0 2 2\n  # done\n");
+  test::write_bytes(dir.file("t.txt"), "# timestamp tx ty tz qx qy qz qw\n\n10.5 1 2 3 0 0 2 2\n  # done\n");
   const StampedPoses poses = read_tum(dir.file("t.txt"));
   ASSERT_EQ(poses.poses.size(), 1u);
   EXPECT_EQ(poses.times[0], 10.5);
   EXPECT_EQ(poses.poses[0].translation(), Eigen::Vector3d(1, 2, 3));
-  EXPECT_LT((poses.poses[0].linear() * Eigen::Vector3d::UnitX() - Eigen::Vector3d::UnitY()).norm(),
-            1e-12);
+  EXPECT_LT((poses.poses[0].linear() * Eigen::Vector3d::UnitX() - Eigen::Vector3d::UnitY()).norm(), 1e-12);
 }
 
 TEST(Tum, Errors) {
@@ -202,12 +193,10 @@ TEST(Tum, Errors) {
   test::write_bytes(dir.file("t.txt"), "# c\n1 0 0 0 0 0 0 1\n2 0 0 0 0 0 0 0\n");
   EXPECT_TRUE(ThrowsIoError([&] { read_tum(dir.file("t.txt")); }, {"t.txt line 3", "zero norm"}));
   test::write_bytes(dir.file("t.txt"), "1 0 0 0 0 0 1\n");
-  EXPECT_TRUE(ThrowsIoError([&] { read_tum(dir.file("t.txt")); },
-                            {"t.txt line 1", "expected 8 numbers, got 7"}));
+  EXPECT_TRUE(ThrowsIoError([&] { read_tum(dir.file("t.txt")); }, {"t.txt line 1", "expected 8 numbers, got 7"}));
   StampedPoses mismatched;
   mismatched.times = {1.0};
-  EXPECT_TRUE(ThrowsIoError([&] { write_tum(dir.file("w.txt"), mismatched); },
-                            {"w.txt", "1 times for 0 poses"}));
+  EXPECT_TRUE(ThrowsIoError([&] { write_tum(dir.file("w.txt"), mismatched); }, {"w.txt", "1 times for 0 poses"}));
 }
 
 TEST(Times, RoundTripAndErrors) {
@@ -216,13 +205,11 @@ TEST(Times, RoundTripAndErrors) {
   write_times(dir.file("times.txt"), times);
   EXPECT_EQ(read_times(dir.file("times.txt")), times);
   test::write_bytes(dir.file("times.txt"), "0.0\n0.1 0.2\n");
-  EXPECT_TRUE(ThrowsIoError([&] { read_times(dir.file("times.txt")); },
-                            {"times.txt line 2", "expected 1 number, got 2"}));
+  EXPECT_TRUE(
+      ThrowsIoError([&] { read_times(dir.file("times.txt")); }, {"times.txt line 2", "expected 1 number, got 2"}));
   test::write_bytes(dir.file("times.txt"), "0.0\n-nan\n");
-  EXPECT_TRUE(ThrowsIoError([&] { read_times(dir.file("times.txt")); },
-                            {"times.txt line 2", "non-finite"}));
+  EXPECT_TRUE(ThrowsIoError([&] { read_times(dir.file("times.txt")); }, {"times.txt line 2", "non-finite"}));
 }
-
 
 // --odometry / --truth take either format: told apart by the first pose line's columns.
 TEST(AnyPoses, KittiAndTumAreToldApartByTheirColumns) {

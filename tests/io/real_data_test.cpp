@@ -18,9 +18,8 @@ void check_scan(const Sequence& seq, size_t i) {
   EXPECT_TRUE(scan.has_intensity);
   EXPECT_TRUE(scan.labels.empty());
   // Real returns: intensities vary and the points spread over metres, not a constant blob.
-  const auto [lo, hi] =
-      std::minmax_element(scan.points.begin(), scan.points.end(),
-                          [](const Point& a, const Point& b) { return a.intensity < b.intensity; });
+  const auto [lo, hi] = std::minmax_element(scan.points.begin(), scan.points.end(),
+                                            [](const Point& a, const Point& b) { return a.intensity < b.intensity; });
   EXPECT_LT(lo->intensity, hi->intensity);
   float max_range = 0.0f;
   for (const Point& p : scan.points) max_range = std::max(max_range, p.xyz().norm());
@@ -32,8 +31,7 @@ void check_scan(const Sequence& seq, size_t i) {
 // at its last keyframe; hku-loop1 keyframes are at most 0.6 m apart).
 void check_real_sequence(const std::string& name, size_t expected_scans, double max_step) {
   const std::string folder = std::string(SEGMATCH_SHARED_DATA_DIR) + "/real/" + name;
-  if (!std::filesystem::exists(folder))
-    GTEST_SKIP() << "../shared/data/real not found: skipping real-data test";
+  if (!std::filesystem::exists(folder)) GTEST_SKIP() << "../shared/data/real not found: skipping real-data test";
   const Sequence seq = Sequence::open(folder);
   EXPECT_EQ(seq.layout(), SequenceLayout::kPcdKeyframes);
   ASSERT_EQ(seq.size(), expected_scans);
@@ -44,8 +42,7 @@ void check_real_sequence(const std::string& name, size_t expected_scans, double 
   for (size_t i = 0; i < seq.size(); ++i) {
     ASSERT_TRUE(seq.poses()[i].matrix().allFinite()) << i;
     if (i == 0) continue;
-    EXPECT_LT((seq.poses()[i].translation() - seq.poses()[i - 1].translation()).norm(), max_step)
-        << i;
+    EXPECT_LT((seq.poses()[i].translation() - seq.poses()[i - 1].translation()).norm(), max_step) << i;
     EXPECT_GT(seq.times()[i], seq.times()[i - 1]) << i;
   }
   check_scan(seq, 0);

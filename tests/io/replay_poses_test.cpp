@@ -7,8 +7,8 @@
 
 #include <filesystem>
 #include <fstream>
-#include <vector>
 #include <stdexcept>
+#include <vector>
 
 #include "io_test_util.h"
 

@@ -52,10 +52,8 @@ struct KittiFolder {
   explicit KittiFolder(size_t count) : n(count) {
     for (size_t k = n; k > 0; --k) {
       const size_t i = k - 1;
-      clouds.insert(clouds.begin(),
-                    test::random_cloud(100 + 10 * i, static_cast<uint32_t>(50 + i)));
-      labels.insert(labels.begin(),
-                    test::random_labels(100 + 10 * i, static_cast<uint32_t>(60 + i)));
+      clouds.insert(clouds.begin(), test::random_cloud(100 + 10 * i, static_cast<uint32_t>(50 + i)));
+      labels.insert(labels.begin(), test::random_labels(100 + 10 * i, static_cast<uint32_t>(60 + i)));
     }
     std::filesystem::create_directories(dir.file("velodyne"));
     std::filesystem::create_directories(dir.file("labels"));
@@ -64,8 +62,7 @@ struct KittiFolder {
       write_kitti_labels(dir.file("labels/" + scan_name(k - 1, ".label")), labels[k - 1]);
     }
     write_kitti_calib(dir.file("calib.txt"), {calib_T_cam0_velo()});
-    write_kitti_poses(dir.file("poses.txt"),
-                      lidar_to_camera_poses(lidar_trajectory(n), calib_T_cam0_velo()));
+    write_kitti_poses(dir.file("poses.txt"), lidar_to_camera_poses(lidar_trajectory(n), calib_T_cam0_velo()));
     std::vector<double> times;
     for (size_t i = 0; i < n; ++i) times.push_back(0.1037 * double(i));
     write_times(dir.file("times.txt"), times);
@@ -134,42 +131,35 @@ TEST(Sequence, LidarFrameAndPosesPathOverrides) {
 TEST(Sequence, MismatchErrors) {
   KittiFolder f(5);
   write_kitti_poses(f.dir.file("poses.txt"), Poses(4, Pose3d::Identity()));
-  EXPECT_TRUE(ThrowsIoError([&] { Sequence::open(f.dir.path()); },
-                            {f.dir.path(), "5 scans but 4 poses in poses.txt"}));
+  EXPECT_TRUE(ThrowsIoError([&] { Sequence::open(f.dir.path()); }, {f.dir.path(), "5 scans but 4 poses in poses.txt"}));
   write_kitti_poses(f.dir.file("poses.txt"), Poses(5, Pose3d::Identity()));
   write_times(f.dir.file("times.txt"), {0, 1, 2, 3, 4, 5});
-  EXPECT_TRUE(
-      ThrowsIoError([&] { Sequence::open(f.dir.path()); }, {"5 scans but 6 times in times.txt"}));
+  EXPECT_TRUE(ThrowsIoError([&] { Sequence::open(f.dir.path()); }, {"5 scans but 6 times in times.txt"}));
   write_times(f.dir.file("times.txt"), {0, 1, 2, 3, 4});
   std::filesystem::remove(f.dir.file("labels/000004.label"));
-  EXPECT_TRUE(ThrowsIoError([&] { Sequence::open(f.dir.path()); },
-                            {"5 scans but 4 label files in labels/"}));
+  EXPECT_TRUE(ThrowsIoError([&] { Sequence::open(f.dir.path()); }, {"5 scans but 4 label files in labels/"}));
   write_kitti_labels(f.dir.file("labels/000009.label"), {});
-  EXPECT_TRUE(ThrowsIoError([&] { Sequence::open(f.dir.path()); },
-                            {"000009.label", "does not match scan"}));
+  EXPECT_TRUE(ThrowsIoError([&] { Sequence::open(f.dir.path()); }, {"000009.label", "does not match scan"}));
   std::filesystem::remove(f.dir.file("labels/000009.label"));
   write_kitti_labels(f.dir.file("labels/000004.label"), {1, 2, 3});
   const Sequence seq = Sequence::open(f.dir.path());  // per-scan counts are checked lazily
-  EXPECT_TRUE(ThrowsIoError([&] { seq.scan(4); },
-                            {"000004.label", "has 3 labels but", "000004.bin has 140 points"}));
+  EXPECT_TRUE(ThrowsIoError([&] { seq.scan(4); }, {"000004.label", "has 3 labels but", "000004.bin has 140 points"}));
 }
 
 TEST(Sequence, MissingPiecesAreNamed) {
   KittiFolder f(2);
   std::filesystem::remove(f.dir.file("calib.txt"));
-  EXPECT_TRUE(ThrowsIoError([&] { Sequence::open(f.dir.path()); },
-                            {"missing file: " + f.dir.file("calib.txt"),
-                             "needed to convert camera-frame poses to the LiDAR frame"}));
+  EXPECT_TRUE(ThrowsIoError(
+      [&] { Sequence::open(f.dir.path()); },
+      {"missing file: " + f.dir.file("calib.txt"), "needed to convert camera-frame poses to the LiDAR frame"}));
   std::filesystem::remove(f.dir.file("poses.txt"));
-  EXPECT_TRUE(ThrowsIoError([&] { Sequence::open(f.dir.path()); },
-                            {"missing file: " + f.dir.file("poses.txt")}));
-  EXPECT_TRUE(ThrowsIoError([&] { Sequence::open(f.dir.file("nowhere")); },
-                            {"missing folder: " + f.dir.file("nowhere")}));
+  EXPECT_TRUE(ThrowsIoError([&] { Sequence::open(f.dir.path()); }, {"missing file: " + f.dir.file("poses.txt")}));
+  EXPECT_TRUE(
+      ThrowsIoError([&] { Sequence::open(f.dir.file("nowhere")); }, {"missing folder: " + f.dir.file("nowhere")}));
   test::TempDir empty;
   std::filesystem::create_directories(empty.file("velodyne"));
-  EXPECT_TRUE(ThrowsIoError(
-      [&] { Sequence::open(empty.path()); },
-      {empty.path(), "no scans found: expected velodyne/NNNNNN.bin or scans/NNNNNN.pcd"}));
+  EXPECT_TRUE(ThrowsIoError([&] { Sequence::open(empty.path()); },
+                            {empty.path(), "no scans found: expected velodyne/NNNNNN.bin or scans/NNNNNN.pcd"}));
 }
 
 TEST(Sequence, TruncatedScanFailsOnRead) {
@@ -197,7 +187,7 @@ TEST(Sequence, PcdKeyframes) {
   EXPECT_FALSE(seq.has_labels());
   EXPECT_EQ(seq.times()[3], 6.5);
   EXPECT_LT((seq.poses()[3].matrix() - poses[3].matrix()).norm(), 1e-9);  // LiDAR frame: as given
-  EXPECT_TRUE(test::same_points(seq.scan(0).points, clouds[3]));  // 000000.pcd was written last
+  EXPECT_TRUE(test::same_points(seq.scan(0).points, clouds[3]));          // 000000.pcd was written last
   EXPECT_EQ(seq.scan_path(1), dir.file("scans/000001.pcd"));
 }
 
@@ -205,8 +195,7 @@ TEST(Sequence, PcdFilesDirectlyInFolderWithLabels) {
   test::TempDir dir;
   for (size_t i = 0; i < 3; ++i) {
     const std::vector<uint32_t> labels(50, static_cast<uint32_t>(i + 1));
-    write_pcd(dir.file(scan_name(i, ".pcd")), test::random_cloud(50, 80),
-              PcdEncoding::kBinaryCompressed, &labels);
+    write_pcd(dir.file(scan_name(i, ".pcd")), test::random_cloud(50, 80), PcdEncoding::kBinaryCompressed, &labels);
   }
   write_kitti_poses(dir.file("poses.txt"), lidar_trajectory(3));
   const Sequence seq = Sequence::open(dir.path());
@@ -216,8 +205,7 @@ TEST(Sequence, PcdFilesDirectlyInFolderWithLabels) {
   // Camera-frame poses for PCD keyframes need calib.txt too.
   SequenceOptions camera;
   camera.pose_frame = PoseFrame::kCamera;
-  EXPECT_TRUE(
-      ThrowsIoError([&] { Sequence::open(dir.path(), camera); }, {"missing file:", "calib.txt"}));
+  EXPECT_TRUE(ThrowsIoError([&] { Sequence::open(dir.path(), camera); }, {"missing file:", "calib.txt"}));
 }
 
 }  // namespace

@@ -35,14 +35,17 @@ class ClosedRoute : public ::testing::Test {
     fs::create_directories(dir_);
     // Simulated once per build of segmatch-sim (support/fixture_cache.h). Sequence 01 and the
     // labels are not used: the shortest second traversal, no labels.
-    const fs::path sim = segmatch::test::cached_fixture("closed-route", {kBin + "/segmatch-sim"}, [](const fs::path& out) {
-      const auto r = segmatch::test::run_command(
-          kBin + "/segmatch-sim --preset tiny --seed 3 --route-00 loop --odom-drift-pct 0.3 "
-                 "--odom-yaw-drift-deg-per-m 0.002 --odom-climb-m-per-m 0.002 --odom-heading-walk 0 --odom-pitch-walk 0 "
-                 "--no-images --no-labels "
-                 "--length-01-m 50 --out " + out.string());
-      if (r.code != 0) throw std::runtime_error("segmatch-sim failed: " + r.output);
-    });
+    const fs::path sim =
+        segmatch::test::cached_fixture("closed-route", {kBin + "/segmatch-sim"}, [](const fs::path& out) {
+          const auto r = segmatch::test::run_command(
+              kBin +
+              "/segmatch-sim --preset tiny --seed 3 --route-00 loop --odom-drift-pct 0.3 "
+              "--odom-yaw-drift-deg-per-m 0.002 --odom-climb-m-per-m 0.002 --odom-heading-walk 0 --odom-pitch-walk 0 "
+              "--no-images --no-labels "
+              "--length-01-m 50 --out " +
+              out.string());
+          if (r.code != 0) throw std::runtime_error("segmatch-sim failed: " + r.output);
+        });
     seq_ = (sim / "sequences" / "00").string();
   }
   static void TearDownTestSuite() { fs::remove_all(dir_); }

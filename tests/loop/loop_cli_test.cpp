@@ -19,9 +19,7 @@ namespace {
 const std::string kBin = std::string(SEGMATCH_BIN_DIR) + "/segmatch-loop";
 const std::string kHku = std::string(SEGMATCH_SHARED_DATA_DIR) + "/real/hku-loop1";
 
-segmatch::test::CommandResult run(const std::string& args) {
-  return segmatch::test::run_command(kBin + " " + args);
-}
+segmatch::test::CommandResult run(const std::string& args) { return segmatch::test::run_command(kBin + " " + args); }
 
 fs::path fresh_dir(const std::string& name) {
   const fs::path d = fs::temp_directory_path() / ("segmatch_loop_cli_" + name + "_" + std::to_string(getpid()));

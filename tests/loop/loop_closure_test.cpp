@@ -31,7 +31,8 @@ constexpr double kDegPerRad = 180.0 / M_PI;
 std::vector<size_t> spaced_frames(const Traversal& t) {
   std::vector<size_t> frames;
   for (size_t i = 0; i < t.size(); ++i)
-    if (frames.empty() || (t.T_world_lidar[i].translation() - t.T_world_lidar[frames.back()].translation()).norm() >= 2.0)
+    if (frames.empty() ||
+        (t.T_world_lidar[i].translation() - t.T_world_lidar[frames.back()].translation()).norm() >= 2.0)
       frames.push_back(i);
   return frames;
 }
@@ -106,7 +107,8 @@ std::unique_ptr<SimLoop> simulate_loop(uint64_t seed) {
     std::vector<SimulatedScan> scans(n);
     std::atomic<size_t> next{0};
     auto work = [&] {
-      for (size_t k; (k = next++) < n;) scans[k] = simulate_scan(caster, hdl64e(), t.T_world_lidar[frames[b + k]], frames[b + k]);
+      for (size_t k; (k = next++) < n;)
+        scans[k] = simulate_scan(caster, hdl64e(), t.T_world_lidar[frames[b + k]], frames[b + k]);
     };
     std::thread helper(work);
     work();
@@ -140,12 +142,13 @@ class SimulatedLoop : public ::testing::Test {
       // The true correction of the odometry, for comparison with l.T_oldodom_odom.
       const Pose3d T_true = odometry[l.match_frame] * t.T_world_lidar[l.match_frame].inverse() *
                             t.T_world_lidar[l.query_frame] * odometry[l.query_frame].inverse();
-      std::printf("[loop] %s: frame %zu (%.0f m) -> %zu (%.0f m), %zu inliers, support %zu, conf %.2f, "
-                  "correction %.2f m %.2f deg (true %.2f m %.2f deg); error %.3f m %.3f deg\n",
-                  name, l.query_frame, t.odometer_m[l.query_frame], l.match_frame, t.odometer_m[l.match_frame],
-                  l.inliers, l.support, l.confidence, l.T_oldodom_odom.translation().norm(),
-                  Eigen::AngleAxisd(l.T_oldodom_odom.linear()).angle() * kDegPerRad, T_true.translation().norm(),
-                  Eigen::AngleAxisd(T_true.linear()).angle() * kDegPerRad, e.m, e.deg);
+      std::printf(
+          "[loop] %s: frame %zu (%.0f m) -> %zu (%.0f m), %zu inliers, support %zu, conf %.2f, "
+          "correction %.2f m %.2f deg (true %.2f m %.2f deg); error %.3f m %.3f deg\n",
+          name, l.query_frame, t.odometer_m[l.query_frame], l.match_frame, t.odometer_m[l.match_frame], l.inliers,
+          l.support, l.confidence, l.T_oldodom_odom.translation().norm(),
+          Eigen::AngleAxisd(l.T_oldodom_odom.linear()).angle() * kDegPerRad, T_true.translation().norm(),
+          Eigen::AngleAxisd(T_true.linear()).angle() * kDegPerRad, e.m, e.deg);
       EXPECT_GE(t.odometer_m[l.query_frame], sim_->loop_m - 70.0) << "a loop before the route came back";
       EXPECT_LE(e.m, 0.2);
       EXPECT_LE(e.deg, 1.0);
@@ -190,8 +193,8 @@ TEST(LoopDetector, RejectsFramesOutOfOrderAndBadPoses) {
 }
 
 TEST_F(SimulatedLoop, ClosedRouteIsDetectedWithTheTrueTransform) {
-  std::printf("[loop] route %.0f m, back at the start after %.0f m, map %zu segments\n",
-              sim_->traversal.length_m(), sim_->loop_m, sim_->exact->map_size());
+  std::printf("[loop] route %.0f m, back at the start after %.0f m, map %zu segments\n", sim_->traversal.length_m(),
+              sim_->loop_m, sim_->exact->map_size());
   ASSERT_GT(sim_->loop_m, 300.0);
   const size_t accurate = check_loops(*sim_->exact, sim_->traversal.T_world_lidar, "exact odometry");
   EXPECT_GE(accurate, 2u) << "the revisit of ~200 m gives several loops";

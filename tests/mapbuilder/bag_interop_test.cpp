@@ -30,12 +30,15 @@ test::CommandResult run(const std::string& args) { return test::run_command(args
 class BagInterop : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    keyframes_ = test::cached_fixture("bag-interop-data", {kBin + "/segmatch-sim"}, [](const fs::path& folder) {
-                   const test::CommandResult r = run(kBin + "/segmatch-sim --preset tiny --seed 3 --length-00-m 100 "
-                                                     "--length-01-m 50 --no-images --keyframes-every-m 2 --out " +
-                                                     folder.string());
-                   if (r.code != 0) throw std::runtime_error("segmatch-sim failed: " + r.output);
-                 }) /
+    keyframes_ = test::cached_fixture("bag-interop-data", {kBin + "/segmatch-sim"},
+                                      [](const fs::path& folder) {
+                                        const test::CommandResult r =
+                                            run(kBin +
+                                                "/segmatch-sim --preset tiny --seed 3 --length-00-m 100 "
+                                                "--length-01-m 50 --no-images --keyframes-every-m 2 --out " +
+                                                folder.string());
+                                        if (r.code != 0) throw std::runtime_error("segmatch-sim failed: " + r.output);
+                                      }) /
                  "keyframes/00";
     dir_ = fs::temp_directory_path() / ("segmatch_bag_interop_" + std::to_string(::getpid()));
     fs::create_directories(dir_);
@@ -44,24 +47,28 @@ class BagInterop : public ::testing::Test {
   static void TearDownTestSuite() { fs::remove_all(dir_); }
 
   void SetUp() override {
-    if (run("node --version").code != 0) GTEST_SKIP() << "Node.js is not installed (scripts/install-deps.sh installs it)";
+    if (run("node --version").code != 0)
+      GTEST_SKIP() << "Node.js is not installed (scripts/install-deps.sh installs it)";
     if (!fs::exists(kWriter / "node_modules/@mcap/core"))
-      GTEST_SKIP() << "the bag writer's packages are not installed: npm ci in " << kWriter.string() << " (scripts/test.sh does)";
+      GTEST_SKIP() << "the bag writer's packages are not installed: npm ci in " << kWriter.string()
+                   << " (scripts/test.sh does)";
   }
 
   // The map of `input` (a folder or a bag) with extra mapbuilder flags; its segments.
   static Segments build(const std::string& map, const std::string& input, const std::string& flags) {
     const test::CommandResult r =
-        run(kBin + "/segmatch-mapbuilder --no-classifier --min-segments-per-km 0 --force --input " + input + " " + flags + " -o " + map);
+        run(kBin + "/segmatch-mapbuilder --no-classifier --min-segments-per-km 0 --force --input " + input + " " +
+            flags + " -o " + map);
     if (r.code != 0) throw std::runtime_error("segmatch-mapbuilder failed on " + input + ": " + r.output);
     return storage::MapReader::open(map).load_segments_without_points();
   }
 
   // Writes the drive with the independent writer, builds its map, compares it with the folder's.
-  static void expect_same_map(const std::string& name, const std::string& writer_flags, const std::string& builder_flags) {
+  static void expect_same_map(const std::string& name, const std::string& writer_flags,
+                              const std::string& builder_flags) {
     const fs::path bag = dir_ / name;
-    const test::CommandResult w =
-        run("node " + (kWriter / "write_bag.mjs").string() + " --sequence " + keyframes_.string() + " --out " + bag.string() + " " + writer_flags);
+    const test::CommandResult w = run("node " + (kWriter / "write_bag.mjs").string() + " --sequence " +
+                                      keyframes_.string() + " --out " + bag.string() + " " + writer_flags);
     ASSERT_EQ(w.code, 0) << w.output;
     const Segments segments = build((dir_ / (name + ".sqlite")).string(), bag.string(), builder_flags);
     ASSERT_FALSE(reference_.empty());
@@ -85,6 +92,8 @@ TEST_F(BagInterop, Lz4Chunks) { expect_same_map("lz4.mcap", "--compression lz4",
 TEST_F(BagInterop, UncompressedChunks) { expect_same_map("none.mcap", "--compression none", ""); }
 TEST_F(BagInterop, Unchunked) { expect_same_map("unchunked.mcap", "--unchunked", ""); }
 TEST_F(BagInterop, IntensityFirst) { expect_same_map("ixyz.mcap", "--field-order ixyz", "--points-topic /points"); }
-TEST_F(BagInterop, DoublesAndARing) { expect_same_map("f64.mcap", "--field-order xyz_ring_i_f64", "--pose-topic /odom"); }
+TEST_F(BagInterop, DoublesAndARing) {
+  expect_same_map("f64.mcap", "--field-order xyz_ring_i_f64", "--pose-topic /odom");
+}
 TEST_F(BagInterop, Rosbag2Sqlite) { expect_same_map("db3", "--format db3", ""); }
 TEST_F(BagInterop, PosesFromTf) { expect_same_map("tf.mcap", "--tf", "--map-frame map"); }

@@ -1,7 +1,7 @@
 // segmatch-mapbuilder and segmatch-mapinfo as a user runs them, on a tiny simulated dataset
 // generated once for the suite.
-#include "segmatch/core/matching/matcher.h"
 #include "segmatch/core/detail/random.h"
+#include "segmatch/core/matching/matcher.h"
 #include "segmatch/io/cloud_io.h"
 #include "segmatch/io/sequence.h"
 #include "segmatch/storage/map_reader.h"
@@ -23,8 +23,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <iterator>
 #include <iomanip>
+#include <iterator>
 #include <random>
 #include <sstream>
 #include <thread>
@@ -80,8 +80,10 @@ class MapBuilderCli : public ::testing::Test {
     fs::create_directories(dir_);
     // The dataset and the map are built once for every test process (support/fixture_cache.h).
     const fs::path data = test::cached_fixture("mapbuilder-data", {kBin + "/segmatch-sim"}, [](const fs::path& folder) {
-      const Result simulated = run(kBin + "/segmatch-sim --preset tiny --seed 3 --length-00-m 100 --length-01-m 50 "
-                                   "--no-images --out " + folder.string());
+      const Result simulated = run(kBin +
+                                   "/segmatch-sim --preset tiny --seed 3 --length-00-m 100 --length-01-m 50 "
+                                   "--no-images --out " +
+                                   folder.string());
       if (simulated.code != 0) throw std::runtime_error("segmatch-sim failed: " + simulated.output);
     });
     sequence_ = data / "sequences/00";
@@ -287,7 +289,7 @@ TEST_F(MapBuilderCli, MapinfoExportsColouredPointsAndAPicture) {
   const storage::MapStats stats = storage::MapReader::open(map_path().string()).stats();
   const fs::path ply = dir_ / "segments.ply", pcd = dir_ / "segments.pcd", png = dir_ / "top.png";
   Result r = run(kBin + "/segmatch-mapinfo " + map_path().string() + " --export-ply " + ply.string() + " --png " +
-              png.string());
+                 png.string());
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_EQ(io::read_ply(ply.string()).points.size(), stats.points);
   EXPECT_NE(read_all(ply).find("property uchar red"), std::string::npos);
@@ -323,7 +325,7 @@ TEST_F(MapBuilderCli, ForceReplacesAMap) {
 TEST_F(MapBuilderCli, BadRangesAreRefused) {
   const fs::path out = dir_ / "range.sqlite";
   Result r = run(kBin + "/segmatch-mapbuilder --input " + sequence().string() + " --first 20 --last 10 --output " +
-              out.string());
+                 out.string());
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("empty scan range"), std::string::npos) << r.output;
   r = run(builder(1000000) + " --output " + out.string());
@@ -336,8 +338,8 @@ TEST_F(MapBuilderCli, BadRangesAreRefused) {
 
 TEST_F(MapBuilderCli, AMissingInputFolderIsRefusedWithAMessage) {
   const fs::path out = dir_ / "missing.sqlite";
-  const Result r = run(kBin + "/segmatch-mapbuilder --input " + (dir_ / "no-such-seq").string() + " --output " +
-                    out.string());
+  const Result r =
+      run(kBin + "/segmatch-mapbuilder --input " + (dir_ / "no-such-seq").string() + " --output " + out.string());
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("no-such-seq does not exist"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(out));
@@ -412,7 +414,8 @@ void interrupt_build(const fs::path& sequence, const fs::path& folder, int signa
   bool began = false;
   for (int i = 0; i < 3000 && !began; ++i) {  // up to 60 s: the recording is measured first (seconds under load)
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    for (const auto& e : fs::directory_iterator(folder)) began = began || e.path().string().find(".tmp-") != std::string::npos;
+    for (const auto& e : fs::directory_iterator(folder))
+      began = began || e.path().string().find(".tmp-") != std::string::npos;
   }
   EXPECT_TRUE(began) << "the build started writing its temporary map";
   std::this_thread::sleep_for(std::chrono::milliseconds(300));  // inside the build loop
@@ -432,7 +435,9 @@ void interrupt_build(const fs::path& sequence, const fs::path& folder, int signa
   }
 }
 
-TEST_F(MapBuilderCli, AnInterruptedBuildLeavesNoFileSigint) { interrupt_build(sequence(), dir_ / "sigint", SIGINT, false); }
+TEST_F(MapBuilderCli, AnInterruptedBuildLeavesNoFileSigint) {
+  interrupt_build(sequence(), dir_ / "sigint", SIGINT, false);
+}
 
 TEST_F(MapBuilderCli, AnInterruptedForcedBuildKeepsTheExistingMapSigterm) {
   interrupt_build(sequence(), dir_ / "sigterm", SIGTERM, true);

@@ -45,7 +45,9 @@ std::vector<size_t> build(MapBuilder& builder, const Drive& d) {
     SimulatedScan scans[2];
     const size_t n = std::min<size_t>(2, frames.size() - k);
     std::thread other;
-    if (n == 2) other = std::thread([&] { scans[1] = simulate_scan(caster, hdl64e(), t.T_world_lidar[frames[k + 1]], frames[k + 1]); });
+    if (n == 2)
+      other = std::thread(
+          [&] { scans[1] = simulate_scan(caster, hdl64e(), t.T_world_lidar[frames[k + 1]], frames[k + 1]); });
     scans[0] = simulate_scan(caster, hdl64e(), t.T_world_lidar[frames[k]], frames[k]);
     if (other.joinable()) other.join();
     for (size_t j = 0; j < n; ++j)
@@ -110,7 +112,8 @@ void Checks::SegmentsEveryMapEveryMetresAndAtTheEnd() {
   // less than one scan step), plus the final one from finish().
   double max_step_m = 0;
   for (size_t k = 1; k < frames_.size(); ++k)
-    max_step_m = std::max(max_step_m, drive_->traversal.odometer_m[frames_[k]] - drive_->traversal.odometer_m[frames_[k - 1]]);
+    max_step_m =
+        std::max(max_step_m, drive_->traversal.odometer_m[frames_[k]] - drive_->traversal.odometer_m[frames_[k - 1]]);
   const double every = builder_->config().map_every_m;
   EXPECT_GE(static_cast<double>(builder_->local_clouds()), std::floor(driven / (every + max_step_m)));
   EXPECT_LE(static_cast<double>(builder_->local_clouds()), std::floor(driven / every) + 1);
@@ -118,8 +121,8 @@ void Checks::SegmentsEveryMapEveryMetresAndAtTheEnd() {
   const MapBuilderTimings& t = builder_->timings();
   EXPECT_GT(t.segment_ms, 0.0);
   EXPECT_GT(t.describe_ms, 0.0);
-  EXPECT_NEAR(t.total_ms(), t.accumulate_ms + t.crop_ms + t.voxel_ms + t.ground_ms + t.segment_ms + t.describe_ms +
-                                t.merge_ms, 1e-9);
+  EXPECT_NEAR(t.total_ms(),
+              t.accumulate_ms + t.crop_ms + t.voxel_ms + t.ground_ms + t.segment_ms + t.describe_ms + t.merge_ms, 1e-9);
 }
 
 void Checks::MapHoldsMostTreesPolesAndCarsNearTheRoute() {
@@ -157,7 +160,8 @@ void Checks::DuplicateViewsAreMergedIntoOneSegmentPerObject() {
     for (size_t a = 0; a < views.size(); ++a)
       for (size_t b = a + 1; b < views.size(); ++b)
         EXPECT_GE((views[a]->centroid - views[b]->centroid).norm(), d)
-            << "instance " << instance << " (" << kind_of(instance) << ") has two segments within the duplicate distance";
+            << "instance " << instance << " (" << kind_of(instance)
+            << ") has two segments within the duplicate distance";
   std::set<uint64_t> ids;
   for (const Segment& s : segments) ids.insert(s.id);
   EXPECT_EQ(ids.size(), segments.size()) << "segment ids are unique";

@@ -112,7 +112,7 @@ TEST(PoseGraph, AWrongLoopIsDownWeightedAndDoesNotBendTheGraph) {
   const PoseGraphConfig c;
   PoseGraph g = graph_with_true_loops(odom, truth, c);
   const OptimizationResult clean = optimize(g, c);
-  const size_t q = 450, m = 442;  // 8 m apart along the second lap's long side
+  const size_t q = 450, m = 442;          // 8 m apart along the second lap's long side
   const Pose3d off = pose(0, 3.0, 0, 0);  // the measurement says 3 m to the side
   g.loops.push_back(loop_edge(q, m, truth[q].inverse() * truth[m] * off, 0.9, c));
   const OptimizationResult r = optimize(g, c);
@@ -219,7 +219,8 @@ TEST(PoseGraph, GravityPriorKeepsTheTrajectoryLevel) {
   PoseGraphConfig level;
   level.gravity_sigma_deg = 0.1;
   const double without = vertical_rmse({}), with = vertical_rmse(level);
-  std::printf("[pose graph] climb drift: vertical RMSE %.3f m without the gravity prior, %.3f m with it\n", without, with);
+  std::printf("[pose graph] climb drift: vertical RMSE %.3f m without the gravity prior, %.3f m with it\n", without,
+              with);
   EXPECT_LT(with, 0.5 * without);
 }
 

@@ -2,8 +2,8 @@
 // step where the odometry's is 3 % long, and refuses a scan of another place; in the pose
 // graph, loops alone cannot undo an odometry's scale error (a scaled closed loop still
 // closes) while scan edges do, and wrong scan edges are down-weighted.
-#include "segmatch/posegraph/pose_graph.h"
 #include "segmatch/posegraph/scan_edges.h"
+#include "segmatch/posegraph/pose_graph.h"
 #include "segmatch/sim/keyframes.h"
 #include "segmatch/sim/lidar.h"
 #include "segmatch/sim/raycaster.h"
@@ -30,7 +30,8 @@ Scene street() {
     const float x = 14.f * float(k);
     s.push_back(Primitive::box({x, 14.f + float(k % 3), 5.f}, {5.f + float((k + 7) % 3), 3.f, 5.f + float(k % 2)},
                                0.1f * float(k % 2), 50, 0.5f));
-    s.push_back(Primitive::box({x + 5.f, -15.f, 4.f}, {4.f, 2.5f + float((k + 7) % 2), 4.f}, -0.05f * float(k % 3), 50, 0.5f));
+    s.push_back(
+        Primitive::box({x + 5.f, -15.f, 4.f}, {4.f, 2.5f + float((k + 7) % 2), 4.f}, -0.05f * float(k % 3), 50, 0.5f));
     s.push_back(Primitive::cylinder({x + 7.f, 6.f, 0.f}, 0.15f, 6.f, 80, 0.4f));
   }
   return s;
@@ -111,7 +112,8 @@ struct ScaleCase {
       graph.loops.push_back(loop_edge(q, q - lap, truth[q].inverse() * truth[q - lap], 0.9, config));
   }
   void add_true_scan_edges() {
-    for (size_t i = 1; i < truth.size(); ++i) graph.scans.push_back(scan_edge(i - 1, truth[i - 1].inverse() * truth[i], config));
+    for (size_t i = 1; i < truth.size(); ++i)
+      graph.scans.push_back(scan_edge(i - 1, truth[i - 1].inverse() * truth[i], config));
   }
 };
 
@@ -132,7 +134,8 @@ TEST(PoseGraph, ScanEdgesUndoAScaleErrorThatLoopsCannotSee) {
 TEST(PoseGraph, WrongScanEdgesAreDownWeighted) {
   ScaleCase c;
   c.add_true_scan_edges();
-  for (size_t i : {50u, 170u, 333u, 420u, 600u}) c.graph.scans[i].T_from_to.translation().y() += 1.0;  // an ICP gone wrong
+  for (size_t i : {50u, 170u, 333u, 420u, 600u})
+    c.graph.scans[i].T_from_to.translation().y() += 1.0;  // an ICP gone wrong
   const OptimizationResult r = optimize(c.graph, c.config);
   const double rmse = trajectory_error(r.T_world_node, c.truth).rmse_m;
   std::printf("[scan edges] 5 wrong scan edges: ATE %.3f m, %zu down-weighted\n", rmse, r.scans_downweighted);

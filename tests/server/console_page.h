@@ -42,15 +42,17 @@ struct PageRun {
 // --run-all-compositor-stages-before-draw a --screenshot run hung 6 times in 10 here (virtual
 // time waiting on a frame that is never drawn); with it, 0 in 20. A run not finished in 25 s
 // (they take 3-10 s) is still killed and tried again, up to three times.
-inline PageRun open_page(const std::string& binary, const std::string& url, const std::string& folder, const std::string& png) {
+inline PageRun open_page(const std::string& binary, const std::string& url, const std::string& folder,
+                         const std::string& png) {
   static int runs = 0;
   test::CommandResult r;
   std::string cmd;
   for (int attempt = 0; attempt < 3; ++attempt) {
-    cmd = "timeout -k 5 25 " + binary + " --headless --disable-gpu --no-sandbox --hide-scrollbars --no-first-run "
+    cmd = "timeout -k 5 25 " + binary +
+          " --headless --disable-gpu --no-sandbox --hide-scrollbars --no-first-run "
           "--disable-extensions --force-device-scale-factor=1 --window-size=1200,800 --virtual-time-budget=4000 "
-          "--run-all-compositor-stages-before-draw --user-data-dir=" + folder + "/profile-" + std::to_string(++runs) +
-          " --dump-dom --screenshot=" + png + " '" + url + "'";
+          "--run-all-compositor-stages-before-draw --user-data-dir=" +
+          folder + "/profile-" + std::to_string(++runs) + " --dump-dom --screenshot=" + png + " '" + url + "'";
     r = test::run_command("(" + cmd + " > " + folder + "/chromium.out 2> " + folder + "/chromium.err)");
     if (r.code == 0) break;
   }
@@ -98,7 +100,8 @@ inline View view_of(const std::string& dom, double width, double height) {
   const std::string scale = attribute(dom, "map", "data-scale");
   EXPECT_FALSE(scale.empty()) << dom.substr(0, 4000);
   if (scale.empty()) return {};
-  return {std::stod(attribute(dom, "map", "data-cx")), std::stod(attribute(dom, "map", "data-cy")), std::stod(scale), width, height};
+  return {std::stod(attribute(dom, "map", "data-cx")), std::stod(attribute(dom, "map", "data-cy")), std::stod(scale),
+          width, height};
 }
 
 // Pixels within `radius` of (x, y) whose colour passes `is`.
@@ -208,7 +211,8 @@ inline void check_trajectory(const cv::Mat& shot, const View& v, const nlohmann:
   size_t grey = 0, checked = 0;
   double to_next = 0;  // px along the line to the next sample
   for (size_t i = 1; i < trajectory.size(); ++i) {
-    const cv::Point2d a = v.px(trajectory[i - 1][0], trajectory[i - 1][1]), b = v.px(trajectory[i][0], trajectory[i][1]);
+    const cv::Point2d a = v.px(trajectory[i - 1][0], trajectory[i - 1][1]),
+                      b = v.px(trajectory[i][0], trajectory[i][1]);
     const double length = cv::norm(b - a);
     for (; to_next <= length; to_next += 5) {
       const cv::Point2d p = a + (b - a) * (to_next / std::max(length, 1e-9));
@@ -244,12 +248,15 @@ inline void check_ellipse(const cv::Mat& shot, const View& v, const DrawnAnswer&
       const cv::Point2d p = v.px(answer.x() + f * d.x(), answer.y() + f * d.y());
       if (!v.shown(p, 3) || cv::norm(p - centre) < 20) continue;
       const bool green = pixels_near(shot, p.x, p.y, f == 1.0 ? 2 : 1, localized_green) > 0;
-      if (f == 1.0) ++on_checked, on += green;
-      else ++off_checked, off += green;
+      if (f == 1.0)
+        ++on_checked, on += green;
+      else
+        ++off_checked, off += green;
     }
   }
-  std::printf("[console] ellipse (semi-axes %.0f and %.0f px): %zu of %zu points on it green, %zu of %zu inside and outside\n",
-              major.norm() * v.scale, minor.norm() * v.scale, on, on_checked, off, off_checked);
+  std::printf(
+      "[console] ellipse (semi-axes %.0f and %.0f px): %zu of %zu points on it green, %zu of %zu inside and outside\n",
+      major.norm() * v.scale, minor.norm() * v.scale, on, on_checked, off, off_checked);
   EXPECT_GE(on_checked, 30u) << "the ellipse is too small or out of view to check";
   EXPECT_GE(on, on_checked * 90 / 100) << on << " of " << on_checked << " points of the ellipse drawn green";
   EXPECT_LE(off, off_checked / 10) << off << " of " << off_checked << " points inside and outside the ellipse green";

@@ -79,7 +79,8 @@ std::vector<Eigen::Vector3d> replay_tiny(const RunningServer& s) {
   for (size_t i = 0; i < 3; ++i) {
     const Query& q = test_world().queries()[i];
     const api::LocalizeReply r = vehicle.localize(q.request);
-    if (r.status == api::LocalizeStatus::kLocalized) localized_at.push_back(r.T_map_local * q.request.sensor_position_local);
+    if (r.status == api::LocalizeStatus::kLocalized)
+      localized_at.push_back(r.T_map_local * q.request.sensor_position_local);
   }
   return localized_at;
 }
@@ -98,19 +99,22 @@ void replay_demo(const RunningServer& s, const std::string& demo, const std::str
   const std::string common = "'" + eval + "' localize --map '" + demo + "/demo-map.sqlite' --sim '" + demo +
                              "/world' --server 127.0.0.1:" + std::to_string(s.server->port()) + " --token-file '" +
                              token_file + "' --quiet";
-  const test::CommandResult r = test::run_command(
-      "(" + common + " --every-m 5 --last 400 > '" + folder + "/global.log' 2>&1 & a=$!; " + common +
-      " --every-m 4 --track --first 400 --last 720 > '" + folder + "/tracking.log' 2>&1 & b=$!; "
-      "wait $a; ra=$?; wait $b; rb=$?; exit $((ra | rb)))");
-  ASSERT_EQ(r.code, 0) << r.output << test::run_command("tail -5 '" + folder + "/global.log' '" + folder + "/tracking.log'").output;
+  const test::CommandResult r =
+      test::run_command("(" + common + " --every-m 5 --last 400 > '" + folder + "/global.log' 2>&1 & a=$!; " + common +
+                        " --every-m 4 --track --first 400 --last 720 > '" + folder +
+                        "/tracking.log' 2>&1 & b=$!; "
+                        "wait $a; ra=$?; wait $b; rb=$?; exit $((ra | rb)))");
+  ASSERT_EQ(r.code, 0) << r.output
+                       << test::run_command("tail -5 '" + folder + "/global.log' '" + folder + "/tracking.log'").output;
 }
 
 // A refusal at its prior: the corner of the map's bounds farthest from `from`.
 std::pair<Eigen::Vector3d, api::LocalizeReply> refuse_far_from(const RunningServer& s, const server::LoadedMap& map,
                                                                const Eigen::Vector3d& from) {
   Eigen::Vector3d prior = map.extent_min;
-  for (const Eigen::Vector3d& corner : {map.extent_min, map.extent_max, Eigen::Vector3d(map.extent_min.x(), map.extent_max.y(), 0),
-                                       Eigen::Vector3d(map.extent_max.x(), map.extent_min.y(), 0)})
+  for (const Eigen::Vector3d& corner :
+       {map.extent_min, map.extent_max, Eigen::Vector3d(map.extent_min.x(), map.extent_max.y(), 0),
+        Eigen::Vector3d(map.extent_max.x(), map.extent_min.y(), 0)})
     if ((corner - from).head<2>().norm() > (prior - from).head<2>().norm()) prior = corner;
   prior.z() = 0;
   api::LocalizeRequest refuse;
@@ -140,7 +144,8 @@ json all_answers(uint16_t port) {
 }
 
 size_t localized_in(const json& answers) {
-  return static_cast<size_t>(std::count_if(answers.begin(), answers.end(), [](const json& a) { return a["status"] == "localized"; }));
+  return static_cast<size_t>(
+      std::count_if(answers.begin(), answers.end(), [](const json& a) { return a["status"] == "localized"; }));
 }
 
 // The statistics agree with the server's counters, with Prometheus' and with the answers.
@@ -153,7 +158,8 @@ void check_statistics(uint16_t port, const server::Server& server, const server:
   EXPECT_EQ(stats["localization"]["by_type_status"]["LOCALIZE/localized"], localized);
   const std::string prom = metrics.text();
   EXPECT_NE(prom.find("segmatch_requests_total{status=\"localized\",type=\"LOCALIZE\"} " + std::to_string(localized)),
-            std::string::npos) << prom;
+            std::string::npos)
+      << prom;
   EXPECT_EQ(stats["localization"]["latency_ms"]["samples"], std::min<uint64_t>(counters.localize_requests, 1024));
 }
 
@@ -162,12 +168,14 @@ void check_statistics(uint16_t port, const server::Server& server, const server:
 void check_zoomed_ellipse(const std::string& browser, const std::string& url, const std::string& folder,
                           const std::vector<DrawnAnswer>& drawn) {
   const auto with_ellipse = std::find_if(drawn.rbegin(), drawn.rend(), [](const DrawnAnswer& a) {
-    return a.newest && a.localized() && !a.answer["pose"]["from_prior"].get<bool>() && a.answer.contains("covariance_xy");
+    return a.newest && a.localized() && !a.answer["pose"]["from_prior"].get<bool>() &&
+           a.answer.contains("covariance_xy");
   });
   ASSERT_NE(with_ellipse, drawn.rend()) << "no newest answer of a client carries a covariance";
   const json& c = with_ellipse->answer["covariance_xy"];
   const double mean = (c[0].get<double>() + c[2].get<double>()) / 2;
-  const double major_sigma = std::sqrt(mean + std::hypot((c[0].get<double>() - c[2].get<double>()) / 2, c[1].get<double>()));
+  const double major_sigma =
+      std::sqrt(mean + std::hypot((c[0].get<double>() - c[2].get<double>()) / 2, c[1].get<double>()));
   const double half = 652.0 * 2 * major_sigma / 150 / 2;
   std::ostringstream box;
   box << std::setprecision(12) << with_ellipse->x() - half << ',' << with_ellipse->y() - half << ','
@@ -183,7 +191,8 @@ void check_zoomed_ellipse(const std::string& browser, const std::string& url, co
 
 TEST(ServerConsole, PageDrawsTheMapAndTheFleetAndShowsRefusals) {
   const std::string browser = chromium_binary();
-  if (browser.empty()) GTEST_SKIP() << "chromium is not installed (scripts/install-deps.sh installs it): the page was not opened";
+  if (browser.empty())
+    GTEST_SKIP() << "chromium is not installed (scripts/install-deps.sh installs it): the page was not opened";
   const char* demo = std::getenv("SEGMATCH_CONSOLE_DEMO");
   const Scratch folder(demo != nullptr);
   auto metrics = std::make_shared<server::Metrics>();
@@ -201,9 +210,11 @@ TEST(ServerConsole, PageDrawsTheMapAndTheFleetAndShowsRefusals) {
   if (demo) replay_demo(s, demo, folder.path);
   if (::testing::Test::HasFatalFailure()) return;
   json answers = all_answers(page.port());
-  const auto first = std::find_if(answers.begin(), answers.end(), [](const json& a) { return a["status"] == "localized"; });
+  const auto first =
+      std::find_if(answers.begin(), answers.end(), [](const json& a) { return a["status"] == "localized"; });
   ASSERT_NE(first, answers.end()) << "nothing was localized";
-  const auto [prior_at, refused] = refuse_far_from(s, map, {(*first)["pose"]["x"].get<double>(), (*first)["pose"]["y"].get<double>(), 0.0});
+  const auto [prior_at, refused] =
+      refuse_far_from(s, map, {(*first)["pose"]["x"].get<double>(), (*first)["pose"]["y"].get<double>(), 0.0});
   ASSERT_NE(refused.status, api::LocalizeStatus::kLocalized);
   answers = all_answers(page.port());
   const std::string refusal_code = answers.back()["refusal"];

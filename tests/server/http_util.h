@@ -29,7 +29,8 @@ class RawHttp {
     a.sin_family = AF_INET;
     a.sin_port = htons(port);
     a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    if (fd_ < 0 || ::connect(fd_, reinterpret_cast<sockaddr*>(&a), sizeof(a)) != 0) throw std::runtime_error("cannot connect");
+    if (fd_ < 0 || ::connect(fd_, reinterpret_cast<sockaddr*>(&a), sizeof(a)) != 0)
+      throw std::runtime_error("cannot connect");
   }
   ~RawHttp() { ::close(fd_); }
   RawHttp(const RawHttp&) = delete;
@@ -71,7 +72,8 @@ class RawHttp {
 };
 
 // One GET on its own connection ("Connection: close"); `headers` end with "\r\n" each.
-inline HttpReply http_get(uint16_t port, const std::string& target, const std::string& headers = "", double wait_s = 10.0) {
+inline HttpReply http_get(uint16_t port, const std::string& target, const std::string& headers = "",
+                          double wait_s = 10.0) {
   RawHttp c(port);
   c.send("GET " + target + " HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n" + headers + "\r\n");
   return c.read(wait_s);

@@ -43,7 +43,8 @@ TEST(ServerLocalization, RevisitQueriesLocalizeAccuratelyAndNeverFalsely) {
     const double err_deg = angle_error_deg(T_map_sensor, q.T_world_sensor);
     accurate += err_m <= 0.2 && err_deg <= 1.0;
     wrong += err_m > 1.0 || err_deg > 3.0;
-    std::printf("[server]   frame %4zu: error %.3f m %.2f deg, confidence %.2f\n", q.frame, err_m, err_deg, r.confidence);
+    std::printf("[server]   frame %4zu: error %.3f m %.2f deg, confidence %.2f\n", q.frame, err_m, err_deg,
+                r.confidence);
   }
   std::printf("[server] revisit: %zu queries, %zu localized, %zu within 0.2 m / 1 deg, %zu false\n", w.queries().size(),
               localized, accurate, wrong);

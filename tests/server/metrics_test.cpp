@@ -65,8 +65,8 @@ TEST(ServerRobustness, MetricsCountTheFramesSent) {
   EXPECT_EQ(sample(text, "segmatch_request_duration_seconds_count"), 2.0) << text;
   EXPECT_EQ(sample(text, "segmatch_in_flight_requests"), 0.0) << text;
   EXPECT_EQ(sample(text, "segmatch_connections"), 0.0) << text;
-  const std::string map_info = R"(segmatch_map_info{name="tiny-3",schema=")" + std::to_string(storage::kSchemaVersion) + R"(",segments=")" +
-                               std::to_string(s.server->map()->segment_count()) + "\"}";
+  const std::string map_info = R"(segmatch_map_info{name="tiny-3",schema=")" + std::to_string(storage::kSchemaVersion) +
+                               R"(",segments=")" + std::to_string(s.server->map()->segment_count()) + "\"}";
   EXPECT_EQ(sample(text, map_info), 1.0) << text;
   EXPECT_GT(sample(text, "segmatch_uptime_seconds"), 0.0) << text;
 }

@@ -43,7 +43,8 @@ api::LocalizeRequest busy_work() {
       for (float z = 0.f; z < 3.f; z += 0.04f)
         for (int k = 0; k < 16; ++k) {
           const float a = 2.f * static_cast<float>(M_PI) * static_cast<float>(k) / 16.f;
-          r.points.push_back(Point{-30.f + 3.f * i + 0.15f * std::cos(a), -30.f + 3.f * j + 0.15f * std::sin(a), z, 0.f});
+          r.points.push_back(
+              Point{-30.f + 3.f * i + 0.15f * std::cos(a), -30.f + 3.f * j + 0.15f * std::sin(a), z, 0.f});
         }
   return r;
 }
@@ -111,8 +112,8 @@ TEST(ServerRobustness, SighupReloadsTheMapFileOrKeepsTheOldOne) {
   std::filesystem::copy_file(test_world().map_path, map, std::filesystem::copy_options::overwrite_existing);
   const std::string binary = std::string(SEGMATCH_BIN_DIR) + "/segmatch-server";
   ASSERT_TRUE(std::filesystem::exists(binary)) << binary << " is not built";
-  const std::string command = binary + " --map " + map +
-                              " --port 0 --stats-interval-s 0 --log-requests off > " + dir + "/out 2> " + dir + "/log & echo $! > " + dir + "/pid";
+  const std::string command = binary + " --map " + map + " --port 0 --stats-interval-s 0 --log-requests off > " + dir +
+                              "/out 2> " + dir + "/log & echo $! > " + dir + "/pid";
   ASSERT_EQ(std::system(command.c_str()), 0);
   ASSERT_TRUE(wait_for_text(dir + "/out", "\n")) << read_file(dir + "/log");
   const pid_t pid = static_cast<pid_t>(std::stol(read_file(dir + "/pid")));
@@ -132,7 +133,8 @@ TEST(ServerRobustness, SighupReloadsTheMapFileOrKeepsTheOldOne) {
   ASSERT_EQ(::kill(pid, SIGHUP), 0);
   ASSERT_TRUE(wait_for_text(dir + "/log", "reload failed, still serving map 'reloaded': ")) << read_file(dir + "/log");
   EXPECT_EQ(client.info().map_name, "reloaded");
-  EXPECT_EQ(client.localize(test_world().queries().front().request).request_id, test_world().queries().front().request.request_id);
+  EXPECT_EQ(client.localize(test_world().queries().front().request).request_id,
+            test_world().queries().front().request.request_id);
 
   ASSERT_EQ(::kill(pid, SIGTERM), 0);
   EXPECT_TRUE(wait_for_text(dir + "/log", "stopped: ")) << read_file(dir + "/log");
@@ -148,7 +150,8 @@ TEST(ServerRobustness, SighupReloadsTheMapFileOrKeepsTheOldOne) {
 }
 
 TEST(ServerLog, LinesStartWithAnIsoUtcTimestampAndALevel) {
-  const std::chrono::system_clock::time_point when{std::chrono::milliseconds(946684799999)};  // the last millisecond of 1999
+  const std::chrono::system_clock::time_point when{
+      std::chrono::milliseconds(946684799999)};  // the last millisecond of 1999
   EXPECT_EQ(server::format_log_line(server::LogLevel::kInfo, "ready", when), "1999-12-31T23:59:59.999Z INFO ready");
   EXPECT_EQ(server::format_log_line(server::LogLevel::kWarning, "x", when), "1999-12-31T23:59:59.999Z WARN x");
   EXPECT_EQ(server::format_log_line(server::LogLevel::kError, "y", std::chrono::system_clock::time_point{}),

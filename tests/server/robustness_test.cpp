@@ -32,9 +32,11 @@ std::optional<api::Frame> read_raw(const api::Socket& sock, double timeout_s = 5
   const auto deadline = api::deadline_after(timeout_s);
   if (api::read_exact(sock.fd(), header, sizeof(header), deadline) != api::IoResult::kOk) return std::nullopt;
   api::Frame f;
-  if (api::decode_header(header, sizeof(header), api::Limits{}, f.header) != api::DecodeStatus::kOk) return std::nullopt;
+  if (api::decode_header(header, sizeof(header), api::Limits{}, f.header) != api::DecodeStatus::kOk)
+    return std::nullopt;
   f.payload.resize(f.header.payload_bytes);
-  if (api::read_exact(sock.fd(), f.payload.data(), f.payload.size(), deadline) != api::IoResult::kOk) return std::nullopt;
+  if (api::read_exact(sock.fd(), f.payload.data(), f.payload.size(), deadline) != api::IoResult::kOk)
+    return std::nullopt;
   return f;
 }
 
@@ -90,7 +92,7 @@ TEST(ServerRobustness, StalledAndVanishingClientsDoNotDisturbOthers) {
   server::ServerConfig config;
   config.read_timeout_s = 1.0;
   RunningServer s(config);
-  api::Socket silent = raw_connection(s);     // connects, sends nothing
+  api::Socket silent = raw_connection(s);  // connects, sends nothing
   api::Socket half_header = raw_connection(s);
   send(half_header, std::vector<uint8_t>{'S', 'G', 'M'});
   {
@@ -111,7 +113,8 @@ TEST(ServerRobustness, StalledAndVanishingClientsDoNotDisturbOthers) {
   // while the checks above waited, so the server may rightly have dropped it).
   EXPECT_EQ(s.client().ping(99), 99u);
   const auto log = s.log_lines();
-  EXPECT_TRUE(std::any_of(log.begin(), log.end(), [](const std::string& l) { return l.find("frame cut off") != std::string::npos; }));
+  EXPECT_TRUE(std::any_of(log.begin(), log.end(),
+                          [](const std::string& l) { return l.find("frame cut off") != std::string::npos; }));
 }
 
 TEST(ServerRobustness, TokenIsRequiredWhenConfigured) {
@@ -219,7 +222,8 @@ TEST(ServerRobustness, DamagedPointRowsFailOnlyTheQueriesThatReadThem) {
   std::filesystem::copy_file(test_world().map_path, damaged, std::filesystem::copy_options::overwrite_existing);
   sqlite3* db = nullptr;
   ASSERT_EQ(sqlite3_open(damaged.c_str(), &db), SQLITE_OK);
-  ASSERT_EQ(sqlite3_exec(db, "UPDATE segment_points SET points = points || x'00'", nullptr, nullptr, nullptr), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(db, "UPDATE segment_points SET points = points || x'00'", nullptr, nullptr, nullptr),
+            SQLITE_OK);
   sqlite3_close(db);
 
   server::MapLoadOptions memory;

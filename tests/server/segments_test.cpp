@@ -82,7 +82,8 @@ TEST(ServerSegments, SegmentsOverTheWireGetTheCloudPathsStatusAndPose) {
                 api::to_string(b.status), sr.segments.size());
     if (b.status == api::LocalizeStatus::kLocalized) {
       const Pose3d T_map_sensor = b.T_map_local * q.T_local_sensor;
-      wrong += position_error_m(T_map_sensor, q.T_world_sensor) > 1.0 || angle_error_deg(T_map_sensor, q.T_world_sensor) > 3.0;
+      wrong += position_error_m(T_map_sensor, q.T_world_sensor) > 1.0 ||
+               angle_error_deg(T_map_sensor, q.T_world_sensor) > 3.0;
     }
     if (a.status != api::LocalizeStatus::kLocalized || b.status != api::LocalizeStatus::kLocalized) continue;
     ++both;
@@ -91,9 +92,11 @@ TEST(ServerSegments, SegmentsOverTheWireGetTheCloudPathsStatusAndPose) {
   }
   std::sort(cloud_bytes.begin(), cloud_bytes.end());
   std::sort(segment_bytes.begin(), segment_bytes.end());
-  const double cloud_median = cloud_bytes[cloud_bytes.size() / 2], segments_median = segment_bytes[segment_bytes.size() / 2];
-  std::printf("[segments] %zu queries: same status %zu, both localized %zu, false %zu; median request %.0f KB vs %.0f KB\n",
-              w.queries().size(), same_status, both, wrong, segments_median / 1024, cloud_median / 1024);
+  const double cloud_median = cloud_bytes[cloud_bytes.size() / 2],
+               segments_median = segment_bytes[segment_bytes.size() / 2];
+  std::printf(
+      "[segments] %zu queries: same status %zu, both localized %zu, false %zu; median request %.0f KB vs %.0f KB\n",
+      w.queries().size(), same_status, both, wrong, segments_median / 1024, cloud_median / 1024);
   ASSERT_GE(w.queries().size(), 8u);
   EXPECT_GE(same_status * 100, w.queries().size() * 98) << "the issue's floor: 98 % of queries";
   EXPECT_GE(both * 2, w.queries().size());
@@ -244,7 +247,8 @@ TEST(ServerSegments, ThinningKeepsEverySegmentAndAtMostTheBudget) {
 // test is the server's; core/surface_tracking_test.cpp checks the registration itself).
 TEST(ServerSegments, TrackingRequestsAnswerFromTheSurfaceLayerOrSayTrackingLost) {
   const TestWorld& w = test_world();
-  const std::string path = (std::filesystem::temp_directory_path() / ("segmatch-track-" + std::to_string(::getpid()) + ".sqlite")).string();
+  const std::string path =
+      (std::filesystem::temp_directory_path() / ("segmatch-track-" + std::to_string(::getpid()) + ".sqlite")).string();
   {
     const storage::MapReader reader = storage::MapReader::open(w.map_path);
     PointCloud layer;
@@ -287,7 +291,8 @@ TEST(ServerSegments, TrackingRequestsAnswerFromTheSurfaceLayerOrSayTrackingLost)
       ASSERT_TRUE(r.detail && r.detail->estimate);
       EXPECT_EQ(r.detail->estimate->method, static_cast<uint8_t>(api::ReplyMethod::kSurfaces));
       const Pose3d T_map_sensor = r.T_map_local * q.T_local_sensor;
-      wrong += position_error_m(T_map_sensor, q.T_world_sensor) > 0.3 || angle_error_deg(T_map_sensor, q.T_world_sensor) > 1.0;
+      wrong += position_error_m(T_map_sensor, q.T_world_sensor) > 0.3 ||
+               angle_error_deg(T_map_sensor, q.T_world_sensor) > 1.0;
     } else {
       ++lost;
       EXPECT_EQ(r.refusal, api::RefusalCode::kTrackingLost) << r.reason;
@@ -302,7 +307,8 @@ TEST(ServerSegments, TrackingRequestsAnswerFromTheSurfaceLayerOrSayTrackingLost)
     api::LocalizeSegmentsRequest wide = full, plain = full;
     wide.flags |= api::kSegmentsFlagTrack;
     wide.prior_radius_m = plain.prior_radius_m = 60.0;
-    const api::LocalizeReply a = server::localize_segments_request(*map, wide), b = server::localize_segments_request(*map, plain);
+    const api::LocalizeReply a = server::localize_segments_request(*map, wide),
+                             b = server::localize_segments_request(*map, plain);
     EXPECT_EQ(a.status, b.status) << q.frame;
     EXPECT_NE(a.refusal, api::RefusalCode::kTrackingLost) << q.frame;
     // LOCALIZE bit 6: the same tracking on the segments the server makes of the cloud, and the
@@ -315,7 +321,8 @@ TEST(ServerSegments, TrackingRequestsAnswerFromTheSurfaceLayerOrSayTrackingLost)
       ASSERT_TRUE(t.detail && t.detail->estimate);
       cloud_by_surfaces += t.detail->estimate->method == static_cast<uint8_t>(api::ReplyMethod::kSurfaces);
       const Pose3d T_map_sensor = t.T_map_local * q.T_local_sensor;
-      wrong += position_error_m(T_map_sensor, q.T_world_sensor) > 0.3 || angle_error_deg(T_map_sensor, q.T_world_sensor) > 1.0;
+      wrong += position_error_m(T_map_sensor, q.T_world_sensor) > 0.3 ||
+               angle_error_deg(T_map_sensor, q.T_world_sensor) > 1.0;
     }
     // The suite's map has no layer: TRACKING_LOST, by name; the vehicle library then sends the
     // full request and gets its answer.
@@ -338,8 +345,8 @@ TEST(ServerSegments, TrackingRequestsAnswerFromTheSurfaceLayerOrSayTrackingLost)
   }
   std::filesystem::remove(path);
   std::sort(bytes.begin(), bytes.end());
-  std::printf("[segments] tracking requests: %zu localized on the surface layer, %zu TRACKING_LOST, median %.0f KB\n", tracked, lost,
-              bytes[bytes.size() / 2] / 1024);
+  std::printf("[segments] tracking requests: %zu localized on the surface layer, %zu TRACKING_LOST, median %.0f KB\n",
+              tracked, lost, bytes[bytes.size() / 2] / 1024);
   // The cloud path checks the support with every segment of the cloud, the tracking request only
   // with those within track.window_m: here 9 and 6 of 9.
   EXPECT_GE(cloud_by_surfaces, tracked);

@@ -12,8 +12,8 @@
 #include <unistd.h>
 
 #include <cmath>
-#include <cstdlib>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <memory>
 #include <mutex>
@@ -53,14 +53,16 @@ inline const TestWorld& test_world() {
   static std::unique_ptr<TestWorld> world;
   std::call_once(once, [] {
     world = std::make_unique<TestWorld>();
-    world->folder = (std::filesystem::temp_directory_path() / ("segmatch_server_test_" + std::to_string(::getpid()))).string();
+    world->folder =
+        (std::filesystem::temp_directory_path() / ("segmatch_server_test_" + std::to_string(::getpid()))).string();
     std::filesystem::create_directories(world->folder);
     const std::filesystem::path tool = test::fixture_root().parent_path() / "make_server_world";
-    const std::filesystem::path cached = test::cached_fixture("server-world", {tool}, [&](const std::filesystem::path& dir) {
-      const test::CommandResult r = test::run_command(tool.string() + " " + dir.string());
-      std::printf("%s", r.output.c_str());
-      if (r.code != 0) throw std::runtime_error("make_server_world failed: " + r.output);
-    });
+    const std::filesystem::path cached =
+        test::cached_fixture("server-world", {tool}, [&](const std::filesystem::path& dir) {
+          const test::CommandResult r = test::run_command(tool.string() + " " + dir.string());
+          std::printf("%s", r.output.c_str());
+          if (r.code != 0) throw std::runtime_error("make_server_world failed: " + r.output);
+        });
     world->map_path = (cached / "tiny.sqlite").string();
     world->config = fast_config();
     world->queries_path = (cached / "queries.bin").string();

@@ -66,20 +66,20 @@ inline std::vector<Query> revisit_queries(const sim::City& city, const LocalClou
   std::vector<Query> out;
   sim::for_each_local_cloud(caster, sim::hdl64e(), city.second, local_cloud, schedule,
                             [&](const sim::SimulatedLocalCloud& lc) {
-    Query q;
-    q.frame = lc.frame;
-    q.T_world_sensor = lc.T_world_sensor;
-    q.T_local_sensor = T_local_world * lc.T_world_sensor;
-    q.request.request_id = lc.frame;
-    q.request.sensor_position_local = q.T_local_sensor.translation();
-    q.request.sensor_orientation_local = Eigen::Quaterniond(q.T_local_sensor.linear());
-    q.request.points = lc.cloud;
-    for (Point& p : q.request.points) {
-      const Eigen::Vector3f v = T_local_world.cast<float>() * p.xyz();
-      p.x = v.x(), p.y = v.y(), p.z = v.z();
-    }
-    out.push_back(std::move(q));
-  });
+                              Query q;
+                              q.frame = lc.frame;
+                              q.T_world_sensor = lc.T_world_sensor;
+                              q.T_local_sensor = T_local_world * lc.T_world_sensor;
+                              q.request.request_id = lc.frame;
+                              q.request.sensor_position_local = q.T_local_sensor.translation();
+                              q.request.sensor_orientation_local = Eigen::Quaterniond(q.T_local_sensor.linear());
+                              q.request.points = lc.cloud;
+                              for (Point& p : q.request.points) {
+                                const Eigen::Vector3f v = T_local_world.cast<float>() * p.xyz();
+                                p.x = v.x(), p.y = v.y(), p.z = v.z();
+                              }
+                              out.push_back(std::move(q));
+                            });
   return out;
 }
 
@@ -104,7 +104,9 @@ inline void write_queries(const std::string& path, const std::vector<Query>& que
 inline std::vector<Query> read_queries(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw std::runtime_error("cannot read " + path);
-  auto get = [&](void* p, size_t n) { return static_cast<bool>(in.read(static_cast<char*>(p), static_cast<std::streamsize>(n))); };
+  auto get = [&](void* p, size_t n) {
+    return static_cast<bool>(in.read(static_cast<char*>(p), static_cast<std::streamsize>(n)));
+  };
   std::vector<Query> out;
   for (uint64_t frame = 0; get(&frame, sizeof frame);) {
     Query q;

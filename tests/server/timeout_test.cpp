@@ -64,7 +64,8 @@ TEST(ServerRobustness, ARequestPastItsTimeoutIsStoppedAndFreesItsWorker) {
   } catch (const api::ClientError& e) {
     EXPECT_EQ(e.kind, api::ClientError::Kind::kServer) << e.what();
     EXPECT_EQ(e.server_code, api::ErrorCode::kRequestTimeout) << e.what();
-    EXPECT_NE(std::string(e.what()).find("request timed out: the query's deadline passed"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("request timed out: the query's deadline passed"), std::string::npos)
+        << e.what();
   }
   std::printf("pole forest stopped after %.2f s (client's encoding and sending included)\n", seconds_since(t0));
   for (const std::string& line : s.log_lines()) std::printf("  server: %s\n", line.c_str());

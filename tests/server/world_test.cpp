@@ -34,9 +34,11 @@ TEST(ServerWorld, StoredQueriesReadBackBitForBit) {
     EXPECT_TRUE(a.T_world_sensor.matrix() == b.T_world_sensor.matrix());
     EXPECT_TRUE(a.request.sensor_position_local == b.request.sensor_position_local);
     // The codec normalises the quaternion on both ends: at most an ulp or two apart.
-    EXPECT_LT((a.request.sensor_orientation_local.coeffs() - b.request.sensor_orientation_local.coeffs()).norm(), 1e-15);
+    EXPECT_LT((a.request.sensor_orientation_local.coeffs() - b.request.sensor_orientation_local.coeffs()).norm(),
+              1e-15);
     ASSERT_EQ(a.request.points.size(), b.request.points.size());
-    EXPECT_EQ(0, std::memcmp(a.request.points.data(), b.request.points.data(), a.request.points.size() * sizeof(Point)));
+    EXPECT_EQ(0,
+              std::memcmp(a.request.points.data(), b.request.points.data(), a.request.points.size() * sizeof(Point)));
   }
 }
 

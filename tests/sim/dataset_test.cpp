@@ -24,8 +24,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
-using segmatch::sim_test::TempDir;
 using segmatch::sim_test::read_all;
+using segmatch::sim_test::TempDir;
 
 std::map<std::string, std::string> all_files(const fs::path& root) {
   std::map<std::string, std::string> out;
@@ -49,7 +49,8 @@ TEST(Dataset, WritesKittiLayoutThatTheSequenceReaderLoads) {
   TempDir dir("segmatch_sim_test_");
   const DatasetConfig c = small(21, 300, 160);
   size_t calls = 0;
-  const DatasetSummary s = generate_dataset(c, dir.path().string(), [&](const std::string&, size_t, size_t) { ++calls; });
+  const DatasetSummary s =
+      generate_dataset(c, dir.path().string(), [&](const std::string&, size_t, size_t) { ++calls; });
   EXPECT_GT(calls, 2u) << "progress is reported";
   for (const char* f : {"world.png", "scan.png", "dataset.json", "ground_truth/lidar_poses_00.txt",
                         "ground_truth/lidar_poses_01.txt", "ground_truth/revisits_01_00.txt",
@@ -144,6 +145,7 @@ TEST(SimCli, RefusesToOverwriteWithoutForceAndRejectsBadArguments) {
   EXPECT_FALSE(fs::exists(dir.path() / "sequences"));
   EXPECT_NE(run(bin + " --preset nowhere --out " + out + "/y"), 0);
   EXPECT_NE(run(bin + " --sensor hdl128 --out " + out + "/z"), 0);
-  EXPECT_EQ(run(bin + " --preset tiny --sensor vlp16 --length-00-m 60 --length-01-m 60 --no-images --out " + out + "/ok"), 0);
+  EXPECT_EQ(
+      run(bin + " --preset tiny --sensor vlp16 --length-00-m 60 --length-01-m 60 --no-images --out " + out + "/ok"), 0);
   EXPECT_TRUE(fs::exists(dir.path() / "ok/sequences/01/velodyne/000000.bin"));
 }

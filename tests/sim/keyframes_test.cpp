@@ -1,8 +1,8 @@
 // Tests of the SLAM-style keyframe export: the folder io::Sequence reads, the spacing of
 // keyframes and points, the frames of poses and points, the odometry drift, and the export
 // from generate_dataset and segmatch-sim.
-#include "segmatch/sim/dataset.h"
 #include "segmatch/sim/keyframes.h"
+#include "segmatch/sim/dataset.h"
 
 #include "segmatch/core/preprocess/preprocess.h"
 #include "segmatch/io/pose_io.h"
@@ -26,8 +26,8 @@ namespace fs = std::filesystem;
 
 constexpr uint32_t kGround = 40;
 
-using segmatch::sim_test::TempDir;
 using segmatch::sim_test::read_all;
+using segmatch::sim_test::TempDir;
 
 // A 40 m street: ground, two facades 6 m either side and a pole every 4 m.
 Scene street() {
@@ -116,7 +116,8 @@ TEST(Keyframes, SpacedByEveryMetresAndFirstHasAllItsFrames) {
   ASSERT_FALSE(e.summary.frames.empty());
   EXPECT_EQ(e.summary.frames[0], 4u) << "the first keyframe integrates frames 0..4";
   for (size_t k = 1; k < e.summary.frames.size(); ++k) {
-    const double d = (e.summary.T_world_keyframe[k].translation() - e.summary.T_world_keyframe[k - 1].translation()).norm();
+    const double d =
+        (e.summary.T_world_keyframe[k].translation() - e.summary.T_world_keyframe[k - 1].translation()).norm();
     EXPECT_GE(d, 3.0) << k;
     EXPECT_LT(d, 3.0 + 0.16) << k << ": within one 0.15 m step of the threshold";
   }
@@ -143,7 +144,8 @@ TEST(Keyframes, PointsAreOnePerVoxelAtAboutTheLeafSpacingInTheSensorFrame) {
     // the ground shares with a pole's foot sit a little higher.
     std::vector<double> dz;
     for (size_t i = 0; i < kf.points.size(); ++i)
-      if (kf.labels[i] == kGround) dz.push_back(std::fabs((seq.poses()[k] * kf.points[i].xyz().cast<double>()).z() + 1.0));
+      if (kf.labels[i] == kGround)
+        dz.push_back(std::fabs((seq.poses()[k] * kf.points[i].xyz().cast<double>()).z() + 1.0));
     ASSERT_GT(dz.size(), kf.points.size() / 4);
     std::sort(dz.begin(), dz.end());
     EXPECT_LT(dz[dz.size() / 2], 0.02) << "keyframe " << k;
@@ -272,11 +274,13 @@ TEST(SimCli, LivoxKeyframesFromTheCommandLine) {
   const std::string bin = std::string(SEGMATCH_BIN_DIR) + "/segmatch-sim";
   if (!fs::exists(bin)) GTEST_SKIP() << bin << " not built";
   TempDir dir("segmatch_keyframes_test_");
-  const auto r = test::run_command(bin + " --preset tiny --sensor livox-avia --speed-mps 1.5 --length-00-m 50 "
-                                         "--length-01-m 50 --keyframes-every-m 2 --keyframe-leaf-m 0.25 "
-                                         "--keyframe-frames 3 --odom-drift-pct 0 --odom-yaw-drift-deg-per-m 0 "
-                                         "--odom-heading-walk 0 --odom-pitch-walk 0 "
-                                         "--no-images --out " + dir.path().string());
+  const auto r = test::run_command(bin +
+                                   " --preset tiny --sensor livox-avia --speed-mps 1.5 --length-00-m 50 "
+                                   "--length-01-m 50 --keyframes-every-m 2 --keyframe-leaf-m 0.25 "
+                                   "--keyframe-frames 3 --odom-drift-pct 0 --odom-yaw-drift-deg-per-m 0 "
+                                   "--odom-heading-walk 0 --odom-pitch-walk 0 "
+                                   "--no-images --out " +
+                                   dir.path().string());
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_NE(r.output.find("keyframes:"), std::string::npos) << r.output;
   // The tiny world's routes are shorter than asked (39 and 23 m driven here).
@@ -286,7 +290,9 @@ TEST(SimCli, LivoxKeyframesFromTheCommandLine) {
       << "no drift asked for";
   // Walking at 1.5 m/s, 2 m take over 1.3 s (at the default 10 m/s: 0.2 s).
   EXPECT_GT(seq.times()[1] - seq.times()[0], 1.3);
-  EXPECT_NE(test::run_command(bin + " --sensor livox-avia --keyframes-every-m -1 --out " + (dir.path() / "x").string()).code, 0);
+  EXPECT_NE(
+      test::run_command(bin + " --sensor livox-avia --keyframes-every-m -1 --out " + (dir.path() / "x").string()).code,
+      0);
   EXPECT_FALSE(fs::exists(dir.path() / "x"));
 }
 

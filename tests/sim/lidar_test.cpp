@@ -38,9 +38,7 @@ double azimuth(const Point& p) {  // [0, 2 pi)
   return a < 0 ? a + 2 * kPi : a;
 }
 
-double elevation_deg(const Point& p) {
-  return std::atan2(p.z, std::hypot(p.x, p.y)) * 180.0 / kPi;
-}
+double elevation_deg(const Point& p) { return std::atan2(p.z, std::hypot(p.x, p.y)) * 180.0 / kPi; }
 
 bool same_bytes(const SimulatedScan& a, const SimulatedScan& b) {
   return a.points.size() == b.points.size() && a.labels == b.labels &&
@@ -334,8 +332,7 @@ TEST(LidarScan, RotatedAndTranslatedSensorSeesTheBoxAtTheMatchingAzimuth) {
   // Pitched as well (10 deg about the sensor y axis): sensor y is unchanged, and the points
   // mapped back to the world lie on the box's front face x = 29.5.
   Pose3d pitched = pose(20, -30, 1.5, kPi / 2);
-  pitched.linear() = pitched.linear() *
-                     Eigen::AngleAxisd(10 * kPi / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  pitched.linear() = pitched.linear() * Eigen::AngleAxisd(10 * kPi / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
   for (const Pose3d& T : {pose(20, -30, 1.5, kPi / 2), pitched}) {
     const SimulatedScan ps = simulate_scan(caster, m, T, 2);
     ASSERT_GT(ps.points.size(), 1000u);

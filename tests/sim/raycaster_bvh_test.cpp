@@ -23,14 +23,11 @@ Primitive random_primitive(Rng& rng, uint32_t label, float extent) {
   auto u = [&](double lo, double hi) { return static_cast<float>(rng.uniform(lo, hi)); };
   const float refl = u(0.0, 1.0);
   switch (rng.uniform_int(0, 4)) {
-    case 0:
-      return Primitive::box(c, {u(0.1, 3), u(0.1, 3), u(0.1, 3)}, u(-kPi, kPi), label, refl);
+    case 0: return Primitive::box(c, {u(0.1, 3), u(0.1, 3), u(0.1, 3)}, u(-kPi, kPi), label, refl);
     case 1:  // long thin box (wall, rail)
       return Primitive::box(c, {u(5, 30), u(0.05, 0.3), u(0.5, 4)}, u(-kPi, kPi), label, refl);
-    case 2:
-      return Primitive::cylinder(c, u(0.05, 1.5), u(0.5, 10), label, refl);
-    case 3:
-      return Primitive::ellipsoid(c, {u(0.2, 4), u(0.2, 4), u(0.2, 4)}, label, refl);
+    case 2: return Primitive::cylinder(c, u(0.05, 1.5), u(0.5, 10), label, refl);
+    case 3: return Primitive::ellipsoid(c, {u(0.2, 4), u(0.2, 4), u(0.2, 4)}, label, refl);
     default: {
       const Eigen::Vector3f e1(u(-5, 5), u(-5, 5), u(-2, 2)), e2(u(-5, 5), u(-5, 5), u(-2, 2));
       return Primitive::triangle(c, c + e1, c + e2, label, refl);
@@ -43,8 +40,7 @@ struct BruteForce {
   explicit BruteForce(const Scene& scene) {
     for (const Primitive& p : scene) singles.emplace_back(Scene{p});
   }
-  bool cast(const Eigen::Vector3f& o, const Eigen::Vector3f& d, float tmin, float tmax,
-            RayHit* out) const {
+  bool cast(const Eigen::Vector3f& o, const Eigen::Vector3f& d, float tmin, float tmax, RayHit* out) const {
     bool any = false;
     for (const RayCaster& c : singles) {
       RayHit h;
@@ -71,8 +67,11 @@ void compare_with_brute_force(const Scene& scene, uint64_t seed, int rays, float
                       static_cast<float>(rng.normal() * 0.5));
     if (i % 2 == 0) {  // aim at a primitive's reference point, jittered
       const Primitive& p = scene[rng.index(scene.size())];
-      d = p.a + Eigen::Vector3f(static_cast<float>(rng.normal()), static_cast<float>(rng.normal()),
-                                static_cast<float>(rng.normal())) * 0.5f - o;
+      d = p.a +
+          Eigen::Vector3f(static_cast<float>(rng.normal()), static_cast<float>(rng.normal()),
+                          static_cast<float>(rng.normal())) *
+              0.5f -
+          o;
     }
     if (i % 10 == 0) d = Eigen::Vector3f(d.x(), 0.0f, 0.0f);  // axis-parallel rays too
     if (i % 10 == 1) d = Eigen::Vector3f(0.0f, 0.0f, d.z() < 0 ? -1.0f : 1.0f);
@@ -135,12 +134,11 @@ TEST(RayCasterBvh, LargeSceneBuildsAndCasts) {
   // primitive's extent is < 35 m from its reference point).
   int hits = 0;
   for (int i = 0; i < 300; ++i) {
-    const Eigen::Vector3f o(static_cast<float>(rng.uniform(-400, 400)),
-                            static_cast<float>(rng.uniform(-400, 400)), 0.0f);
-    const Eigen::Vector3f d =
-        Eigen::Vector3f(static_cast<float>(rng.normal()), static_cast<float>(rng.normal()),
-                        static_cast<float>(rng.normal() * 0.2))
-            .normalized();
+    const Eigen::Vector3f o(static_cast<float>(rng.uniform(-400, 400)), static_cast<float>(rng.uniform(-400, 400)),
+                            0.0f);
+    const Eigen::Vector3f d = Eigen::Vector3f(static_cast<float>(rng.normal()), static_cast<float>(rng.normal()),
+                                              static_cast<float>(rng.normal() * 0.2))
+                                  .normalized();
     RayHit a;
     const bool ha = caster.cast(o, d, 0.5f, 120.0f, &a);
     bool hb = false;

@@ -1,7 +1,7 @@
 // Tests of the BVH ray caster: exact hits and normals per primitive type, range limits and
 // robustness against degenerate input (raycaster_bvh_test.cpp: the BVH against brute force).
-#include "segmatch/core/detail/random.h"
 #include "segmatch/sim/raycaster.h"
+#include "segmatch/core/detail/random.h"
 #include "segmatch/sim/scene.h"
 
 #include <gtest/gtest.h>
@@ -20,8 +20,8 @@ constexpr float kTol = 1e-4f;
 Eigen::Vector3f unit(float x, float y, float z) { return Eigen::Vector3f(x, y, z).normalized(); }
 
 // Casts and expects a hit; returns it.
-RayHit expect_hit(const RayCaster& caster, const Eigen::Vector3f& origin,
-                  const Eigen::Vector3f& dir, float min_range = 0.0f, float max_range = 1000.0f) {
+RayHit expect_hit(const RayCaster& caster, const Eigen::Vector3f& origin, const Eigen::Vector3f& dir,
+                  float min_range = 0.0f, float max_range = 1000.0f) {
   RayHit hit;
   EXPECT_TRUE(caster.cast(origin, dir, min_range, max_range, &hit))
       << "origin " << origin.transpose() << " dir " << dir.transpose();
@@ -164,8 +164,7 @@ TEST(RayCasterPrimitives, EllipsoidOnAndOffAxis) {
 }
 
 TEST(RayCasterPrimitives, TriangleIsTwoSided) {
-  const RayCaster caster(
-      Scene{Primitive::triangle({5, -1, -1}, {5, 1, -1}, {5, 0, 1}, 5, 0.5f)});
+  const RayCaster caster(Scene{Primitive::triangle({5, -1, -1}, {5, 1, -1}, {5, 0, 1}, 5, 0.5f)});
   RayHit hit = expect_hit(caster, {0, 0, 0}, {1, 0, 0});
   EXPECT_NEAR(hit.range_m, 5.0f, kTol);
   expect_normal(hit, {-1, 0, 0});
@@ -189,8 +188,7 @@ TEST(RayCasterPrimitives, GroundMeshHasNoCracksAlongSharedEdges) {
   for (int i = -4; i < 4; ++i) {
     for (int j = -4; j < 4; ++j) {
       const float x0 = 5.0f * i, y0 = 5.0f * j;
-      const Eigen::Vector3f a(x0, y0, 0), b(x0 + 5, y0, 0), c(x0 + 5, y0 + 5, 0),
-          d(x0, y0 + 5, 0);
+      const Eigen::Vector3f a(x0, y0, 0), b(x0 + 5, y0, 0), c(x0 + 5, y0 + 5, 0), d(x0, y0 + 5, 0);
       scene.push_back(Primitive::triangle(a, b, c, 40, 0.3f));
       scene.push_back(Primitive::triangle(a, c, d, 40, 0.3f));
     }
@@ -202,9 +200,8 @@ TEST(RayCasterPrimitives, GroundMeshHasNoCracksAlongSharedEdges) {
     for (int j = -3; j <= 3; ++j) {
       for (float f : {0.0f, 0.5f, 0.25f}) {
         // Points on grid lines, on diagonals and at vertices.
-        const Eigen::Vector3f targets[3] = {{5.0f * i, 5.0f * (j + f), 0},
-                                            {5.0f * (i + f), 5.0f * j, 0},
-                                            {5.0f * (i + f), 5.0f * (j + f), 0}};
+        const Eigen::Vector3f targets[3] = {
+            {5.0f * i, 5.0f * (j + f), 0}, {5.0f * (i + f), 5.0f * j, 0}, {5.0f * (i + f), 5.0f * (j + f), 0}};
         for (const Eigen::Vector3f& t : targets) {
           RayHit hit;
           if (!caster.cast(origin, (t - origin).normalized(), 0.0f, 100.0f, &hit)) {
@@ -224,8 +221,7 @@ TEST(RayCasterPrimitives, GroundMeshHasNoCracksAlongSharedEdges) {
 
 TEST(RayCasterRange, MinAndMaxRangeAreRespected) {
   const RayCaster caster(Scene{Primitive::box({10, 0, 0}, {1, 1, 1}, 0.0f, 1, 0.5f),
-                               Primitive::triangle({20, -5, -5}, {20, 5, -5}, {20, 0, 5}, 2,
-                                                   0.5f)});
+                               Primitive::triangle({20, -5, -5}, {20, 5, -5}, {20, 0, 5}, 2, 0.5f)});
   RayHit hit;
   ASSERT_TRUE(caster.cast({0, 0, 0}, {1, 0, 0}, 0.0f, 100.0f, &hit));
   EXPECT_NEAR(hit.range_m, 9.0f, kTol);
@@ -269,8 +265,8 @@ TEST(RayCasterRange, RayStartingInsideHitsTheFarSide) {
 
 TEST(RayCasterRange, FlatBoxAndDiscAreHittable) {
   // Zero thickness is allowed for boxes (signs, panels) and cylinders (discs).
-  const RayCaster caster(Scene{Primitive::box({5, 0, 0}, {0, 1, 1}, 0.0f, 1, 0.5f),
-                               Primitive::cylinder({0, 0, -3}, 1.0f, 0.0f, 2, 0.5f)});
+  const RayCaster caster(
+      Scene{Primitive::box({5, 0, 0}, {0, 1, 1}, 0.0f, 1, 0.5f), Primitive::cylinder({0, 0, -3}, 1.0f, 0.0f, 2, 0.5f)});
   RayHit hit = expect_hit(caster, {0, 0.5f, 0.5f}, {1, 0, 0});
   EXPECT_NEAR(hit.range_m, 5.0f, kTol);
   EXPECT_EQ(hit.label, 1u);
@@ -288,17 +284,17 @@ TEST(RayCasterRobustness, DegeneratePrimitivesAreSkipped) {
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const float inf = std::numeric_limits<float>::infinity();
   Scene scene = {
-      Primitive::box({1, 0, 0}, {0, 0, 0}, 0.0f, 100, 0.5f),          // zero size
-      Primitive::box({1, 0, 0}, {0, 1, 0}, 0.0f, 101, 0.5f),          // a line, no area
-      Primitive::box({1, 0, 0}, {-1, 1, 1}, 0.0f, 102, 0.5f),         // negative extent
-      Primitive::box({nan, 0, 0}, {1, 1, 1}, 0.0f, 103, 0.5f),        // NaN centre
-      Primitive::box({1, 0, 0}, {1, 1, 1}, nan, 104, 0.5f),           // NaN yaw
-      Primitive::box({inf, 0, 0}, {1, 1, 1}, 0.0f, 105, 0.5f),        // infinite
-      Primitive::cylinder({1, 0, 0}, 0.0f, 2.0f, 106, 0.5f),          // zero radius
-      Primitive::cylinder({1, 0, 0}, -1.0f, 2.0f, 107, 0.5f),         // negative radius
-      Primitive::cylinder({1, 0, 0}, 1.0f, nan, 108, 0.5f),           // NaN height
-      Primitive::ellipsoid({1, 0, 0}, {1, 0, 1}, 109, 0.5f),          // zero semi-axis
-      Primitive::ellipsoid({1, 0, 0}, {1, 1, 1e-45f}, 110, 0.5f),     // denormal semi-axis
+      Primitive::box({1, 0, 0}, {0, 0, 0}, 0.0f, 100, 0.5f),            // zero size
+      Primitive::box({1, 0, 0}, {0, 1, 0}, 0.0f, 101, 0.5f),            // a line, no area
+      Primitive::box({1, 0, 0}, {-1, 1, 1}, 0.0f, 102, 0.5f),           // negative extent
+      Primitive::box({nan, 0, 0}, {1, 1, 1}, 0.0f, 103, 0.5f),          // NaN centre
+      Primitive::box({1, 0, 0}, {1, 1, 1}, nan, 104, 0.5f),             // NaN yaw
+      Primitive::box({inf, 0, 0}, {1, 1, 1}, 0.0f, 105, 0.5f),          // infinite
+      Primitive::cylinder({1, 0, 0}, 0.0f, 2.0f, 106, 0.5f),            // zero radius
+      Primitive::cylinder({1, 0, 0}, -1.0f, 2.0f, 107, 0.5f),           // negative radius
+      Primitive::cylinder({1, 0, 0}, 1.0f, nan, 108, 0.5f),             // NaN height
+      Primitive::ellipsoid({1, 0, 0}, {1, 0, 1}, 109, 0.5f),            // zero semi-axis
+      Primitive::ellipsoid({1, 0, 0}, {1, 1, 1e-45f}, 110, 0.5f),       // denormal semi-axis
       Primitive::triangle({1, 0, 0}, {1, 0, 0}, {1, 1, 0}, 111, 0.5f),  // repeated vertex
       Primitive::triangle({1, 0, 0}, {2, 0, 0}, {3, 0, 0}, 112, 0.5f),  // colinear
       Primitive::triangle({1, 0, 0}, {2, nan, 0}, {3, 1, 0}, 113, 0.5f),

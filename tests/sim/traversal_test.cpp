@@ -71,7 +71,8 @@ TEST(Traversal, ScansEveryTenthOfASecondAtUrbanSpeedOnTheRightOfTheRoad) {
     // (one lane per direction) or a lane and a half (two).
     const auto& e = w.streets.edges[t.edge[i]];
     const double off = lateral_offset(w, t, i);
-    if (std::abs(T.linear().col(0).head<2>().normalized().dot((w.streets.nodes[e.b] - w.streets.nodes[e.a]).normalized())) > 0.9999) {
+    if (std::abs(T.linear().col(0).head<2>().normalized().dot(
+            (w.streets.nodes[e.b] - w.streets.nodes[e.a]).normalized())) > 0.9999) {
       ++straight;
       EXPECT_NEAR(-off, (e.lanes_per_direction - 0.5) * w.config.lane_width_m, 0.05) << "frame " << i;
     }

@@ -21,8 +21,8 @@ WorldConfig demo_like(uint64_t seed) {
 }
 
 bool same_primitive(const Primitive& a, const Primitive& b) {
-  return a.shape == b.shape && a.a == b.a && a.b == b.b && a.c == b.c && a.yaw == b.yaw &&
-         a.label == b.label && a.reflectivity == b.reflectivity;
+  return a.shape == b.shape && a.a == b.a && a.b == b.b && a.c == b.c && a.yaw == b.yaw && a.label == b.label &&
+         a.reflectivity == b.reflectivity;
 }
 
 bool same_scene(const Scene& a, const Scene& b) {

@@ -49,8 +49,7 @@ TEST(StorageReader, OpensReadOnlyAndChangesNothing) {
   const Snapshot before = snapshot(dir, path);
   // No write permission needed, on the file or on its folder (no journal, no -shm).
   std::filesystem::permissions(path, std::filesystem::perms::owner_read);
-  std::filesystem::permissions(dir.path(), std::filesystem::perms::owner_read |
-                                               std::filesystem::perms::owner_exec);
+  std::filesystem::permissions(dir.path(), std::filesystem::perms::owner_read | std::filesystem::perms::owner_exec);
   {
     const MapReader reader = MapReader::open(path);
     reader.load_segments();

@@ -73,8 +73,7 @@ TEST_F(StorageRefusal, OlderUnsupportedSchemaVersion) {
 TEST_F(StorageRefusal, ForeignSqliteDatabase) {
   const std::string path = dir_.file("foreign.db");
   run_sql(path, "CREATE TABLE customers (id INTEGER PRIMARY KEY, name TEXT)");
-  expect_storage_error([&] { MapReader::open(path); }, path,
-                       {"another application", "application_id 0x00000000"});
+  expect_storage_error([&] { MapReader::open(path); }, path, {"another application", "application_id 0x00000000"});
   const std::string gpkg = dir_.file("other.gpkg");
   run_sql(gpkg, "PRAGMA application_id = 1196444487; CREATE TABLE t (x)");  // GeoPackage
   expect_storage_error([&] { MapReader::open(gpkg); }, gpkg, {"another application", "0x47504B47"});
@@ -101,10 +100,8 @@ TEST_F(StorageRefusal, NotSqlite) {
 TEST_F(StorageRefusal, Truncated) {
   const std::string half = variant("half.segmap", [](std::string& b) { b.resize(b.size() / 2 + 100); });
   expect_storage_error([&] { MapReader::open(half); }, half, {"truncated"});
-  const std::string page_short =
-      variant("short.segmap", [](std::string& b) { b.resize(b.size() - 65536); });
-  expect_storage_error([&] { MapReader::open(page_short); }, page_short,
-                       {"truncated", "header says"});
+  const std::string page_short = variant("short.segmap", [](std::string& b) { b.resize(b.size() - 65536); });
+  expect_storage_error([&] { MapReader::open(page_short); }, page_short, {"truncated", "header says"});
   const std::string header_only = variant("header.segmap", [](std::string& b) { b.resize(60); });
   expect_storage_error([&] { MapReader::open(header_only); }, header_only,
                        {"not an SQLite database", "truncated to 60 bytes"});
@@ -112,25 +109,25 @@ TEST_F(StorageRefusal, Truncated) {
 
 TEST_F(StorageRefusal, CorruptedInTheMiddle) {
   for (const size_t length : {16u, 256u, 4096u}) {
-    const std::string path = variant("middle" + std::to_string(length) + ".segmap",
-                                     [&](std::string& b) {
-                                       for (size_t i = 0; i < length; ++i) b[b.size() / 2 + i] ^= 0x5A;
-                                     });
+    const std::string path = variant("middle" + std::to_string(length) + ".segmap", [&](std::string& b) {
+      for (size_t i = 0; i < length; ++i) b[b.size() / 2 + i] ^= 0x5A;
+    });
     expect_storage_error([&] { read_everything(path); }, path, {"corrupted"});
     EXPECT_FALSE(MapReader::open(path).check_integrity().empty());
   }
 }
 
 // Flips one bit in the stored bytes of segment row `row`'s BLOB that `sql` selects (in a stretch
-// found by unique_stretch()), then expects a full load to fail with `words`, the integrity check to name only that row, and
-// only a read of that segment to fail.
+// found by unique_stretch()), then expects a full load to fail with `words`, the integrity check to name only that row,
+// and only a read of that segment to fail.
 void expect_bit_flip_named(StorageRefusal& t, const char* sql, int row, const std::vector<std::string>& words) {
   const Segments segments = random_segments(300, 31);
   const std::string blob = stored_blob(t.path_, sql);
   ASSERT_GT(blob.size(), 48u);
   const size_t at = unique_stretch(t.bytes_, blob);
   ASSERT_NE(at, std::string::npos) << "no stretch of the BLOB occurs once in the file";
-  const std::string path = t.variant("bitflip" + std::to_string(row) + ".segmap", [&](std::string& b) { b[at + 40] ^= 0x04; });
+  const std::string path =
+      t.variant("bitflip" + std::to_string(row) + ".segmap", [&](std::string& b) { b[at + 40] ^= 0x04; });
   std::vector<std::string> expected = words;
   expected.push_back("segment row " + std::to_string(row));
   expect_storage_error([&] { MapReader::open(path).load_segments(); }, path, expected);
@@ -192,8 +189,8 @@ TEST_F(StorageRefusal, CorruptedClassifier) {
   const size_t at = bytes_.find(packed);
   ASSERT_NE(at, std::string::npos);
   for (const size_t offset : {size_t{5}, packed.size() - 2}) {  // frame header, then content
-    const std::string path = variant("classifier" + std::to_string(offset) + ".segmap",
-                                     [&](std::string& b) { b[at + offset] ^= 0x08; });
+    const std::string path =
+        variant("classifier" + std::to_string(offset) + ".segmap", [&](std::string& b) { b[at + offset] ^= 0x08; });
     expect_storage_error([&] { MapReader::open(path).classifier(); }, path, {"corrupted", "classifier"});
   }
 }
@@ -203,8 +200,7 @@ TEST_F(StorageRefusal, MissingFileOrFolder) {
   expect_storage_error([&] { MapReader::open(missing); }, missing, {"does not exist"});
   expect_storage_error([&] { MapReader::open(dir_.path()); }, dir_.path(), {"is a directory"});
   const std::string no_folder = dir_.file("no/such/folder/map.segmap");
-  expect_storage_error([&] { MapWriter::create(no_folder, test_metadata(), true); }, no_folder,
-                       {"does not exist"});
+  expect_storage_error([&] { MapWriter::create(no_folder, test_metadata(), true); }, no_folder, {"does not exist"});
 }
 
 TEST_F(StorageRefusal, ExistingMapIsNotOverwrittenByDefault) {

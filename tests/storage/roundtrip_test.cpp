@@ -96,8 +96,9 @@ TEST(StorageRoundTrip, EveryFieldComesBack) {
     EXPECT_TRUE(trajectory[i].T_map_sensor.matrix() == expected_trajectory[i].T_map_sensor.matrix())
         << "pose " << i << " not bit-exact";
     if (i) {
-      length += (expected_trajectory[i].T_map_sensor.translation() -
-                 expected_trajectory[i - 1].T_map_sensor.translation()).norm();
+      length +=
+          (expected_trajectory[i].T_map_sensor.translation() - expected_trajectory[i - 1].T_map_sensor.translation())
+              .norm();
     }
   }
 

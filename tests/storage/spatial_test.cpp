@@ -6,8 +6,7 @@ namespace storage {
 namespace test {
 namespace {
 
-std::vector<uint64_t> brute_force(const Segments& all, const Eigen::Vector3f& center,
-                                  float radius) {
+std::vector<uint64_t> brute_force(const Segments& all, const Eigen::Vector3f& center, float radius) {
   std::vector<uint64_t> ids;
   for (const Segment& s : all) {
     if ((s.centroid - center).squaredNorm() <= radius * radius) ids.push_back(s.id);
@@ -47,8 +46,7 @@ TEST(StorageSpatial, SegmentsNearEqualsBruteForce) {
   EXPECT_GT(total, 1000u);  // the queries were not all empty
 
   const Eigen::Vector3f on_boundary(10.f, 10.f, 2.f);
-  EXPECT_EQ(ids_of(reader.segments_near(on_boundary, 25.f)),
-            brute_force(segments, on_boundary, 25.f));
+  EXPECT_EQ(ids_of(reader.segments_near(on_boundary, 25.f)), brute_force(segments, on_boundary, 25.f));
   EXPECT_EQ(reader.segments_near(on_boundary, 0.f).size(), 2u);
   EXPECT_EQ(reader.segments_near(on_boundary, 1e6f).size(), segments.size());
   EXPECT_TRUE(reader.segments_near(on_boundary, -1.f).empty());

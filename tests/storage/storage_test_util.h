@@ -3,10 +3,10 @@
 #pragma once
 
 #include <gtest/gtest.h>
-#include <sqlite3.h>
 #include <segmatch/core/description/esf_quantization.h>
 #include <segmatch/storage/map_reader.h>
 #include <segmatch/storage/map_writer.h>
+#include <sqlite3.h>
 
 #include <algorithm>
 #include <cctype>
@@ -32,8 +32,7 @@ class TempDir {
   }
   ~TempDir() {
     std::error_code ec;
-    std::filesystem::permissions(path_, std::filesystem::perms::owner_all,
-                                 std::filesystem::perm_options::add, ec);
+    std::filesystem::permissions(path_, std::filesystem::perms::owner_all, std::filesystem::perm_options::add, ec);
     std::filesystem::remove_all(path_, ec);
   }
   TempDir(const TempDir&) = delete;
@@ -84,29 +83,31 @@ inline void write_bytes(const std::string& path, const std::string& bytes) {
 
 // A random segment around `center`: `n` points within `extent` metres, intensities in [0, 1],
 // random descriptors (left out for every 7th / 5th id to cover has_eigen / has_esf = false).
-inline Segment random_segment(std::mt19937& rng, uint64_t id, const Eigen::Vector3f& center,
-                              size_t n, float extent = 3.f) {
+inline Segment random_segment(std::mt19937& rng, uint64_t id, const Eigen::Vector3f& center, size_t n,
+                              float extent = 3.f) {
   std::uniform_real_distribution<float> offset(-extent, extent), unit(0.f, 1.f);
   Segment s;
   s.id = id;
   s.label = static_cast<uint32_t>(rng());
   for (size_t i = 0; i < n; ++i) {
-    s.points.push_back({center.x() + offset(rng), center.y() + offset(rng),
-                        center.z() + offset(rng) * 0.5f, unit(rng)});
+    s.points.push_back(
+        {center.x() + offset(rng), center.y() + offset(rng), center.z() + offset(rng) * 0.5f, unit(rng)});
   }
   Eigen::Vector3f sum = Eigen::Vector3f::Zero();
   for (const Point& p : s.points) sum += p.xyz();
   s.centroid = n ? Eigen::Vector3f(sum / float(n)) : center;
   s.has_eigen = id % 7 != 3;
   s.has_esf = id % 5 != 2;
-  if (s.has_eigen) for (float& v : s.eigen) v = unit(rng);
-  if (s.has_esf) for (float& v : s.esf) v = unit(rng) * 0.01f;
+  if (s.has_eigen)
+    for (float& v : s.eigen) v = unit(rng);
+  if (s.has_esf)
+    for (float& v : s.esf) v = unit(rng) * 0.01f;
   return s;
 }
 
 // `count` segments spread over a `size` x `size` m area.
-inline Segments random_segments(size_t count, uint32_t seed, float size = 500.f,
-                                size_t min_points = 20, size_t max_points = 200) {
+inline Segments random_segments(size_t count, uint32_t seed, float size = 500.f, size_t min_points = 20,
+                                size_t max_points = 200) {
   std::mt19937 rng(seed);
   std::uniform_real_distribution<float> where(-size / 2, size / 2), height(0.f, 10.f);
   std::uniform_int_distribution<size_t> points(min_points, max_points);
@@ -130,8 +131,7 @@ inline std::vector<Keyframe> random_trajectory(size_t count, uint32_t seed) {
     position += Eigen::Vector3d(step(rng), step(rng) * 0.3, 0.01);
     k.T_map_sensor = Pose3d::Identity();
     k.T_map_sensor.linear() =
-        (Eigen::AngleAxisd(angle(rng), Eigen::Vector3d(0.1, 0.2, 1.0).normalized()))
-            .toRotationMatrix();
+        (Eigen::AngleAxisd(angle(rng), Eigen::Vector3d(0.1, 0.2, 1.0).normalized())).toRotationMatrix();
     k.T_map_sensor.translation() = position;
     keyframes.push_back(k);
   }
@@ -149,8 +149,8 @@ inline MapMetadata test_metadata(const std::string& name = "test map") {
 }
 
 // Writes a committed map with segments (keyframe i % 10 * 2), a trajectory and a classifier.
-inline void write_test_map(const std::string& path, const Segments& segments,
-                           const std::string& name = "test map", bool overwrite = false) {
+inline void write_test_map(const std::string& path, const Segments& segments, const std::string& name = "test map",
+                           bool overwrite = false) {
   MapWriter writer = MapWriter::create(path, test_metadata(name), overwrite);
   std::vector<uint32_t> keyframes;
   for (size_t i = 0; i < segments.size(); ++i) keyframes.push_back(uint32_t(i % 10) * 2);
@@ -196,8 +196,7 @@ inline void expect_storage_error(const std::function<void()>& fn, const std::str
     const std::string message = e.what();
     EXPECT_NE(message.find(path), std::string::npos) << message;
     for (const std::string& word : words) {
-      EXPECT_NE(lower(message).find(lower(word)), std::string::npos)
-          << "'" << word << "' missing from: " << message;
+      EXPECT_NE(lower(message).find(lower(word)), std::string::npos) << "'" << word << "' missing from: " << message;
     }
   }
 }

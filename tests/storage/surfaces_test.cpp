@@ -69,9 +69,8 @@ PointCloud all_decoded(const MapReader& reader) {
 }
 
 PointCloud sorted(PointCloud points) {
-  std::sort(points.begin(), points.end(), [](const Point& a, const Point& b) {
-    return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z);
-  });
+  std::sort(points.begin(), points.end(),
+            [](const Point& a, const Point& b) { return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z); });
   return points;
 }
 

@@ -71,8 +71,8 @@ TEST(StorageUpgrade, SchemaOneMapComesBackBitForBit) {
   const Segments near0 = old.segments_near(at, 20.f), near1 = now.segments_near(at, 20.f);
   ASSERT_EQ(near0.size(), near1.size());
   for (size_t i = 0; i < near0.size(); ++i) expect_bit_identical(near0[i], near1[i]);
-  std::printf("[upgrade] %zu segments: %.2f MB -> %.2f MB\n", before.size(),
-              std::filesystem::file_size(kOldMap) / 1e6, std::filesystem::file_size(upgraded) / 1e6);
+  std::printf("[upgrade] %zu segments: %.2f MB -> %.2f MB\n", before.size(), std::filesystem::file_size(kOldMap) / 1e6,
+              std::filesystem::file_size(upgraded) / 1e6);
 }
 
 TEST(StorageUpgrade, SchemaTwoMapReadsAsItsOriginalAndUpgrades) {

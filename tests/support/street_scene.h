@@ -3,9 +3,9 @@
 // street with objects localizes at the true pose, the poles alone are ambiguous.
 #pragma once
 
+#include <segmatch/core/common/types.h>
 #include <segmatch/core/localization/localizer.h>
 #include <segmatch/core/segmentation/segment.h>
-#include <segmatch/core/common/types.h>
 
 #include <cmath>
 
@@ -39,13 +39,13 @@ inline PointCloud pole_street(bool with_distinct_objects) {
   PointCloud cloud;
   for (int i = 0; i < 10; ++i) add_cylinder(cloud, 6.f * i, 4.f, 0.15f, 4.f);
   if (with_distinct_objects) {
-    add_box(cloud, 3.f, -6.f, 4.2f, 1.8f, 1.5f);   // a car
-    add_box(cloud, 15.f, -7.f, 2.f, 2.f, 2.5f);    // a kiosk
-    add_box(cloud, 26.f, -5.f, 1.f, 3.f, 1.f);     // a bench
-    add_box(cloud, 35.f, 8.f, 6.f, 0.4f, 2.f);     // a wall
-    add_cylinder(cloud, 47.f, -6.f, 0.6f, 1.2f);   // a bin
-    add_cylinder(cloud, 20.f, 9.f, 1.2f, 0.9f);    // a planter
-    add_box(cloud, 52.f, 9.f, 1.5f, 1.5f, 3.2f);   // a cabinet
+    add_box(cloud, 3.f, -6.f, 4.2f, 1.8f, 1.5f);  // a car
+    add_box(cloud, 15.f, -7.f, 2.f, 2.f, 2.5f);   // a kiosk
+    add_box(cloud, 26.f, -5.f, 1.f, 3.f, 1.f);    // a bench
+    add_box(cloud, 35.f, 8.f, 6.f, 0.4f, 2.f);    // a wall
+    add_cylinder(cloud, 47.f, -6.f, 0.6f, 1.2f);  // a bin
+    add_cylinder(cloud, 20.f, 9.f, 1.2f, 0.9f);   // a planter
+    add_box(cloud, 52.f, 9.f, 1.5f, 1.5f, 3.2f);  // a cabinet
   }
   return cloud;
 }
@@ -75,7 +75,9 @@ inline PointCloud transformed(const PointCloud& cloud, const Pose3d& T) {
 class InMemorySurfaces : public MapSurfaces {
  public:
   explicit InMemorySurfaces(PointCloud points) : points_(std::move(points)) {}
-  PointCloud near(const Eigen::Vector3d& centre, double radius_m) const override { return crop_cylinder(points_, centre, radius_m); }
+  PointCloud near(const Eigen::Vector3d& centre, double radius_m) const override {
+    return crop_cylinder(points_, centre, radius_m);
+  }
 
  private:
   PointCloud points_;

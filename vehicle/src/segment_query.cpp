@@ -74,7 +74,8 @@ bool SegmentQuery::can_track(const api::LocalizeSegmentsRequest& full) const {
 api::LocalizeSegmentsRequest SegmentQuery::tracking_request(const api::LocalizeSegmentsRequest& full) const {
   const uint32_t needs = api::kSegmentsFlagHasPrior | api::kSegmentsFlagNewestScans;
   if ((full.flags & needs) != needs)
-    throw std::invalid_argument("a tracking request needs a prior and the newest scans (LOCALIZE_SEGMENTS bits 0 and 4)");
+    throw std::invalid_argument(
+        "a tracking request needs a prior and the newest scans (LOCALIZE_SEGMENTS bits 0 and 4)");
   const SurfaceTrackingConfig& track = parameters_.localizer.track;
   api::LocalizeSegmentsRequest r = full;
   r.flags |= api::kSegmentsFlagTrack;
@@ -87,7 +88,8 @@ api::LocalizeSegmentsRequest SegmentQuery::tracking_request(const api::LocalizeS
   VoxelGridConfig thin;
   thin.leaf_m = track.leaf_m;
   thin.min_points_per_voxel = 1;
-  const PointCloud newest = voxel_filter(crop_cylinder(full.newest_points, full.sensor_position_local, track.window_m), thin);
+  const PointCloud newest =
+      voxel_filter(crop_cylinder(full.newest_points, full.sensor_position_local, track.window_m), thin);
   const size_t step = (newest.size() + track.max_points - 1) / static_cast<size_t>(track.max_points);
   r.newest_points.clear();
   for (size_t i = 0; i < newest.size(); i += std::max<size_t>(step, 1)) r.newest_points.push_back(newest[i]);

@@ -60,8 +60,7 @@ Eigen::Vector3f mean_of(const PointCloud& points) {
 
 void DescriptorConfig::validate() const {
   if (esf_samples <= 0) {
-    throw std::invalid_argument("DescriptorConfig.esf_samples must be > 0, got " +
-                                std::to_string(esf_samples));
+    throw std::invalid_argument("DescriptorConfig.esf_samples must be > 0, got " + std::to_string(esf_samples));
   }
 }
 
@@ -71,13 +70,13 @@ EigenFeatures eigen_features(const PointCloud& points) {
   if (points.size() < 3 || !normalised_eigenvalues(points, l)) return f;
   const double sum = l[0] + l[1] + l[2];  // 1 up to rounding
   const double values[kEigenFeatureCount] = {
-      (l[0] - l[1]) / l[0],                          // linearity
-      (l[1] - l[2]) / l[0],                          // planarity
-      l[2] / l[0],                                   // scattering
-      std::cbrt(l[0] * l[1] * l[2]),                 // omnivariance
-      (l[0] - l[2]) / l[0],                          // anisotropy
+      (l[0] - l[1]) / l[0],                              // linearity
+      (l[1] - l[2]) / l[0],                              // planarity
+      l[2] / l[0],                                       // scattering
+      std::cbrt(l[0] * l[1] * l[2]),                     // omnivariance
+      (l[0] - l[2]) / l[0],                              // anisotropy
       -(x_log_x(l[0]) + x_log_x(l[1]) + x_log_x(l[2])),  // eigenentropy
-      l[2] / sum,                                    // change of curvature
+      l[2] / sum,                                        // change of curvature
   };
   for (int i = 0; i < kEigenFeatureCount; ++i) {
     if (!std::isfinite(values[i])) return EigenFeatures{};

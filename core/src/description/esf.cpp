@@ -60,10 +60,9 @@ constexpr float kPiHalf = 1.5707963267948966f;
 // Checked against the former formula on every float with |v| < 2e6, inf and NaN.
 int grid_index(float v) {
   if (!(std::abs(v) < 1e6f)) return v > 0.f ? kGrid - 1 : 0;  // also NaN: keeps the cast defined
-  const int t = static_cast<int>(v);                           // truncates towards zero
+  const int t = static_cast<int>(v);                          // truncates towards zero
   const float ft = static_cast<float>(t);
-  const int i = v >= 0.f ? t + static_cast<int>(kHalf) - 1 + (ft < v)
-                         : t + static_cast<int>(kHalf) - (ft > v);
+  const int i = v >= 0.f ? t + static_cast<int>(kHalf) - 1 + (ft < v) : t + static_cast<int>(kHalf) - (ft > v);
   return std::clamp(i, 0, kGrid - 1);
 }
 
@@ -152,8 +151,7 @@ std::array<uint64_t, kGrid> line_reciprocals() {
 const std::array<uint64_t, kGrid> kLineRecip = line_reciprocals();
 
 // Inlined into the triple so the three walks overlap (a few percent).
-__attribute__((always_inline)) inline LineTrace trace_line(const LineGrids& grids,
-                                                           const std::array<int, 3>& s,
+__attribute__((always_inline)) inline LineTrace trace_line(const LineGrids& grids, const std::array<int, 3>& s,
                                                            const std::array<int, 3>& t) {
   int d[3];
   uint64_t neg[3];  // all ones on a negative axis
@@ -167,7 +165,7 @@ __attribute__((always_inline)) inline LineTrace trace_line(const LineGrids& grid
   const int b = kMinor[a][0], c = kMinor[a][1];
   const uint64_t recip = kLineRecip[d[a]];
   const uint64_t start = d[a] > 0 ? (d[a] - 1) * recip : 0;  // numerator at j = 0
-  auto field = [&](int k) {  // start value of axis k's coordinate and fraction
+  auto field = [&](int k) {                                  // start value of axis k's coordinate and fraction
     return (static_cast<uint64_t>(s[k]) << kFrac) + (start ^ (neg[k] & kFracMask));
   };
   auto field_step = [&](int k) {  // + or - 2 d recip
@@ -214,7 +212,7 @@ int round_bin(float x) { return static_cast<int>(x * (kBins - 1) + 0.5f); }
 // can still lie inside the cell: one comparison settles it.
 struct AngleBins {
   static constexpr int kCells = 4096;
-  float edge[kBins + 1];           // edge[m] for m = 1..63; edge[64] = -1 (never reached)
+  float edge[kBins + 1];  // edge[m] for m = 1..63; edge[64] = -1 (never reached)
   uint8_t count_at_top[kCells];
   AngleBins() {
     edge[0] = 2.f;
@@ -277,8 +275,8 @@ LineGrids voxelize(const std::vector<GridPoint>& pts) {
 }
 
 // One triple (PCL computeESF loop body). Returns false if rejected (degenerate triangle).
-bool sample_triple(const LineGrids& grid, const GridPoint& g1, const GridPoint& g2,
-                   const GridPoint& g3, EsfHistograms& hist, TripleSample& out) {
+bool sample_triple(const LineGrids& grid, const GridPoint& g1, const GridPoint& g2, const GridPoint& g3,
+                   EsfHistograms& hist, TripleSample& out) {
   const Eigen::Vector3f v21 = g2.p - g1.p, v31 = g3.p - g1.p, v23 = g2.p - g3.p;
   const float a = v21.norm(), b = v31.norm(), c = v23.norm();
   // Squared area: PCL's Heron term s(s-a)(s-b)(s-c), computed from the cross product, which
@@ -332,8 +330,7 @@ void bin_distances(const std::vector<TripleSample>& samples, EsfHistograms& hist
 
 // PCL's weights (D2 in and D2 ratio carry an extra 0.5), then normalisation to sum 1.
 EsfDescriptor finalise(const EsfHistograms& hist) {
-  static constexpr float kWeights[kEsfHistograms] = {0.5f, 0.5f, 0.5f, 0.5f, 0.5f,
-                                                     1.0f, 0.5f, 2.0f, 2.0f, 1.0f};
+  static constexpr float kWeights[kEsfHistograms] = {0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 1.0f, 0.5f, 2.0f, 2.0f, 1.0f};
   EsfDescriptor out{};
   double sum = 0.0;
   for (int h = 0; h < kEsfHistograms; ++h) {
@@ -370,8 +367,7 @@ EsfDescriptor esf_descriptor(const PointCloud& points, int samples, uint64_t see
   const uint64_t n = pts.size();
   // PCL retries rejected triples forever; cap the attempts so degenerate input terminates.
   const long max_attempts = 10L * samples + 100;
-  for (long attempt = 0; attempt < max_attempts && static_cast<int>(accepted.size()) < samples;
-       ++attempt) {
+  for (long attempt = 0; attempt < max_attempts && static_cast<int>(accepted.size()) < samples; ++attempt) {
     const uint64_t i1 = pick(rng, n), i2 = pick(rng, n), i3 = pick(rng, n);
     if (i1 == i2 || i1 == i3 || i2 == i3) continue;
     TripleSample t;

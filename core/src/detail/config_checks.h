@@ -15,14 +15,16 @@ inline void require_positive(double value, const char* owner, const char* field)
 }
 
 // `what_zero_means`, if given, is appended: e.g. "(0: off)".
-inline void require_non_negative(double value, const char* owner, const char* field, const char* what_zero_means = nullptr) {
+inline void require_non_negative(double value, const char* owner, const char* field,
+                                 const char* what_zero_means = nullptr) {
   if (!(value >= 0.0) || !std::isfinite(value))
     throw std::invalid_argument(std::string(owner) + "." + field + " must be finite and >= 0" +
                                 (what_zero_means ? std::string(" ") + what_zero_means : std::string()));
 }
 
 inline void require_fraction(double value, const char* owner, const char* field) {
-  if (!(value >= 0.0 && value <= 1.0)) throw std::invalid_argument(std::string(owner) + "." + field + " must be in 0..1");
+  if (!(value >= 0.0 && value <= 1.0))
+    throw std::invalid_argument(std::string(owner) + "." + field + " must be in 0..1");
 }
 
 }  // namespace detail

@@ -27,7 +27,9 @@ class OpenTable {
   Slot& operator[](size_t s) { return slots_[s]; }
   const Slot& operator[](size_t s) const { return slots_[s]; }
 
-  size_t home(Key key) const { return static_cast<size_t>((static_cast<uint64_t>(key) * 0x9E3779B97F4A7C15ull) >> shift_); }
+  size_t home(Key key) const {
+    return static_cast<size_t>((static_cast<uint64_t>(key) * 0x9E3779B97F4A7C15ull) >> shift_);
+  }
   void prefetch(Key key) const { __builtin_prefetch(&slots_[home(key)]); }
 
   // The slot holding `key`, or kNone.
@@ -76,7 +78,8 @@ class OpenTable {
     }
   }
   void grow() {
-    rebuild(slots_.size(), [](const Slot&) { return true; }, [](size_t, size_t) {});
+    rebuild(
+        slots_.size(), [](const Slot&) { return true; }, [](size_t, size_t) {});
   }
 
  private:

@@ -17,8 +17,8 @@ constexpr size_t kBuckets = size_t{1} << kDigitBits;
 
 // One counting-sort pass on the digit at `shift` of `keys`, into `out`.
 template <typename Fn>
-void radix_pass(const std::vector<uint64_t>& keys, std::vector<uint64_t>& out, int shift,
-                std::vector<uint32_t>& count, Fn&& moved) {
+void radix_pass(const std::vector<uint64_t>& keys, std::vector<uint64_t>& out, int shift, std::vector<uint32_t>& count,
+                Fn&& moved) {
   std::fill(count.begin(), count.end(), 0u);
   for (uint64_t k : keys) ++count[(k >> shift) & (kBuckets - 1)];
   uint32_t sum = 0;
@@ -77,8 +77,7 @@ void radix_sort(std::vector<uint64_t>& keys, std::vector<uint32_t>& values, int 
   std::vector<uint64_t> tmp(n);
   std::vector<uint32_t> values_tmp(n);
   for (int shift = 0; shift < key_bits; shift += kDigitBits) {
-    radix_pass(keys, tmp, shift, count,
-               [&](size_t i, uint32_t dst) { values_tmp[dst] = values[i]; });
+    radix_pass(keys, tmp, shift, count, [&](size_t i, uint32_t dst) { values_tmp[dst] = values[i]; });
     keys.swap(tmp);
     values.swap(values_tmp);
   }
@@ -153,8 +152,7 @@ GridFrame GridFrame::fit(const PointCloud& cloud, double cell_m, bool planar, co
   return f;
 }
 
-CellGrid CellGrid::build(const PointCloud& cloud, double cell_m, bool planar, const char* field,
-                         bool with_lookup) {
+CellGrid CellGrid::build(const PointCloud& cloud, double cell_m, bool planar, const char* field, bool with_lookup) {
   CellGrid g;
   g.frame = GridFrame::fit(cloud, cell_m, planar, field);
   std::vector<uint64_t> keys;

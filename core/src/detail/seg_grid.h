@@ -18,9 +18,7 @@
 namespace segmatch {
 namespace detail {
 
-inline bool is_finite(const Point& p) {
-  return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
-}
+inline bool is_finite(const Point& p) { return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z); }
 
 // std::floor(q) as an integer, for |q| < 2^63, without the libm call std::floor is on
 // x86-64 without SSE4.1 (it was a measurable share of the voxel and cell keys).
@@ -45,9 +43,7 @@ inline int64_t unpack21(uint64_t key, int field) { return static_cast<int64_t>(f
 
 // Two coordinates in one key, x in the high 32 bits: for y in [0, 2^32) the keys of one x are
 // contiguous and ordered by y, and x + dx is key + (dx << 32).
-inline uint64_t pack_xy(int64_t x, int64_t y) {
-  return static_cast<uint64_t>(x) << 32 ^ static_cast<uint32_t>(y);
-}
+inline uint64_t pack_xy(int64_t x, int64_t y) { return static_cast<uint64_t>(x) << 32 ^ static_cast<uint32_t>(y); }
 // The x and y of a pack_xy() key, for -2^31 <= x, y < 2^31.
 inline int64_t unpack_x(uint64_t key) { return static_cast<int64_t>(key) >> 32; }  // arithmetic shift
 inline int64_t unpack_y(uint64_t key) { return static_cast<int32_t>(static_cast<uint32_t>(key)); }
@@ -137,19 +133,15 @@ struct GridFrame {
 
   // Throws std::invalid_argument naming `field` if the cloud does not fit into 64 bits.
   static GridFrame fit(const PointCloud& cloud, double cell_m, bool planar, const char* field);
-  int64_t coord(float v, int axis) const {
-    return static_cast<int64_t>(std::floor(double(v) / cell_m)) - base[axis];
-  }
+  int64_t coord(float v, int axis) const { return static_cast<int64_t>(std::floor(double(v) / cell_m)) - base[axis]; }
   bool inside(int64_t ix, int64_t iy, int64_t iz) const {
     return ix >= 0 && iy >= 0 && iz >= 0 && ix < extent[0] && iy < extent[1] && iz < extent[2];
   }
   uint64_t pack(int64_t ix, int64_t iy, int64_t iz) const {
-    return (static_cast<uint64_t>(ix) << (bits[1] + bits[2])) |
-           (static_cast<uint64_t>(iy) << bits[2]) | static_cast<uint64_t>(iz);
+    return (static_cast<uint64_t>(ix) << (bits[1] + bits[2])) | (static_cast<uint64_t>(iy) << bits[2]) |
+           static_cast<uint64_t>(iz);
   }
-  uint64_t key_of(const Point& p) const {
-    return pack(coord(p.x, 0), coord(p.y, 1), bits[2] ? coord(p.z, 2) : 0);
-  }
+  uint64_t key_of(const Point& p) const { return pack(coord(p.x, 0), coord(p.y, 1), bits[2] ? coord(p.z, 2) : 0); }
   // key_of() with fast_floor: the same key (the same quotient, floored the same).
   uint64_t fast_key(const Point& p) const {
     const auto c = [&](float v, int axis) { return fast_floor(double(v) / cell_m) - base[axis]; };

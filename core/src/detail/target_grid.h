@@ -4,8 +4,8 @@
 #pragma once
 
 #include "detail/seg_grid.h"
-#include "segmatch/core/detail/simd.h"
 #include "segmatch/core/common/types.h"
+#include "segmatch/core/detail/simd.h"
 
 #include <Eigen/Core>
 
@@ -66,8 +66,7 @@ class TargetGrid {
   // does not depend on the order in which distances are compared.
   // `hint` (a point index or kMissing) seeds the bound: the previous iteration's neighbour
   // is usually still within a hair of the nearest, so few cells remain to be looked at.
-  bool nearest(const Eigen::Vector3f& p, float max2, uint32_t hint, uint32_t* index,
-               float* d2) const {
+  bool nearest(const Eigen::Vector3f& p, float max2, uint32_t hint, uint32_t* index, float* d2) const {
     float best = std::nextafter(max2, std::numeric_limits<float>::infinity());
     uint32_t best_k = FlatHashMap::kMissing;
     if (hint != FlatHashMap::kMissing && sq_dist(hint, p) < best) {
@@ -77,24 +76,26 @@ class TargetGrid {
     const auto consider = [&](float d, uint32_t k) {
       if (d < best || (d == best && k < best_k)) best = d, best_k = k;
     };
-    search(p, max2, [&] { return best; }, [&](uint32_t k, uint32_t e) {
-      if (e - k >= 4) {  // four lanes, each keeping its first minimum (indices ascend in a lane)
-        simd::F4 lane_d = sq_dist4(k, p);
-        simd::I4 lane_k = simd::make(int32_t(k), int32_t(k + 1), int32_t(k + 2), int32_t(k + 3)), idx = lane_k;
-        for (k += 4; k + 4 <= e; k += 4) {
-          idx = idx + simd::splat(int32_t(4));
-          const simd::F4 d = sq_dist4(k, p);
-          lane_k = simd::select_lt(d, lane_d, idx, lane_k);
-          lane_d = simd::min(d, lane_d);
-        }
-        float ld[4];
-        int32_t lk[4];
-        simd::store(ld, lane_d);
-        simd::store(lk, lane_k);
-        for (int l = 0; l < 4; ++l) consider(ld[l], uint32_t(lk[l]));
-      }
-      for (; k < e; ++k) consider(sq_dist(k, p), k);
-    });
+    search(
+        p, max2, [&] { return best; },
+        [&](uint32_t k, uint32_t e) {
+          if (e - k >= 4) {  // four lanes, each keeping its first minimum (indices ascend in a lane)
+            simd::F4 lane_d = sq_dist4(k, p);
+            simd::I4 lane_k = simd::make(int32_t(k), int32_t(k + 1), int32_t(k + 2), int32_t(k + 3)), idx = lane_k;
+            for (k += 4; k + 4 <= e; k += 4) {
+              idx = idx + simd::splat(int32_t(4));
+              const simd::F4 d = sq_dist4(k, p);
+              lane_k = simd::select_lt(d, lane_d, idx, lane_k);
+              lane_d = simd::min(d, lane_d);
+            }
+            float ld[4];
+            int32_t lk[4];
+            simd::store(ld, lane_d);
+            simd::store(lk, lane_k);
+            for (int l = 0; l < 4; ++l) consider(ld[l], uint32_t(lk[l]));
+          }
+          for (; k < e; ++k) consider(sq_dist(k, p), k);
+        });
     *index = best_k;
     *d2 = best;
     return best_k != FlatHashMap::kMissing;
@@ -106,15 +107,17 @@ class TargetGrid {
     std::pair<float, uint32_t> best[kMaxK];  // ascending; insertion sort
     size_t n = 0;
     k = std::min(k, kMaxK);
-    search(p, max2, [&] { return n < k ? max2 : best[k - 1].first; }, [&](uint32_t b, uint32_t e) {
-      for (uint32_t j = b; j < e; ++j) {
-        const float d = sq_dist(j, p);
-        if (d > max2 || (n == k && !(d < best[k - 1].first))) continue;
-        size_t i = n < k ? n++ : k - 1;
-        for (; i > 0 && d < best[i - 1].first; --i) best[i] = best[i - 1];
-        best[i] = {d, j};
-      }
-    });
+    search(
+        p, max2, [&] { return n < k ? max2 : best[k - 1].first; },
+        [&](uint32_t b, uint32_t e) {
+          for (uint32_t j = b; j < e; ++j) {
+            const float d = sq_dist(j, p);
+            if (d > max2 || (n == k && !(d < best[k - 1].first))) continue;
+            size_t i = n < k ? n++ : k - 1;
+            for (; i > 0 && d < best[i - 1].first; --i) best[i] = best[i - 1];
+            best[i] = {d, j};
+          }
+        });
     for (size_t i = 0; i < n; ++i) out->push_back(best[i].second);
   }
 
@@ -197,7 +200,7 @@ class TargetGrid {
   }
 
   GridFrame frame_;
-  FlatHashMap lookup_;   // cell key -> cell index
+  FlatHashMap lookup_;           // cell key -> cell index
   std::vector<uint32_t> begin_;  // cell c holds points begin_[c] .. begin_[c + 1] - 1
   float cell_;
   int filter_bits_ = 6;

@@ -36,7 +36,9 @@ void append_tile_sorted(const KeptTile& tile, int64_t centre_z, double leaf, uin
     for (int a = 0; a < 3; ++a) p[a] = (double(c[a]) + double(v.s[a]) / kFracScale / n) * leaf;
     const uint32_t col = key_column(h.key);
     sc->entries.push_back({{float(p[0]), float(p[1]), float(p[2]), float(v.i / n)},
-                           static_cast<int32_t>(c[2] - centre_z), col, with_labels ? table.majority(slot) : 0u});
+                           static_cast<int32_t>(c[2] - centre_z),
+                           col,
+                           with_labels ? table.majority(slot) : 0u});
     ++start[col + 1];
   }
   for (int c = 0; c < kColumns; ++c) start[c + 1] += start[c];

@@ -184,7 +184,7 @@ struct EmitScratch {
 // centroid of its points, in voxel key order (x, then y, then z), with majority labels if
 // labels_out. Sorts tiles by (x, y), voxels inside a tile by (x, y, z), then emits each strip
 // of tiles sharing x column by column: no global sort. Reorders `tiles`.
-PointCloud emit_in_key_order(std::vector<KeptTile>& tiles, int64_t centre_z, double leaf,
-                             uint32_t min_points, std::vector<uint32_t>* labels_out, EmitScratch* scratch);
+PointCloud emit_in_key_order(std::vector<KeptTile>& tiles, int64_t centre_z, double leaf, uint32_t min_points,
+                             std::vector<uint32_t>* labels_out, EmitScratch* scratch);
 
 }  // namespace segmatch::voxel_table

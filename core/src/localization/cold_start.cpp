@@ -22,9 +22,10 @@ struct PlacesTried {
 
 // The places most like `query` (the scan's descriptor), each a prior for tracking `scans` on the
 // surface layer with a cold start's gates.
-PlacesTried try_places(const PlaceIndex& places, const PlaceDescriptor& query, const PointCloud& scans, const Segments& targets,
-                       const CentroidIndex& centroids, const RandomForestMatcher* classifier, const MapSurfaces* surfaces,
-                       const LocalizerConfig& gates, const Segments& query_segments, const Eigen::Vector3f& sensor) {
+PlacesTried try_places(const PlaceIndex& places, const PlaceDescriptor& query, const PointCloud& scans,
+                       const Segments& targets, const CentroidIndex& centroids, const RandomForestMatcher* classifier,
+                       const MapSurfaces* surfaces, const LocalizerConfig& gates, const Segments& query_segments,
+                       const Eigen::Vector3f& sensor) {
   const PlaceRecognitionConfig& c = gates.places;
   PlacesTried out;
   const std::vector<PlaceCandidate> candidates = places.query(query, sensor.cast<double>());
@@ -46,15 +47,16 @@ PlacesTried try_places(const PlaceIndex& places, const PlaceDescriptor& query, c
     out.passed.push_back(std::move(trial));
   }
   char why[64];
-  std::snprintf(why, sizeof(why), "%zu places tried (best distance %.2f)", candidates.size(), candidates.front().distance);
+  std::snprintf(why, sizeof(why), "%zu places tried (best distance %.2f)", candidates.size(),
+                candidates.front().distance);
   out.why = std::string(why) + ", none tracked; the nearest: " + first_reason;
   return out;
 }
 
 }  // namespace
 
-LocalizationResult Localizer::recognize_place(LocalizationResult refused, const PointCloud& cloud, const PointCloud& newest,
-                                              const Eigen::Vector3f& sensor_position) const {
+LocalizationResult Localizer::recognize_place(LocalizationResult refused, const PointCloud& cloud,
+                                              const PointCloud& newest, const Eigen::Vector3f& sensor_position) const {
   const PlaceRecognitionConfig& c = config_.places;
   const auto start = std::chrono::steady_clock::now();
   // Its time counts as refinement, as tracking's does.
@@ -80,8 +82,8 @@ LocalizationResult Localizer::recognize_place(LocalizationResult refused, const 
   gates.track.min_fitness = gates.search.min_fitness = c.min_fitness;
   gates.track.max_shifted_support = c.max_shifted_support;  // 0: off
   auto tried = [&](const PointCloud& view, const PlaceDescriptor& query) {
-    return try_places(*places, query, view, targets_, centroids_, classifier_.get(), surfaces_.get(), gates, refused.query,
-                      sensor_position);
+    return try_places(*places, query, view, targets_, centroids_, classifier_.get(), surfaces_.get(), gates,
+                      refused.query, sensor_position);
   };
   PlacesTried found = tried(scans, describe_place(cloud.empty() ? newest : cloud, s, 0.0, c));
   // A second look when none passed and the scan reaches elevations the map's sensor never saw
@@ -90,22 +92,26 @@ LocalizationResult Localizer::recognize_place(LocalizationResult refused, const 
   const ElevationBand shown = measure_elevations(scans, sensor_position);
   if (found.passed.empty() && (shown.min_deg < c.map_elevation_min_deg - c.elevation_excess_deg ||
                                shown.max_deg > c.map_elevation_max_deg + c.elevation_excess_deg)) {
-    const double lo = c.map_elevation_min_deg - c.elevation_margin_deg, hi = c.map_elevation_max_deg + c.elevation_margin_deg;
+    const double lo = c.map_elevation_min_deg - c.elevation_margin_deg,
+                 hi = c.map_elevation_max_deg + c.elevation_margin_deg;
     const PointCloud kept = crop_elevation(scans, sensor_position, lo, hi);
-    PlacesTried second = tried(kept, describe_place(cloud.empty() || &cloud == &scans ? kept : crop_elevation(cloud, sensor_position, lo, hi),
-                                                    s, 0.0, c));
+    PlacesTried second = tried(
+        kept, describe_place(cloud.empty() || &cloud == &scans ? kept : crop_elevation(cloud, sensor_position, lo, hi),
+                             s, 0.0, c));
     second.why = found.why + "; kept to the map's elevations: " + second.why;
     found = std::move(second);
   }
   std::vector<LocalizationResult>& passed = found.passed;
   if (passed.empty()) return unchanged(found.why);
   // The best fit answers unless a distinct place fits nearly as well (fitness_margin).
-  std::stable_sort(passed.begin(), passed.end(),
-                   [](const LocalizationResult& x, const LocalizationResult& y) { return x.refine_fitness > y.refine_fitness; });
+  std::stable_sort(passed.begin(), passed.end(), [](const LocalizationResult& x, const LocalizationResult& y) {
+    return x.refine_fitness > y.refine_fitness;
+  });
   const Eigen::Vector3d best = passed.front().T_map_query * s;
   for (size_t i = 1; i < passed.size(); ++i) {
     const double apart_m = ((passed[i].T_map_query * s) - best).head<2>().norm();
-    if (apart_m > config_.search.min_separation_m && passed[i].refine_fitness >= passed.front().refine_fitness - c.fitness_margin) {
+    if (apart_m > config_.search.min_separation_m &&
+        passed[i].refine_fitness >= passed.front().refine_fitness - c.fitness_margin) {
       char why[160];
       std::snprintf(why, sizeof(why), "ambiguous: the scan fits places %.1f m apart (fitness %.3f and %.3f)", apart_m,
                     passed.front().refine_fitness, passed[i].refine_fitness);

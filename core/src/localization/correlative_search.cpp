@@ -35,13 +35,15 @@ class LikelihoodGrid {
     values_.assign(static_cast<size_t>(size_) * size_, 0.0f);
     std::vector<uint8_t> occupied(values_.size(), 0);
     for (const Point& p : map) {
-      const int64_t x = detail::fast_floor((p.x - origin_.x()) / cell_m), y = detail::fast_floor((p.y - origin_.y()) / cell_m);
+      const int64_t x = detail::fast_floor((p.x - origin_.x()) / cell_m),
+                    y = detail::fast_floor((p.y - origin_.y()) / cell_m);
       if (x >= 0 && y >= 0 && x < size_ && y < size_) occupied[static_cast<size_t>(x) * size_ + y] = 1;
     }
     constexpr int kSpread = 2;
     float kernel[2 * kSpread + 1][2 * kSpread + 1];
     for (int dx = -kSpread; dx <= kSpread; ++dx)
-      for (int dy = -kSpread; dy <= kSpread; ++dy) kernel[dx + kSpread][dy + kSpread] = static_cast<float>(std::exp(-0.5 * (dx * dx + dy * dy)));
+      for (int dy = -kSpread; dy <= kSpread; ++dy)
+        kernel[dx + kSpread][dy + kSpread] = static_cast<float>(std::exp(-0.5 * (dx * dx + dy * dy)));
     for (int x = 0; x < size_; ++x)
       for (int y = 0; y < size_; ++y) {
         if (!occupied[static_cast<size_t>(x) * size_ + y]) continue;
@@ -79,7 +81,8 @@ std::vector<Eigen::Vector3d> query_offsets(const PointCloud& query, const Eigen:
   for (const Point& p : query) {
     const Eigen::Vector3d d = p.xyz().cast<double>() - sensor;
     if (d.head<2>().norm() > reach_m) continue;
-    const uint64_t key = detail::pack_xy(detail::fast_floor(d.x() / c.resolution_m), detail::fast_floor(d.y() / c.resolution_m));
+    const uint64_t key =
+        detail::pack_xy(detail::fast_floor(d.x() / c.resolution_m), detail::fast_floor(d.y() / c.resolution_m));
     if (seen.insert(key, static_cast<uint32_t>(out.size())) == out.size()) out.push_back(d);
   }
   const size_t stride = (out.size() + c.max_query_points - 1) / static_cast<size_t>(c.max_query_points);
@@ -113,9 +116,11 @@ std::vector<SearchCandidate> correlative_search(const PointCloud& query_points, 
   best.assign(static_cast<size_t>(2 * steps + 1) * (2 * steps + 1), Peak{-1.0, 0, 0, 0});
   std::vector<Eigen::Vector2i> cells(offsets.size());
   for (int h = -turns; h <= turns; ++h) {
-    const Eigen::Matrix3d R = Eigen::AngleAxisd(h * c.angle_step_deg * M_PI / 180.0, Eigen::Vector3d::UnitZ()).toRotationMatrix() *
-                              T_map_query_prior.linear();
-    for (size_t i = 0; i < offsets.size(); ++i) cells[i] = grid.cell_of(sensor_map.head<2>() + (R * offsets[i]).head<2>()) - centre;
+    const Eigen::Matrix3d R =
+        Eigen::AngleAxisd(h * c.angle_step_deg * M_PI / 180.0, Eigen::Vector3d::UnitZ()).toRotationMatrix() *
+        T_map_query_prior.linear();
+    for (size_t i = 0; i < offsets.size(); ++i)
+      cells[i] = grid.cell_of(sensor_map.head<2>() + (R * offsets[i]).head<2>()) - centre;
     for (int dx = -steps; dx <= steps; ++dx)
       for (int dy = -steps; dy <= steps; ++dy) {
         if (dx * dx + dy * dy > steps * steps) continue;
@@ -132,13 +137,15 @@ std::vector<SearchCandidate> correlative_search(const PointCloud& query_points, 
     if (p.score <= 0.0 || out.size() >= static_cast<size_t>(c.candidates)) break;
     bool distinct = true;
     for (const SearchCandidate& o : out) {
-      const Eigen::Vector2d d = (o.T_map_query * sensor_query - sensor_map).head<2>() / cell - Eigen::Vector2d(p.dx, p.dy);
+      const Eigen::Vector2d d =
+          (o.T_map_query * sensor_query - sensor_map).head<2>() / cell - Eigen::Vector2d(p.dx, p.dy);
       distinct = distinct && d.norm() >= min_sep_cells;
     }
     if (!distinct) continue;
     // The candidate turns the prior about the vertical through its sensor, then moves it.
     Pose3d T = Pose3d::Identity();
-    T.linear() = Eigen::AngleAxisd(p.heading * c.angle_step_deg * M_PI / 180.0, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    T.linear() =
+        Eigen::AngleAxisd(p.heading * c.angle_step_deg * M_PI / 180.0, Eigen::Vector3d::UnitZ()).toRotationMatrix();
     T.translation() = sensor_map - T.linear() * sensor_map + Eigen::Vector3d(p.dx * cell, p.dy * cell, 0.0);
     out.push_back({T * T_map_query_prior, p.score / static_cast<double>(offsets.size())});
   }

@@ -18,8 +18,7 @@ std::vector<uint32_t> detail::subsample_indices(const PointCloud& scan, double l
     }
     return keep;
   }
-  const detail::GridFrame frame =
-      detail::GridFrame::fit(scan, leaf_m, false, "LocalCloudConfig.subsample_leaf_m");
+  const detail::GridFrame frame = detail::GridFrame::fit(scan, leaf_m, false, "LocalCloudConfig.subsample_leaf_m");
   detail::FlatHashMap seen(scan.size() / 4 + 1);
   for (size_t i = 0; i < scan.size(); ++i) {
     if (!detail::is_finite(scan[i])) continue;

@@ -3,8 +3,8 @@
 #include "localization/localizer_stages.h"
 #include "localization/segment_stages.h"
 
-#include <chrono>
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
@@ -67,7 +67,8 @@ PointCloud crop_cylinder(const PointCloud& cloud, const Eigen::Vector3d& center,
 
 PointCloud crop_elevation(const PointCloud& cloud, const Eigen::Vector3f& sensor, double min_deg, double max_deg) {
   // Compared as tangents: elevation e lies in [min, max] iff tan(min) * d <= dz <= tan(max) * d.
-  const double lo = std::tan(std::max(min_deg, -89.9) * M_PI / 180.0), hi = std::tan(std::min(max_deg, 89.9) * M_PI / 180.0);
+  const double lo = std::tan(std::max(min_deg, -89.9) * M_PI / 180.0),
+               hi = std::tan(std::min(max_deg, 89.9) * M_PI / 180.0);
   PointCloud out;
   out.reserve(cloud.size());
   for (const Point& p : cloud) {
@@ -140,7 +141,8 @@ void LocalizerConfig::validate() const {
   if (min_support < verification.min_inliers)
     throw std::invalid_argument("min_support must be at least verification.min_inliers");
   if (min_support_with_prior >= 0 && min_support_with_prior < verification.min_inliers)
-    throw std::invalid_argument("min_support_with_prior must be at least verification.min_inliers (or negative: unused)");
+    throw std::invalid_argument(
+        "min_support_with_prior must be at least verification.min_inliers (or negative: unused)");
   if (!(min_refine_fitness_with_prior <= 1.0f))
     throw std::invalid_argument("min_refine_fitness_with_prior must be <= 1 (negative: unused)");
   if (!(min_confidence_with_prior <= 1.0f))
@@ -154,12 +156,13 @@ namespace {
 
 // Segmentation (voxels, ground, clusters), then the description unless `describe` is false: the
 // tracking path describes only the segments it checks (detail::describe_pending).
-Segments segments_of_voxels(const PointCloud& voxels, const Eigen::Vector3f& sensor_position, const SegmentationConfig& config,
-                            const std::vector<uint32_t>* voxel_labels, ModuleTimings& t, const Deadline& deadline, bool describe) {
+Segments segments_of_voxels(const PointCloud& voxels, const Eigen::Vector3f& sensor_position,
+                            const SegmentationConfig& config, const std::vector<uint32_t>* voxel_labels,
+                            ModuleTimings& t, const Deadline& deadline, bool describe) {
   Stopwatch clock;
   std::vector<uint32_t> foreground_labels;
-  const PointCloud foreground = remove_ground(voxels, config.ground, sensor_position, voxel_labels,
-                                              voxel_labels ? &foreground_labels : nullptr);
+  const PointCloud foreground =
+      remove_ground(voxels, config.ground, sensor_position, voxel_labels, voxel_labels ? &foreground_labels : nullptr);
   t.ground_ms = clock.lap();
   if (deadline.passed()) return {};
   Segments segments = segment_cloud(foreground, config.segmenter, voxel_labels ? &foreground_labels : nullptr);
@@ -170,8 +173,9 @@ Segments segments_of_voxels(const PointCloud& voxels, const Eigen::Vector3f& sen
   return segments;
 }
 
-Segments segments_of_cloud(const PointCloud& cloud, const Eigen::Vector3f& sensor_position, const SegmentationConfig& config,
-                           const std::vector<uint32_t>* labels, ModuleTimings& t, const Deadline& deadline, bool describe) {
+Segments segments_of_cloud(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
+                           const SegmentationConfig& config, const std::vector<uint32_t>* labels, ModuleTimings& t,
+                           const Deadline& deadline, bool describe) {
   Stopwatch clock;
   std::vector<uint32_t> voxel_labels;
   const PointCloud voxels = voxel_filter(cloud, config.voxel, labels, labels ? &voxel_labels : nullptr);
@@ -183,8 +187,8 @@ Segments segments_of_cloud(const PointCloud& cloud, const Eigen::Vector3f& senso
 }  // namespace
 
 Segments extract_segments(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
-                          const SegmentationConfig& config, const std::vector<uint32_t>* labels,
-                          ModuleTimings* timings, const Deadline& deadline) {
+                          const SegmentationConfig& config, const std::vector<uint32_t>* labels, ModuleTimings* timings,
+                          const Deadline& deadline) {
   ModuleTimings local;
   return segments_of_cloud(cloud, sensor_position, config, labels, timings ? *timings : local, deadline, true);
 }
@@ -218,17 +222,18 @@ Localizer::Localizer(const LocalizerConfig& config, Segments targets,
 }
 
 Segments Localizer::segment_query(const PointCloud& cloud, const Eigen::Vector3f& sensor_position, CloudKind kind,
-                                   ModuleTimings& timings, const Deadline& deadline) const {
+                                  ModuleTimings& timings, const Deadline& deadline) const {
   Stopwatch clock;
-  Segments query = kind == CloudKind::kVoxelized
-                       ? extract_segments_from_voxels(cloud, sensor_position, config_.segmentation, nullptr, &timings, deadline)
-                       : extract_segments(cloud, sensor_position, config_.segmentation, nullptr, &timings, deadline);
+  Segments query =
+      kind == CloudKind::kVoxelized
+          ? extract_segments_from_voxels(cloud, sensor_position, config_.segmentation, nullptr, &timings, deadline)
+          : extract_segments(cloud, sensor_position, config_.segmentation, nullptr, &timings, deadline);
   timings.total_ms = clock.lap();
   return query;
 }
 
-LocalizationResult Localizer::localize(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
-                                       CloudKind kind, const PosePrior* prior, const Deadline& deadline) const {
+LocalizationResult Localizer::localize(const PointCloud& cloud, const Eigen::Vector3f& sensor_position, CloudKind kind,
+                                       const PosePrior* prior, const Deadline& deadline) const {
   check_prior(prior);
   if (deadline.passed()) return stopped({}, "before segmentation");  // it waited past it
   ModuleTimings timings;
@@ -249,9 +254,10 @@ LocalizationResult Localizer::localize_tracking_first(const PointCloud& cloud, c
   ModuleTimings timings;
   // Undescribed: tracking describes the few segments it checks, the fallback the rest.
   Stopwatch clock;
-  Segments query = kind == CloudKind::kVoxelized
-                       ? segments_of_voxels(cloud, sensor_position, config_.segmentation, nullptr, timings, deadline, false)
-                       : segments_of_cloud(cloud, sensor_position, config_.segmentation, nullptr, timings, deadline, false);
+  Segments query =
+      kind == CloudKind::kVoxelized
+          ? segments_of_voxels(cloud, sensor_position, config_.segmentation, nullptr, timings, deadline, false)
+          : segments_of_cloud(cloud, sensor_position, config_.segmentation, nullptr, timings, deadline, false);
   timings.total_ms = clock.lap();
   if (deadline.passed()) {
     LocalizationResult r;
@@ -300,7 +306,8 @@ LocalizationResult Localizer::localize_segments(Segments query, const Eigen::Vec
   if (deadline.passed()) return stopped(run.finish(), "before retrieval");
   if (targets_.empty()) return refuse(run.finish(), Refusal::kEmptyMap, "the map has no segments");
   using T = ModuleTimings;
-  if (prior && config_.registration.enabled && !run(&T::refine_ms, "during registration", [&] { return register_first(map, q, r); }))
+  if (prior && config_.registration.enabled &&
+      !run(&T::refine_ms, "during registration", [&] { return register_first(map, q, r); }))
     return run.finish();
   // Each stage runs when the one before went on.
   (void)(run(nullptr, nullptr, [&] { return enough_segments(map, r); }) &&
@@ -321,7 +328,8 @@ LocalizationResult Localizer::track(Segments query, const PointCloud& newest, co
   LocalizationResult r;
   r.query = std::move(query);
   r.query_segments = r.query.size();
-  detail::track_on_surfaces(newest, targets_, centroids_, classifier_.get(), surfaces_.get(), config_, prior, sensor_position, r);
+  detail::track_on_surfaces(newest, targets_, centroids_, classifier_.get(), surfaces_.get(), config_, prior,
+                            sensor_position, r);
   r.timings.refine_ms = r.timings.total_ms = clock.lap();
   return r;
 }

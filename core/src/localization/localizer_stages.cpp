@@ -1,8 +1,8 @@
 #include "localization/localizer_stages.h"
 
 #include "segmatch/core/localization/correlative_search.h"
-#include "segmatch/core/preprocess/preprocess.h"
 #include "segmatch/core/localization/registration.h"
+#include "segmatch/core/preprocess/preprocess.h"
 
 #include <Eigen/Geometry>
 
@@ -30,7 +30,6 @@ std::vector<int> targets_within_disc(const Segments& targets, const Eigen::Vecto
   return out;
 }
 
-
 // Points of the segments on one side of the matches, for the refinement: every stride-th point
 // of each segment (segment_point_stride).
 // With `source`, a target's points come from there (the same points, in the same order).
@@ -52,9 +51,7 @@ PointCloud gather(const Segments& segments, const Matches& inliers, bool query_s
   return out;
 }
 
-
 namespace {
-
 
 // Every query segment's points (every stride-th of each).
 PointCloud all_query_points(const Segments& query, size_t stride) {
@@ -119,22 +116,24 @@ void describe_pending(Segments& query, const Matches* pairs, const DescriptorCon
 }
 
 bool well_supported(const Segments& targets, const CentroidIndex& centroids, const RandomForestMatcher* classifier,
-                    const LocalizerConfig& config, const Pose3d& T_map_query, int min_matched_segments, LocalizationResult& r) {
+                    const LocalizerConfig& config, const Pose3d& T_map_query, int min_matched_segments,
+                    LocalizationResult& r) {
   const Support support = support_of(r.query, centroids, T_map_query, config.support_radius_m);
   r.support = support.count();
   describe_pending(r.query, &support.pairs, config.segmentation.descriptors);
   r.inliers = filter_matches(r.query, targets, support.pairs, config.matcher, classifier);
   const int min_support = config.registration.min_support;
-  if (r.support >= static_cast<size_t>(min_support) && r.inliers.size() >= static_cast<size_t>(min_matched_segments)) return true;
+  if (r.support >= static_cast<size_t>(min_support) && r.inliers.size() >= static_cast<size_t>(min_matched_segments))
+    return true;
   r.registration_refusal = RegistrationRefusal::kLowSupport;
-  r.registration_reason = std::to_string(r.support) + " query segments land on map segments under the registered pose, " +
-                          std::to_string(r.inliers.size()) + " of them matched (at least " + std::to_string(min_support) +
-                          " and " + std::to_string(min_matched_segments) + ")";
+  r.registration_reason = std::to_string(r.support) +
+                          " query segments land on map segments under the registered pose, " +
+                          std::to_string(r.inliers.size()) + " of them matched (at least " +
+                          std::to_string(min_support) + " and " + std::to_string(min_matched_segments) + ")";
   return false;
 }
 
-void localized_by(const RegistrationResult& reg, LocalizationResult& r,
-                  LocalizationMethod method) {
+void localized_by(const RegistrationResult& reg, LocalizationResult& r, LocalizationMethod method) {
   r.registration_refusal = RegistrationRefusal::kNone;
   r.registration_reason.clear();
   r.refine_fitness = reg.fitness;
@@ -158,7 +157,8 @@ bool within_wide_prior(const RegistrationResult& reg, const PosePrior& prior, co
   }
   if (reg.fitness < search.min_fitness) {
     refusal = RegistrationRefusal::kLowFitness;
-    reason = "registration fitness " + std::to_string(reg.fitness) + " below the wide prior's " + std::to_string(search.min_fitness);
+    reason = "registration fitness " + std::to_string(reg.fitness) + " below the wide prior's " +
+             std::to_string(search.min_fitness);
     return false;
   }
   return true;
@@ -174,8 +174,9 @@ struct ShiftedSupport {
 
 // The best support of the query segments under the pose shifted horizontally along `along` and
 // across it, by 1.5 m to range_m (0.5 m steps, a half support radius).
-ShiftedSupport best_shifted_support(const Segments& query, const CentroidIndex& centroids, const LocalizerConfig& config,
-                                    const Pose3d& T_map_query, Eigen::Vector3d along, double range_m) {
+ShiftedSupport best_shifted_support(const Segments& query, const CentroidIndex& centroids,
+                                    const LocalizerConfig& config, const Pose3d& T_map_query, Eigen::Vector3d along,
+                                    double range_m) {
   along.z() = 0.0;
   if (along.norm() < 1e-6) along = Eigen::Vector3d::UnitX();
   along.normalize();
@@ -200,14 +201,15 @@ std::string look_alike_beside(const Pose3d& T_map_query, const Eigen::Vector3d& 
   const ShiftedSupport shifted = best_shifted_support(r.query, centroids, config, T_map_query, along, range_m);
   if (static_cast<float>(shifted.support) < config.track.max_shifted_support * static_cast<float>(r.support)) return {};
   char why[200];
-  std::snprintf(why, sizeof(why), "the pose %.1f m away (%s the street) has %zu supporting segments, the chosen one %zu: "
-                "the objects fit elsewhere as well or better", shifted.offset_m, shifted.along ? "along" : "across",
-                shifted.support, r.support);
+  std::snprintf(why, sizeof(why),
+                "the pose %.1f m away (%s the street) has %zu supporting segments, the chosen one %zu: "
+                "the objects fit elsewhere as well or better",
+                shifted.offset_m, shifted.along ? "along" : "across", shifted.support, r.support);
   return why;
 }
 
-bool unambiguous_along_street(const RegistrationResult& reg, const CentroidIndex& centroids, const LocalizerConfig& config,
-                              double range_m, LocalizationResult& r) {
+bool unambiguous_along_street(const RegistrationResult& reg, const CentroidIndex& centroids,
+                              const LocalizerConfig& config, double range_m, LocalizationResult& r) {
   std::string why = look_alike_beside(reg.T_map_query, reg.weakest_axis, centroids, config, range_m, r);
   if (why.empty()) return true;
   r.registration_refusal = RegistrationRefusal::kAmbiguous;
@@ -219,8 +221,8 @@ double ambiguity_range_m(const LocalizerConfig& config, const PosePrior& prior) 
   return std::max<double>(config.track.ambiguity_range_m, 2.0 * prior.radius_m);
 }
 
-bool distinct_from(const std::vector<RegistrationResult>& passed, const RegistrationResult& reg, const Eigen::Vector3d& s,
-                   double min_separation_m) {
+bool distinct_from(const std::vector<RegistrationResult>& passed, const RegistrationResult& reg,
+                   const Eigen::Vector3d& s, double min_separation_m) {
   for (const RegistrationResult& p : passed)
     if ((p.T_map_query * s - reg.T_map_query * s).norm() < min_separation_m) return false;
   return true;
@@ -234,8 +236,10 @@ bool supported_globally(const LocalizerConfig& config, LocalizationResult& r) {
   const int floor = std::max({config.min_support, config.min_support_with_prior, config.registration.min_support});
   if (r.support >= static_cast<size_t>(floor)) return true;
   r.registration_refusal = RegistrationRefusal::kLowSupport;
-  r.registration_reason = std::to_string(r.support) + " query segments land on map segments under the registered pose (over a wide prior at least " +
-                          std::to_string(floor) + ")";
+  r.registration_reason =
+      std::to_string(r.support) +
+      " query segments land on map segments under the registered pose (over a wide prior at least " +
+      std::to_string(floor) + ")";
   return false;
 }
 
@@ -244,16 +248,16 @@ bool supported_globally(const LocalizerConfig& config, LocalizationResult& r) {
 // within the wide prior. One passing answers; two passing at distinct places is an ambiguity
 // (a street of look-alikes), refused.
 void register_over_wide_prior(const Segments& targets, const TargetPoints* source, const CentroidIndex& centroids,
-                              const RandomForestMatcher* classifier, const LocalizerConfig& config, const PosePrior& prior,
-                              const Eigen::Vector3d& s, LocalizationResult& r) {
+                              const RandomForestMatcher* classifier, const LocalizerConfig& config,
+                              const PosePrior& prior, const Eigen::Vector3d& s, LocalizationResult& r) {
   const CorrelativeSearchConfig& search = config.search;
   const size_t stride = segment_point_stride(r.query, static_cast<size_t>(config.refine.max_segment_points));
   const PointCloud query = all_query_points(r.query, stride);
   const Eigen::Vector3d centre = prior.T_map_query * s;
-  const PointCloud map = map_points_near(targets, source, centre, config.registration.window_m + prior.radius_m + kWindowMarginM);
-  const std::vector<SearchCandidate> peaks =
-      correlative_search(query, map, prior.T_map_query, s, prior.radius_m, prior.max_rotation_deg,
-                         config.registration.window_m, search);
+  const PointCloud map =
+      map_points_near(targets, source, centre, config.registration.window_m + prior.radius_m + kWindowMarginM);
+  const std::vector<SearchCandidate> peaks = correlative_search(
+      query, map, prior.T_map_query, s, prior.radius_m, prior.max_rotation_deg, config.registration.window_m, search);
   const float max_rmse_m = config.max_refine_rmse_voxels * config.segmentation.voxel.leaf_m;
   // A peak is within a cell and a heading step of a minimum: the registration from it may move
   // that far and a little more, no farther.
@@ -263,14 +267,17 @@ void register_over_wide_prior(const Segments& targets, const TargetPoints* sourc
   for (const SearchCandidate& peak : peaks) {
     LocalizationResult trial = r;
     const Eigen::Vector3d at = peak.T_map_query * s;
-    RegistrationResult reg = register_to_map(query, crop_cylinder(map, at, config.registration.window_m + kWindowMarginM),
-                                             peak.T_map_query, s, peak_radius_m, peak_turn_deg, max_rmse_m,
-                                             config.registration, config.refine, config.covariance);
+    RegistrationResult reg = register_to_map(
+        query, crop_cylinder(map, at, config.registration.window_m + kWindowMarginM), peak.T_map_query, s,
+        peak_radius_m, peak_turn_deg, max_rmse_m, config.registration, config.refine, config.covariance);
     if (reg.accepted()) within_wide_prior(reg, prior, s, search, reg.refusal, reg.reason);
     trial.registration_refusal = reg.refusal;
     trial.registration_reason = reg.reason;
-    if (reg.accepted() && well_supported(targets, centroids, classifier, config, reg.T_map_query, config.registration.min_matched_segments, trial) &&
-        supported_globally(config, trial) && unambiguous_along_street(reg, centroids, config, ambiguity_range_m(config, prior), trial)) {
+    if (reg.accepted() &&
+        well_supported(targets, centroids, classifier, config, reg.T_map_query,
+                       config.registration.min_matched_segments, trial) &&
+        supported_globally(config, trial) &&
+        unambiguous_along_street(reg, centroids, config, ambiguity_range_m(config, prior), trial)) {
       if (distinct_from(passed, reg, s, search.min_separation_m)) passed.push_back(reg);
       if (passed.size() == 1) last = trial;  // keep the first answer's support and inliers
       continue;
@@ -290,7 +297,8 @@ void register_over_wide_prior(const Segments& targets, const TargetPoints* sourc
     r.registration_reason = "no query or map points to search the prior with";
     return;
   }
-  r.registration_reason = "none of " + std::to_string(peaks.size()) + " search peaks registered: " + r.registration_reason;
+  r.registration_reason =
+      "none of " + std::to_string(peaks.size()) + " search peaks registered: " + r.registration_reason;
 }
 
 }  // namespace
@@ -309,17 +317,17 @@ void register_near_prior(const Segments& targets, const TargetPoints* source, co
     return register_over_wide_prior(targets, source, centroids, classifier, config, prior, s, r);
   // A prior too wide to start from is refused before any point is gathered (register_to_map
   // checks the radius first and says why).
-  const RegistrationResult reg =
-      register_to_map(wide ? PointCloud{} : all_query_points(r.query, stride),
-                      wide ? PointCloud{} : map_points_near(targets, source, prior.T_map_query * s, reach), prior.T_map_query, s,
-                      prior.radius_m, prior.max_rotation_deg, max_rmse_m, config.registration, config.refine,
-                      config.covariance);
+  const RegistrationResult reg = register_to_map(
+      wide ? PointCloud{} : all_query_points(r.query, stride),
+      wide ? PointCloud{} : map_points_near(targets, source, prior.T_map_query * s, reach), prior.T_map_query, s,
+      prior.radius_m, prior.max_rotation_deg, max_rmse_m, config.registration, config.refine, config.covariance);
   r.registration_refusal = reg.refusal;
   r.registration_reason = reg.reason;
   r.refine_fitness = reg.fitness;
   r.refine_rmse_m = reg.rmse_m;
   if (!reg.accepted() ||
-      !well_supported(targets, centroids, classifier, config, reg.T_map_query, config.registration.min_matched_segments, r) ||
+      !well_supported(targets, centroids, classifier, config, reg.T_map_query, config.registration.min_matched_segments,
+                      r) ||
       !unambiguous_along_street(reg, centroids, config, ambiguity_range_m(config, prior), r))
     return;
   localized_by(reg, r);
@@ -340,7 +348,8 @@ void refine_to_newest(const PointCloud& newest, const Segments& targets, const T
   if (!surfaces) points = remove_ground(points, config.segmentation.ground, sensor);
   if (points.size() < static_cast<size_t>(c.min_points)) {
     r.newest_refusal = RegistrationRefusal::kFewPoints;
-    r.newest_reason = std::to_string(points.size()) + " newest points near the sensor (at least " + std::to_string(c.min_points) + ")";
+    r.newest_reason = std::to_string(points.size()) + " newest points near the sensor (at least " +
+                      std::to_string(c.min_points) + ")";
     return;
   }
   const Eigen::Vector3d centre = r.T_map_query * s;
@@ -353,20 +362,23 @@ void refine_to_newest(const PointCloud& newest, const Segments& targets, const T
   settle.min_query_points = c.min_points;
   settle.min_fitness = c.min_fitness;
   const float max_rmse_m = config.max_refine_rmse_voxels * config.segmentation.voxel.leaf_m;
-  const RegistrationResult now = register_to_map(points, map, r.T_map_query, s, c.max_shift_m, c.max_turn_deg,
-                                                 std::max(max_rmse_m, c.leaf_m), settle, config.refine, config.covariance);
+  const RegistrationResult now =
+      register_to_map(points, map, r.T_map_query, s, c.max_shift_m, c.max_turn_deg, std::max(max_rmse_m, c.leaf_m),
+                      settle, config.refine, config.covariance);
   r.newest_refusal = now.refusal;
   r.newest_reason = now.reason;
   // Enough newest points were given (above), so too few points here means no layer near the
   // sensor; a registration that ended off the layer (low fitness, whether it settled or was
   // still being dragged) found no place where they lie on it.
-  const bool off_map = now.refusal == RegistrationRefusal::kFewPoints || (!now.accepted() && now.fitness < c.min_fitness);
+  const bool off_map =
+      now.refusal == RegistrationRefusal::kFewPoints || (!now.accepted() && now.fitness < c.min_fitness);
   if (surfaces && c.refuse_off_map && off_map) {
     char fit[96];
     std::snprintf(fit, sizeof(fit), "fitness %.2f, at least %.2f", now.fitness, c.min_fitness);
     r = refuse(std::move(r), Refusal::kOffMap,
                std::string("the vehicle's newest scans do not lie on the map's surfaces at the answer (") +
-                   (now.refusal == RegistrationRefusal::kFewPoints ? now.reason : fit) + "): the sensor sees what the map never saw");
+                   (now.refusal == RegistrationRefusal::kFewPoints ? now.reason : fit) +
+                   "): the sensor sees what the map never saw");
     return;
   }
   // They lie on the layer, but settle farther from the answer than max_shift_m or turned past

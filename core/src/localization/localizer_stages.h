@@ -41,14 +41,16 @@ void refine_recent_window(const WindowPoints& points, const Eigen::Vector3f& sen
 // describing it): described here, the ones listed in `pairs` (those a pose puts on map
 // segments) or, with pairs null, every one. A segment's descriptor depends on its own points
 // (describe_segments), so describing later gives the same descriptors and answers.
-void describe_pending(Segments& query, const Matches* pairs, const DescriptorConfig& config, const Deadline& deadline = {});
+void describe_pending(Segments& query, const Matches* pairs, const DescriptorConfig& config,
+                      const Deadline& deadline = {});
 
 // The segment check of a registered pose: enough query segments land on map segments
 // (RegistrationConfig::min_support), and at least min_matched_segments of those pairs pass the
 // matcher (the registration's floor, or the surface layer's: SurfaceTrackingConfig). Fills r's
 // support and inliers; false, with r's registration refusal, when too few.
 bool well_supported(const Segments& targets, const CentroidIndex& centroids, const RandomForestMatcher* classifier,
-                    const LocalizerConfig& config, const Pose3d& T_map_query, int min_matched_segments, LocalizationResult& r);
+                    const LocalizerConfig& config, const Pose3d& T_map_query, int min_matched_segments,
+                    LocalizationResult& r);
 
 // A pose registered from a correlative search peak still answers the wide prior it came from:
 // inside its disc and heading tolerance, with the search's fitness floor
@@ -68,8 +70,8 @@ std::string look_alike_beside(const Pose3d& T_map_query, const Eigen::Vector3d& 
 // along a street of look-alike facades fits them: fitness 0.89 on the simulated demo city, a
 // prior 6 m off), while the objects fit at the truth, where their support is far higher. False,
 // with r's registration refusal (kAmbiguous) and reason, when a look-alike is beside it.
-bool unambiguous_along_street(const RegistrationResult& reg, const CentroidIndex& centroids, const LocalizerConfig& config,
-                              double range_m, LocalizationResult& r);
+bool unambiguous_along_street(const RegistrationResult& reg, const CentroidIndex& centroids,
+                              const LocalizerConfig& config, double range_m, LocalizationResult& r);
 // How far from an answer look-alikes are sought: SurfaceTrackingConfig::ambiguity_range_m, or
 // the prior's diameter when wider (every pose the prior allows, and the truth just beyond it).
 double ambiguity_range_m(const LocalizerConfig& config, const PosePrior& prior);
@@ -90,12 +92,12 @@ std::vector<PoseHypothesis> within_prior(std::vector<PoseHypothesis> hypotheses,
 // a local cloud driven along one): the principal axis of their centroids.
 Eigen::Vector3d spread_axis(const Segments& query, const Pose3d& T_map_query);
 // Per query segment, the map segments lying where the prior, within its tolerances, puts it.
-std::vector<std::vector<int>> targets_near_prior(const Segments& query, const Segments& targets, const Eigen::Vector3f& sensor,
-                                                 const PosePrior& prior);
+std::vector<std::vector<int>> targets_near_prior(const Segments& query, const Segments& targets,
+                                                 const Eigen::Vector3f& sensor, const PosePrior& prior);
 
 // Whether reg's sensor lies at least min_separation_m from every pose already passed.
-bool distinct_from(const std::vector<RegistrationResult>& passed, const RegistrationResult& reg, const Eigen::Vector3d& s,
-                   double min_separation_m);
+bool distinct_from(const std::vector<RegistrationResult>& passed, const RegistrationResult& reg,
+                   const Eigen::Vector3d& s, double min_separation_m);
 
 // A registration's answer as r's: localized by `method`, its pose, covariance and fitness.
 void localized_by(const RegistrationResult& reg, LocalizationResult& r,
@@ -114,8 +116,9 @@ void register_near_prior(const Segments& targets, const TargetPoints* source, co
 // localized by the newest scans' registration around the prior, or refused with
 // Refusal::kTrackingLost.
 void track_on_surfaces(const PointCloud& newest, const Segments& targets, const CentroidIndex& centroids,
-                       const RandomForestMatcher* classifier, const MapSurfaces* surfaces, const LocalizerConfig& config,
-                       const PosePrior& prior, const Eigen::Vector3f& sensor, LocalizationResult& r);
+                       const RandomForestMatcher* classifier, const MapSurfaces* surfaces,
+                       const LocalizerConfig& config, const PosePrior& prior, const Eigen::Vector3f& sensor,
+                       LocalizationResult& r);
 
 void refine_to_newest(const PointCloud& newest, const Segments& targets, const TargetPoints* source,
                       const MapSurfaces* surfaces, const LocalizerConfig& config, const Eigen::Vector3f& sensor,

@@ -18,11 +18,13 @@ void PlaceRecognitionConfig::validate() const {
   detail::require_positive(max_radius_m, owner, "max_radius_m");
   detail::require_non_negative(min_height_m, owner, "min_height_m");
   detail::require_positive(max_height_m, owner, "max_height_m");
-  if (!(max_height_m > min_height_m)) throw std::invalid_argument("PlaceRecognitionConfig.max_height_m must exceed min_height_m");
+  if (!(max_height_m > min_height_m))
+    throw std::invalid_argument("PlaceRecognitionConfig.max_height_m must exceed min_height_m");
   detail::require_positive(block_height_m, owner, "block_height_m");
   detail::require_positive(place_spacing_m, owner, "place_spacing_m");
   detail::require_positive(lateral_step_m, owner, "lateral_step_m");
-  if (lateral_steps < 0 || lateral_steps > 10) throw std::invalid_argument("PlaceRecognitionConfig.lateral_steps must be in 0..10");
+  if (lateral_steps < 0 || lateral_steps > 10)
+    throw std::invalid_argument("PlaceRecognitionConfig.lateral_steps must be in 0..10");
   if (shortlist < 1) throw std::invalid_argument("PlaceRecognitionConfig.shortlist must be >= 1");
   if (candidates < 1 || candidates > shortlist)
     throw std::invalid_argument("PlaceRecognitionConfig.candidates must be in 1..shortlist");
@@ -34,8 +36,10 @@ void PlaceRecognitionConfig::validate() const {
   detail::require_fraction(min_fitness, owner, "min_fitness");
   detail::require_non_negative(max_shifted_support, owner, "max_shifted_support", "(0: off)");
   detail::require_fraction(fitness_margin, owner, "fitness_margin");
-  if (!(map_elevation_min_deg >= -90.0f && map_elevation_max_deg <= 90.0f && map_elevation_min_deg < map_elevation_max_deg))
-    throw std::invalid_argument("PlaceRecognitionConfig.map_elevation_min_deg and map_elevation_max_deg must lie in -90..90, min below max");
+  if (!(map_elevation_min_deg >= -90.0f && map_elevation_max_deg <= 90.0f &&
+        map_elevation_min_deg < map_elevation_max_deg))
+    throw std::invalid_argument(
+        "PlaceRecognitionConfig.map_elevation_min_deg and map_elevation_max_deg must lie in -90..90, min below max");
   detail::require_non_negative(elevation_excess_deg, owner, "elevation_excess_deg");
   detail::require_non_negative(elevation_margin_deg, owner, "elevation_margin_deg");
 }
@@ -95,8 +99,10 @@ PlaceDescriptor describe_place(const PointCloud& points, const Eigen::Vector3d& 
       float block = 0.0f;
       for (int ring = 0; ring < d.rings; ++ring) {
         float& cell = d.cells[static_cast<size_t>(ring) * d.sectors + sector];
-        if (cell <= block) cell = 0.0f;
-        else if (cell >= config.block_height_m) block = std::max(block, cell);
+        if (cell <= block)
+          cell = 0.0f;
+        else if (cell >= config.block_height_m)
+          block = std::max(block, cell);
       }
     }
   for (int ring = 0; ring < d.rings; ++ring) {
@@ -118,7 +124,8 @@ PlaceDistance place_distance(const PlaceDescriptor& query, const PlaceDescriptor
     std::vector<uint8_t> occupied(static_cast<size_t>(S), 0);
     for (int s = 0; s < S; ++s) {
       double norm2 = 0.0;
-      for (int r = 0; r < R; ++r) norm2 += double(d.cells[static_cast<size_t>(r) * S + s]) * d.cells[static_cast<size_t>(r) * S + s];
+      for (int r = 0; r < R; ++r)
+        norm2 += double(d.cells[static_cast<size_t>(r) * S + s]) * d.cells[static_cast<size_t>(r) * S + s];
       if (norm2 <= 0.0) continue;
       occupied[static_cast<size_t>(s)] = 1;
       const double inv = 1.0 / std::sqrt(norm2);
@@ -161,7 +168,8 @@ void PlaceIndex::add(const Pose3d& T_map_sensor, PlaceDescriptor descriptor) {
   descriptors_.push_back(std::move(descriptor));
 }
 
-std::vector<PlaceCandidate> PlaceIndex::query(const PlaceDescriptor& descriptor, const Eigen::Vector3d& sensor_query) const {
+std::vector<PlaceCandidate> PlaceIndex::query(const PlaceDescriptor& descriptor,
+                                              const Eigen::Vector3d& sensor_query) const {
   // Ring keys first (rotation invariant, a few floats a place), then the full comparison.
   std::vector<std::pair<double, size_t>> by_key;
   by_key.reserve(descriptors_.size());
@@ -176,7 +184,8 @@ std::vector<PlaceCandidate> PlaceIndex::query(const PlaceDescriptor& descriptor,
   const size_t shortlist = std::min(by_key.size(), static_cast<size_t>(config_.shortlist));
   std::partial_sort(by_key.begin(), by_key.begin() + static_cast<std::ptrdiff_t>(shortlist), by_key.end());
   std::vector<std::pair<PlaceDistance, size_t>> scored;
-  for (size_t i = 0; i < shortlist; ++i) scored.emplace_back(place_distance(descriptor, descriptors_[by_key[i].second]), by_key[i].second);
+  for (size_t i = 0; i < shortlist; ++i)
+    scored.emplace_back(place_distance(descriptor, descriptors_[by_key[i].second]), by_key[i].second);
   std::sort(scored.begin(), scored.end(), [](const auto& a, const auto& b) {
     return a.first.distance != b.first.distance ? a.first.distance < b.first.distance : a.second < b.second;
   });

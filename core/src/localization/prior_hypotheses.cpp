@@ -12,8 +12,8 @@
 namespace segmatch {
 namespace detail {
 
-Ranked rank_by_support(const std::vector<PoseHypothesis>& hypotheses, const Segments& query,
-                       const CentroidIndex& map, float radius_m) {
+Ranked rank_by_support(const std::vector<PoseHypothesis>& hypotheses, const Segments& query, const CentroidIndex& map,
+                       float radius_m) {
   Ranked r;
   for (size_t h = 0; h < hypotheses.size(); ++h) {
     Support s = support_of(query, map, hypotheses[h].T_target_query, radius_m);
@@ -76,7 +76,8 @@ std::vector<std::vector<int>> targets_near_prior(const Segments& query, const Se
     const Eigen::Vector3d expected = prior.T_map_query * q;
     const double slack = prior.radius_m + angle * (q - s).norm();
     for (int t : nearby)
-      if ((targets[static_cast<size_t>(t)].centroid.cast<double>() - expected).norm() <= slack) allowed[qi].push_back(t);
+      if ((targets[static_cast<size_t>(t)].centroid.cast<double>() - expected).norm() <= slack)
+        allowed[qi].push_back(t);
   }
   return allowed;
 }

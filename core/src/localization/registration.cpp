@@ -1,7 +1,7 @@
 #include "segmatch/core/localization/registration.h"
 
 #include "segmatch/core/localization/localizer.h"  // crop_cylinder
-#include "segmatch/core/preprocess/preprocess.h"  // voxel_filter
+#include "segmatch/core/preprocess/preprocess.h"   // voxel_filter
 
 #include "detail/config_checks.h"
 
@@ -84,10 +84,12 @@ float weakest_axis_share(const RefineResult& refined, Eigen::Vector3d* axis) {
   const Matrix6d& A = refined.information;
   // Schur complement: the translation information once rotation is free to absorb what it can.
   const Eigen::Matrix3d Arr = A.topLeftCorner<3, 3>() + 1e-9 * Eigen::Matrix3d::Identity();
-  const Eigen::Matrix3d S = A.bottomRightCorner<3, 3>() - A.bottomLeftCorner<3, 3>() * Arr.ldlt().solve(A.topRightCorner<3, 3>());
+  const Eigen::Matrix3d S =
+      A.bottomRightCorner<3, 3>() - A.bottomLeftCorner<3, 3>() * Arr.ldlt().solve(A.topRightCorner<3, 3>());
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(0.5 * (S + S.transpose()));
   if (axis) *axis = solver.eigenvectors().col(0);
-  return static_cast<float>(std::max(0.0, solver.eigenvalues()(0)) / static_cast<double>(refined.plane_correspondences));
+  return static_cast<float>(std::max(0.0, solver.eigenvalues()(0)) /
+                            static_cast<double>(refined.plane_correspondences));
 }
 
 namespace {
@@ -120,10 +122,13 @@ RegistrationResult register_to_map(const PointCloud& query_points, const PointCl
   RegistrationResult r;
   r.T_map_query = T_map_query_prior;
   if (prior_radius_m > config.max_prior_radius_m)
-    return refused(r, RegistrationRefusal::kWidePrior, fmt("the prior's radius %.1f m exceeds %.1f m", prior_radius_m, config.max_prior_radius_m));
+    return refused(r, RegistrationRefusal::kWidePrior,
+                   fmt("the prior's radius %.1f m exceeds %.1f m", prior_radius_m, config.max_prior_radius_m));
   const PointCloud window = crop_cylinder(query_points, sensor_query, config.window_m);
   if (window.size() < static_cast<size_t>(config.min_query_points) || map_points.empty())
-    return refused(r, RegistrationRefusal::kFewPoints, fmt("%.0f query points in the window and %.0f map points near the prior", double(window.size()), double(map_points.size())));
+    return refused(r, RegistrationRefusal::kFewPoints,
+                   fmt("%.0f query points in the window and %.0f map points near the prior", double(window.size()),
+                       double(map_points.size())));
   const Eigen::Vector3d pivot_prior = T_map_query_prior * sensor_query;
   RefineConfig coarse = refine, fine_config = refine;
   coarse.max_correspondence_m = std::max(config.coarse_correspondence_m, refine.max_correspondence_m);
@@ -139,8 +144,8 @@ RegistrationResult register_to_map(const PointCloud& query_points, const PointCl
   }
   const PointCloud& coarse_map = config.coarse_leaf_m > 0.0f ? thinned : map_points;
   const Pose3d start = config.coarse_stage
-                          ? refine_alignment(window, coarse_map, T_map_query_prior, coarse, pivot_prior).T_target_query
-                          : T_map_query_prior;
+                           ? refine_alignment(window, coarse_map, T_map_query_prior, coarse, pivot_prior).T_target_query
+                           : T_map_query_prior;
   const RefineResult fine = refine_alignment(window, map_points, start, fine_config, start * sensor_query);
   r.T_map_query = fine.T_target_query;
   r.fitness = fine.fitness;
@@ -149,20 +154,29 @@ RegistrationResult register_to_map(const PointCloud& query_points, const PointCl
   r.covariance = pose_covariance(fine, covariance);
   // Still moving when the iterations ran out: a prior outside the basin, being dragged along.
   if (!fine.converged && fine.last_step_m > config.max_last_step_m)
-    return refused(r, RegistrationRefusal::kNotConverged, fmt("registration still moving %.3f m per iteration after %.0f iterations", fine.last_step_m, double(fine.iterations)));
+    return refused(r, RegistrationRefusal::kNotConverged,
+                   fmt("registration still moving %.3f m per iteration after %.0f iterations", fine.last_step_m,
+                       double(fine.iterations)));
   if (fine.fitness < config.min_fitness)
-    return refused(r, RegistrationRefusal::kLowFitness, fmt("registration fitness %.2f below %.2f", fine.fitness, config.min_fitness));
+    return refused(r, RegistrationRefusal::kLowFitness,
+                   fmt("registration fitness %.2f below %.2f", fine.fitness, config.min_fitness));
   if (max_rmse_m > 0.0f && fine.rmse_m > max_rmse_m)
-    return refused(r, RegistrationRefusal::kHighRmse, fmt("registered surfaces %.3f m apart (RMS, at most %.3f)", fine.rmse_m, max_rmse_m));
+    return refused(r, RegistrationRefusal::kHighRmse,
+                   fmt("registered surfaces %.3f m apart (RMS, at most %.3f)", fine.rmse_m, max_rmse_m));
   const double moved = (fine.T_target_query * sensor_query - pivot_prior).norm();
   if (moved > prior_radius_m)
-    return refused(r, RegistrationRefusal::kOutsidePrior, fmt("registration moved the sensor %.1f m from the prior (radius %.1f m)", moved, prior_radius_m));
+    return refused(r, RegistrationRefusal::kOutsidePrior,
+                   fmt("registration moved the sensor %.1f m from the prior (radius %.1f m)", moved, prior_radius_m));
   const double turned_deg =
       Eigen::AngleAxisd(fine.T_target_query.linear() * T_map_query_prior.linear().transpose()).angle() * 180.0 / M_PI;
   if (turned_deg > prior_rotation_deg)
-    return refused(r, RegistrationRefusal::kOutsidePrior, fmt("registration turned the sensor %.1f deg from the prior (at most %.1f)", turned_deg, prior_rotation_deg));
+    return refused(
+        r, RegistrationRefusal::kOutsidePrior,
+        fmt("registration turned the sensor %.1f deg from the prior (at most %.1f)", turned_deg, prior_rotation_deg));
   if (r.weakest_axis_share < config.min_axis_share || r.covariance.isZero())
-    return refused(r, RegistrationRefusal::kDegenerate, fmt("degenerate: %.3f of the surface information along the weakest axis (at least %.3f)", r.weakest_axis_share, config.min_axis_share));
+    return refused(r, RegistrationRefusal::kDegenerate,
+                   fmt("degenerate: %.3f of the surface information along the weakest axis (at least %.3f)",
+                       r.weakest_axis_share, config.min_axis_share));
   r.refusal = RegistrationRefusal::kNone;
   return r;
 }

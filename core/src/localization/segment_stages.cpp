@@ -47,7 +47,8 @@ double StageRunner::lap() {
 }
 
 LocalizationResult StageRunner::finish() {
-  r_.timings.total_ms = before_ms_ + std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start_).count();
+  r_.timings.total_ms =
+      before_ms_ + std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start_).count();
   return std::move(r_);
 }
 
@@ -65,15 +66,17 @@ Flow register_first(const SegmentMap& map, const SegmentQuery& q, LocalizationRe
 Flow enough_segments(const SegmentMap& map, LocalizationResult& r) {
   const int min_inliers = map.config.verification.min_inliers;
   if (r.query.size() >= static_cast<size_t>(min_inliers)) return Flow::kGoOn;
-  return refused(r, Refusal::kTooFewSegments, "only " + std::to_string(r.query.size()) + " segments in the query cloud (at least " +
-                                                  std::to_string(min_inliers) + " needed)");
+  return refused(r, Refusal::kTooFewSegments,
+                 "only " + std::to_string(r.query.size()) + " segments in the query cloud (at least " +
+                     std::to_string(min_inliers) + " needed)");
 }
 
 // Paper III-D: k-NN candidates in feature space (with a prior, among the map segments it
 // allows) ...
 Flow retrieve(const SegmentMap& map, const SegmentQuery& q, LocalizationResult& r, SegmentWork& w) {
   w.candidates = q.prior ? retrieve_candidates_among(r.query, map.targets, map.index.scaling(),
-                                                     targets_near_prior(r.query, map.targets, q.sensor, *q.prior), map.config.retrieval)
+                                                     targets_near_prior(r.query, map.targets, q.sensor, *q.prior),
+                                                     map.config.retrieval)
                          : retrieve_candidates(r.query, map.index, map.config.retrieval);
   r.candidates = w.candidates.size();
   return Flow::kGoOn;
@@ -90,8 +93,9 @@ Flow classify(const SegmentMap& map, LocalizationResult& r, SegmentWork& w) {
 Flow verify(const SegmentMap& map, const Deadline& deadline, LocalizationResult& r, SegmentWork& w) {
   VerificationResult v = verify_matches(r.query, map.targets, w.matches, map.config.verification, deadline);
   if (!v.found)
-    return refused(r, Refusal::kNoConsistentMatches, "no geometrically consistent set of " + std::to_string(map.config.verification.min_inliers) +
-                                                         " matches among " + std::to_string(w.matches.size()));
+    return refused(r, Refusal::kNoConsistentMatches,
+                   "no geometrically consistent set of " + std::to_string(map.config.verification.min_inliers) +
+                       " matches among " + std::to_string(w.matches.size()));
   w.hypotheses = std::move(v.hypotheses);
   return Flow::kGoOn;
 }
@@ -100,8 +104,9 @@ Flow apply_prior(const SegmentQuery& q, LocalizationResult& r, SegmentWork& w) {
   const size_t verified = w.hypotheses.size();
   w.hypotheses = within_prior(std::move(w.hypotheses), q.sensor, q.prior);
   if (!w.hypotheses.empty()) return Flow::kGoOn;
-  return refused(r, Refusal::kOutsidePrior, "none of the " + std::to_string(verified) + " verified poses is within " +
-                                                std::to_string(q.prior->radius_m) + " m of the prior");
+  return refused(r, Refusal::kOutsidePrior,
+                 "none of the " + std::to_string(verified) + " verified poses is within " +
+                     std::to_string(q.prior->radius_m) + " m of the prior");
 }
 
 // Beyond the paper: the hypothesis that explains most of the query wins, if unambiguous.
@@ -116,11 +121,13 @@ Flow rank(const SegmentMap& map, const SegmentQuery& q, LocalizationResult& r, S
   r.T_map_query = best.T_target_query;
   const int min_support = floors_of(c, q.prior != nullptr).min_support;
   if (r.support < static_cast<size_t>(min_support))
-    return refused(r, Refusal::kLowSupport, "only " + std::to_string(r.support) + " query segments agree with the best pose (at least " +
-                                                std::to_string(min_support) + " needed)");
+    return refused(r, Refusal::kLowSupport,
+                   "only " + std::to_string(r.support) + " query segments agree with the best pose (at least " +
+                       std::to_string(min_support) + " needed)");
   if (static_cast<float>(r.runner_up_support) >= c.max_ambiguity * static_cast<float>(r.support))
-    return refused(r, Refusal::kAmbiguous, "ambiguous: two distinct poses are supported by " + std::to_string(r.support) + " and " +
-                                               std::to_string(r.runner_up_support) + " query segments");
+    return refused(r, Refusal::kAmbiguous,
+                   "ambiguous: two distinct poses are supported by " + std::to_string(r.support) + " and " +
+                       std::to_string(r.runner_up_support) + " query segments");
   // With a prior, retrieval looked only where the prior puts each segment: a look-alike just
   // beyond it was never a hypothesis. A street of poles 6 m apart under a prior 6 m off and 3 m
   // wide was answered one pole off; the objects fit the truth as well (look_alike_beside).
@@ -141,19 +148,23 @@ Flow refine(const SegmentMap& map, const SegmentQuery& q, LocalizationResult& r,
   const size_t stride = segment_point_stride(r.query, static_cast<size_t>(c.refine.max_segment_points));
   const PointCloud query_points = gather(r.query, w.ranked.support.pairs, true, stride);
   const PointCloud target_points = gather(map.targets, w.ranked.support.pairs, false, 1, map.points);
-  const RefineResult refined = refine_alignment(query_points, target_points, r.T_map_query, c.refine, r.T_map_query * q.sensor.cast<double>());
+  const RefineResult refined =
+      refine_alignment(query_points, target_points, r.T_map_query, c.refine, r.T_map_query * q.sensor.cast<double>());
   r.refine_fitness = refined.fitness;
   r.refine_rmse_m = refined.rmse_m;
   if (refined.fitness < min_fitness)
-    return refused(r, Refusal::kSurfacesDisagree, "matched segments' surfaces disagree (fitness " + std::to_string(refined.fitness) + ")");
+    return refused(r, Refusal::kSurfacesDisagree,
+                   "matched segments' surfaces disagree (fitness " + std::to_string(refined.fitness) + ")");
   const float max_rmse_m = c.max_refine_rmse_voxels * c.segmentation.voxel.leaf_m;
   if (max_rmse_m > 0.0f && refined.rmse_m > max_rmse_m)
-    return refused(r, Refusal::kSurfacesDisagree, "matched segments' surfaces are " + std::to_string(refined.rmse_m) +
-                                                      " m apart (RMS, at most " + std::to_string(max_rmse_m) + ")");
+    return refused(r, Refusal::kSurfacesDisagree,
+                   "matched segments' surfaces are " + std::to_string(refined.rmse_m) + " m apart (RMS, at most " +
+                       std::to_string(max_rmse_m) + ")");
   r.T_map_query = refined.T_target_query;
   r.covariance = pose_covariance(refined, c.covariance);
   if (c.refine.recent_window_m > 0.0f)
-    refine_recent_window(window_points(r.query, map.targets, map.points, q.sensor.cast<double>(), r.T_map_query, stride, c.refine.recent_window_m),
+    refine_recent_window(window_points(r.query, map.targets, map.points, q.sensor.cast<double>(), r.T_map_query, stride,
+                                       c.refine.recent_window_m),
                          q.sensor, min_fitness, c.refine, c.covariance, r);
   return Flow::kGoOn;
 }

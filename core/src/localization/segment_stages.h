@@ -58,7 +58,8 @@ LocalizationResult stopped(LocalizationResult r, const char* when);
 // did not answer.
 class StageRunner {
  public:
-  StageRunner(LocalizationResult& r, const Deadline& deadline) : r_(r), deadline_(deadline), before_ms_(r.timings.total_ms) {}
+  StageRunner(LocalizationResult& r, const Deadline& deadline)
+      : r_(r), deadline_(deadline), before_ms_(r.timings.total_ms) {}
 
   // False when the query ends here (r is then final). module: where the stage's time counts
   // (null: nowhere); during: the stage's name for a deadline refusal (null: not checked).

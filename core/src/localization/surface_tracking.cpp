@@ -5,8 +5,8 @@
 #include "localization/localizer_stages.h"
 
 #include "segmatch/core/localization/correlative_search.h"
-#include "segmatch/core/preprocess/preprocess.h"
 #include "segmatch/core/localization/registration.h"
+#include "segmatch/core/preprocess/preprocess.h"
 
 #include <algorithm>
 #include <cmath>
@@ -22,8 +22,9 @@ namespace {
 // (SurfaceTrackingConfig): the fine stage alone from the prior, onto the layer within the reach
 // of a pose that moves at most fine_first_m; both stages onto the wider disc a prior of this
 // radius needs when that does not pass every gate.
-RegistrationResult register_on_layer(const PointCloud& points, const MapSurfaces& surfaces, const LocalizerConfig& config,
-                                     const PosePrior& prior, const Eigen::Vector3d& s, bool* near_prior) {
+RegistrationResult register_on_layer(const PointCloud& points, const MapSurfaces& surfaces,
+                                     const LocalizerConfig& config, const PosePrior& prior, const Eigen::Vector3d& s,
+                                     bool* near_prior) {
   *near_prior = false;
   const SurfaceTrackingConfig& c = config.track;
   const Eigen::Vector3d centre = prior.T_map_query * s;
@@ -72,13 +73,15 @@ bool track_from(const PointCloud& points, const Segments& targets, const Centroi
   // (SurfaceTrackingConfig::min_matched_segments_near_prior) first; the full count otherwise.
   const int fewer = std::min(c.min_matched_segments_near_prior, c.min_matched_segments);
   if (!well_supported(targets, centroids, classifier, config, reg.T_map_query, fewer, r)) return false;
-  const bool dense = c.min_support_for_fewer_matched > 0 && r.support >= static_cast<size_t>(c.min_support_for_fewer_matched);
+  const bool dense =
+      c.min_support_for_fewer_matched > 0 && r.support >= static_cast<size_t>(c.min_support_for_fewer_matched);
   if (!near_prior && !dense && r.inliers.size() < static_cast<size_t>(c.min_matched_segments)) {
     r.registration_refusal = RegistrationRefusal::kLowSupport;
-    r.registration_reason = std::to_string(r.support) + " query segments land on map segments under the registered pose, " +
-                            std::to_string(r.inliers.size()) + " of them matched (at least " + std::to_string(c.min_matched_segments) +
-                            " matched, or " + std::to_string(fewer) + " from " + std::to_string(c.min_support_for_fewer_matched) +
-                            " landing)";
+    r.registration_reason = std::to_string(r.support) +
+                            " query segments land on map segments under the registered pose, " +
+                            std::to_string(r.inliers.size()) + " of them matched (at least " +
+                            std::to_string(c.min_matched_segments) + " matched, or " + std::to_string(fewer) +
+                            " from " + std::to_string(c.min_support_for_fewer_matched) + " landing)";
     return false;
   }
   return unambiguous_along_street(reg, centroids, config, ambiguity_range_m, r);
@@ -90,16 +93,18 @@ bool track_from(const PointCloud& points, const Segments& targets, const Centroi
 // the wide prior's fitness floor (CorrelativeSearchConfig::min_fitness) over every tracking gate.
 // One passing answers; two at distinct places are an ambiguity.
 bool track_over_wide_prior(const PointCloud& points, const Segments& targets, const CentroidIndex& centroids,
-                           const RandomForestMatcher* classifier, const MapSurfaces& surfaces, const LocalizerConfig& config,
-                           const PosePrior& prior, const Eigen::Vector3d& s, LocalizationResult& r, RegistrationResult& answer) {
+                           const RandomForestMatcher* classifier, const MapSurfaces& surfaces,
+                           const LocalizerConfig& config, const PosePrior& prior, const Eigen::Vector3d& s,
+                           LocalizationResult& r, RegistrationResult& answer) {
   const CorrelativeSearchConfig& search = config.search;
   const Eigen::Vector3d centre = prior.T_map_query * s;
   const double reach_m = config.track.window_m + prior.radius_m + kWindowMarginM;
   const PointCloud layer = crop_cylinder(surfaces.near(centre, reach_m), centre, reach_m);
   const PointCloud map_objects = remove_ground(layer, config.segmentation.ground, centre.cast<float>());
   const PointCloud query_objects = remove_ground(points, config.segmentation.ground, s.cast<float>());
-  const std::vector<SearchCandidate> peaks = correlative_search(query_objects, map_objects, prior.T_map_query, s, prior.radius_m,
-                                                                prior.max_rotation_deg, config.track.window_m, search);
+  const std::vector<SearchCandidate> peaks =
+      correlative_search(query_objects, map_objects, prior.T_map_query, s, prior.radius_m, prior.max_rotation_deg,
+                         config.track.window_m, search);
   if (peaks.empty()) {
     r.registration_refusal = RegistrationRefusal::kFewPoints;
     r.registration_reason = "no newest or layer points above the ground to search the prior with";
@@ -118,7 +123,8 @@ bool track_over_wide_prior(const PointCloud& points, const Segments& targets, co
     const PosePrior at{peak.T_map_query, config.registration.max_prior_radius_m, prior.max_rotation_deg};
     LocalizationResult trial = r;
     RegistrationResult reg;
-    const bool ok = track_from(points, targets, centroids, classifier, surfaces, config, at, s, ambiguity_range_m(config, prior), trial, reg) &&
+    const bool ok = track_from(points, targets, centroids, classifier, surfaces, config, at, s,
+                               ambiguity_range_m(config, prior), trial, reg) &&
                     within_wide_prior(reg, prior, s, search, trial.registration_refusal, trial.registration_reason);
     if (!ok) {
       if (passed.empty()) last = std::move(trial);
@@ -138,7 +144,8 @@ bool track_over_wide_prior(const PointCloud& points, const Segments& targets, co
     r.registration_refusal = RegistrationRefusal::kAmbiguous;
     r.registration_reason = std::to_string(passed.size()) + " distinct poses within the prior pass tracking";
   } else {
-    r.registration_reason = "none of " + std::to_string(peaks.size()) + " search peaks tracked: " + r.registration_reason;
+    r.registration_reason =
+        "none of " + std::to_string(peaks.size()) + " search peaks tracked: " + r.registration_reason;
   }
   return false;
 }
@@ -146,8 +153,9 @@ bool track_over_wide_prior(const PointCloud& points, const Segments& targets, co
 }  // namespace
 
 void track_on_surfaces(const PointCloud& newest, const Segments& targets, const CentroidIndex& centroids,
-                       const RandomForestMatcher* classifier, const MapSurfaces* surfaces, const LocalizerConfig& config,
-                       const PosePrior& prior, const Eigen::Vector3f& sensor, LocalizationResult& r) {
+                       const RandomForestMatcher* classifier, const MapSurfaces* surfaces,
+                       const LocalizerConfig& config, const PosePrior& prior, const Eigen::Vector3f& sensor,
+                       LocalizationResult& r) {
   const SurfaceTrackingConfig& c = config.track;
   auto lost = [&r](std::string why) {
     r = refuse(std::move(r), Refusal::kTrackingLost, "tracking on the surface layer: " + why);
@@ -156,19 +164,22 @@ void track_on_surfaces(const PointCloud& newest, const Segments& targets, const 
   if (!c.enabled) return lost("off in this map's parameters (track.enabled)");
   if (!surfaces) return lost("the map has no surface layer");
   if (prior.radius_m > max_tracked_radius_m(config))
-    return lost("the prior's radius " + std::to_string(prior.radius_m) + " m is wider than the widest tracked (max_tracked_radius_m)");
+    return lost("the prior's radius " + std::to_string(prior.radius_m) +
+                " m is wider than the widest tracked (max_tracked_radius_m)");
   const Eigen::Vector3d s = sensor.cast<double>();
   VoxelGridConfig thin;
   thin.leaf_m = c.leaf_m;
   thin.min_points_per_voxel = 1;
   const PointCloud points = voxel_filter(crop_cylinder(newest, s, c.window_m), thin);
   if (points.size() < static_cast<size_t>(c.min_points))
-    return lost(std::to_string(points.size()) + " newest points near the sensor (at least " + std::to_string(c.min_points) + ")");
+    return lost(std::to_string(points.size()) + " newest points near the sensor (at least " +
+                std::to_string(c.min_points) + ")");
   RegistrationResult reg;
-  const bool tracked = prior.radius_m > config.registration.max_prior_radius_m
-                           ? track_over_wide_prior(points, targets, centroids, classifier, *surfaces, config, prior, s, r, reg)
-                           : track_from(points, targets, centroids, classifier, *surfaces, config, prior, s,
-                                        ambiguity_range_m(config, prior), r, reg);
+  const bool tracked =
+      prior.radius_m > config.registration.max_prior_radius_m
+          ? track_over_wide_prior(points, targets, centroids, classifier, *surfaces, config, prior, s, r, reg)
+          : track_from(points, targets, centroids, classifier, *surfaces, config, prior, s,
+                       ambiguity_range_m(config, prior), r, reg);
   if (!tracked) return lost(r.registration_reason);
   r.window_points = points.size();
   localized_by(reg, r, LocalizationMethod::kSurfaces);

@@ -37,13 +37,15 @@ void LoopDetectorConfig::validate() const {
   if (exclude_recent_distance_m > 0.0 && local_cloud_history_m > exclude_recent_distance_m)
     throw std::invalid_argument("local_cloud_history_m must not exceed exclude_recent_distance_m");
   if (min_inliers < 1) throw std::invalid_argument("min_inliers must be >= 1");
-  if (!(min_confidence >= 0.0f && min_confidence <= 1.0f)) throw std::invalid_argument("min_confidence must be in 0..1");
+  if (!(min_confidence >= 0.0f && min_confidence <= 1.0f))
+    throw std::invalid_argument("min_confidence must be in 0..1");
   if (rebuild_every_local_clouds < 1) throw std::invalid_argument("rebuild_every_local_clouds must be >= 1");
   if (!(max_drift_m >= 0.0) || !std::isfinite(max_drift_m))
     throw std::invalid_argument("max_drift_m must be finite and >= 0 (0: no bound)");
   if (!(max_drift_fraction >= 0.0 && max_drift_fraction < 1.0))
     throw std::invalid_argument("max_drift_fraction must be in [0, 1) (0: a fixed bound)");
-  if (!(max_drift_deg >= 0.0) || !std::isfinite(max_drift_deg)) throw std::invalid_argument("max_drift_deg must be finite and >= 0");
+  if (!(max_drift_deg >= 0.0) || !std::isfinite(max_drift_deg))
+    throw std::invalid_argument("max_drift_deg must be finite and >= 0");
 }
 
 struct LoopDetector::Impl {
@@ -92,7 +94,8 @@ struct LoopDetector::Impl {
 };
 
 void LoopDetector::Impl::advance_odometer(const Pose3d& T_odom_sensor, size_t frame) {
-  if (!finite_pose(T_odom_sensor)) throw std::invalid_argument("T_odom_sensor of frame " + std::to_string(frame) + " is not finite");
+  if (!finite_pose(T_odom_sensor))
+    throw std::invalid_argument("T_odom_sensor of frame " + std::to_string(frame) + " is not finite");
   if (has_last && frame <= last_frame)
     throw std::invalid_argument("frame indices must increase (got " + std::to_string(frame) + " after " +
                                 std::to_string(last_frame) + ")");
@@ -182,8 +185,7 @@ void LoopDetector::Impl::match(const PointCloud& cloud, const Pose3d& T_odom_sen
   // The map is in the odometry frame: the odometry's own guess is the identity.
   const double bound_m = config.drift_bound_m(now.odometer_m);
   const PosePrior odometry{Pose3d::Identity(), bound_m, config.max_drift_deg};
-  LocalizationResult r =
-      localizer->localize(cloud, sensor, CloudKind::kVoxelized, bound_m > 0.0 ? &odometry : nullptr);
+  LocalizationResult r = localizer->localize(cloud, sensor, CloudKind::kVoxelized, bound_m > 0.0 ? &odometry : nullptr);
   step.timings = r.timings;
   query = std::move(r.query);
   if (!r.localized()) {
@@ -245,8 +247,6 @@ double LoopDetector::odometer_m() const { return impl_->odometer; }
 size_t LoopDetector::map_size() const { return impl_->map.size(); }
 const std::vector<LoopClosure>& LoopDetector::loops() const { return impl_->loops; }
 Segments LoopDetector::map_segments() const { return impl_->map.segments(); }
-std::vector<size_t> LoopDetector::map_segment_frames() const {
-  return impl_->map.view_frames();
-}
+std::vector<size_t> LoopDetector::map_segment_frames() const { return impl_->map.view_frames(); }
 
 }  // namespace segmatch

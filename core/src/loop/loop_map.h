@@ -6,8 +6,8 @@
 #pragma once
 
 #include "segmatch/core/detail/centroid_grid.h"
-#include "segmatch/core/segmentation/segment.h"
 #include "segmatch/core/mapping/segment_map.h"
+#include "segmatch/core/segmentation/segment.h"
 
 #include <cstddef>
 #include <cstdint>
@@ -59,9 +59,9 @@ class LoopSegmentMap {
   SegmentMapConfig config_;
   RecencyWindow window_;
   Segments segments_;
-  std::vector<Sighting> sightings_;               // parallel to segments_
-  std::vector<size_t> view_frames_;               // parallel to segments_
-  CentroidGrid grid_;                             // segment centroids -> indices
+  std::vector<Sighting> sightings_;  // parallel to segments_
+  std::vector<size_t> view_frames_;  // parallel to segments_
+  CentroidGrid grid_;                // segment centroids -> indices
   uint64_t next_id_ = 0;
 };
 

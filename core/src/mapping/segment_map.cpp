@@ -15,7 +15,8 @@ SegmentMap::SegmentMap(const SegmentMapConfig& config) : config_(config), grid_(
 }
 
 int SegmentMap::find_duplicate(const Eigen::Vector3f& c) const {
-  return grid_.nearest(c, [&](int i) -> const Eigen::Vector3f& { return segments_[i].centroid; }, [](int) { return true; });
+  return grid_.nearest(
+      c, [&](int i) -> const Eigen::Vector3f& { return segments_[i].centroid; }, [](int) { return true; });
 }
 
 std::vector<int> SegmentMap::neighbours_of(int self) const {
@@ -61,8 +62,7 @@ size_t SegmentMap::add(Segments segments) {
       const int other = near.front();
       const Segment& a = segments_[self];
       const Segment& b = segments_[other];
-      const bool self_wins =
-          a.points.size() > b.points.size() || (a.points.size() == b.points.size() && a.id < b.id);
+      const bool self_wins = a.points.size() > b.points.size() || (a.points.size() == b.points.size() && a.id < b.id);
       if (!self_wins) {
         erase(self);
         break;

@@ -22,19 +22,15 @@ void MatcherConfig::validate() const {
     throw std::invalid_argument("MatcherConfig.rf_threshold must be in [0, 1]");
   if (rf_trees <= 0) throw std::invalid_argument("MatcherConfig.rf_trees must be > 0");
   if (rf_max_depth <= 0) throw std::invalid_argument("MatcherConfig.rf_max_depth must be > 0");
-  if (rf_min_samples <= 0)
-    throw std::invalid_argument("MatcherConfig.rf_min_samples must be > 0");
+  if (rf_min_samples <= 0) throw std::invalid_argument("MatcherConfig.rf_min_samples must be > 0");
 }
 
-int pair_feature_count(bool use_shapes) {
-  return 3 * kEigenFeatureCount + (use_shapes ? kEsfHistograms : 0);
-}
+int pair_feature_count(bool use_shapes) { return 3 * kEigenFeatureCount + (use_shapes ? kEsfHistograms : 0); }
 
 namespace {
 void check_descriptors(const Segment& s, bool use_shapes, const char* role) {
   if (!s.has_eigen)
-    throw std::invalid_argument(std::string(role) + " segment " + std::to_string(s.id) +
-                                " has no eigen features");
+    throw std::invalid_argument(std::string(role) + " segment " + std::to_string(s.id) + " has no eigen features");
   if (use_shapes && !s.has_esf)
     throw std::invalid_argument(std::string(role) + " segment " + std::to_string(s.id) +
                                 " has no ESF descriptor (use_shapes = true)");
@@ -146,8 +142,7 @@ Matches filter_rf(const Segments& queries, const Segments& targets, const Matche
         for (int j = t_head[ts]; j >= 0; j = next[j]) {
           const Match& m = candidates[b0 + j];
           const float* eq = &q_esf[static_cast<size_t>(q_slot[m.query]) * kEsfBins];
-          detail::write_pair_features(queries[m.query].eigen, targets[m.target].eigen, eq, et,
-                                      rows.data() + j * dim);
+          detail::write_pair_features(queries[m.query].eigen, targets[m.target].eigen, eq, et, rows.data() + j * dim);
         }
       }
     }
@@ -169,8 +164,7 @@ Matches filter_matches(const Segments& queries, const Segments& targets, const M
   if (rf == nullptr || !rf->trained())
     throw std::invalid_argument("filter_matches: kRandomForest needs a trained RandomForestMatcher");
   if (rf->config().use_shapes != config.use_shapes)
-    throw std::invalid_argument(
-        "filter_matches: MatcherConfig.use_shapes does not match the trained model");
+    throw std::invalid_argument("filter_matches: MatcherConfig.use_shapes does not match the trained model");
   if (candidates.empty()) return {};
   return filter_rf(queries, targets, candidates, config, *rf);
 }

@@ -28,8 +28,8 @@ inline void scale_esf(const EsfDescriptor& esf, float* out) {
 
 // Writes the 21 eigen values, then (if both scaled ESFs of scale_esf() are given) the 10
 // histogram intersections. `out` must hold 21 or 31 floats.
-inline void write_pair_features(const EigenFeatures& fq, const EigenFeatures& ft,
-                                const float* esf_q, const float* esf_t, float* out) {
+inline void write_pair_features(const EigenFeatures& fq, const EigenFeatures& ft, const float* esf_q,
+                                const float* esf_t, float* out) {
   for (int d = 0; d < kEigenFeatureCount; ++d) {
     out[d] = std::abs(fq[d] - ft[d]);
     out[kEigenFeatureCount + d] = fq[d];

@@ -137,8 +137,7 @@ size_t FeatureIndex::size() const { return impl_ ? impl_->count : 0; }
 
 const FeatureScaling& FeatureIndex::scaling() const { return impl_->scaling; }
 
-Matches retrieve_candidates(const Segments& queries, const FeatureIndex& index,
-                            const RetrievalConfig& config) {
+Matches retrieve_candidates(const Segments& queries, const FeatureIndex& index, const RetrievalConfig& config) {
   config.validate();
   Matches out;
   out.reserve(queries.size() * std::min(static_cast<size_t>(config.k), index.size()));
@@ -165,7 +164,8 @@ Matches retrieve_candidates_among(const Segments& queries, const Segments& targe
   for (size_t qi = 0; qi < queries.size(); ++qi) {
     const Segment& q = queries[qi];
     if (!q.has_eigen)
-      throw std::invalid_argument("retrieve_candidates_among: query segment " + std::to_string(q.id) + " has no eigen features");
+      throw std::invalid_argument("retrieve_candidates_among: query segment " + std::to_string(q.id) +
+                                  " has no eigen features");
     near.clear();
     for (int ti : allowed[qi]) near.emplace_back(scaling.distance(q.eigen, targets[static_cast<size_t>(ti)].eigen), ti);
     const size_t k = std::min(near.size(), static_cast<size_t>(config.k));

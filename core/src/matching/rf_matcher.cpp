@@ -7,8 +7,8 @@
 #include <opencv2/ml.hpp>
 
 #include <algorithm>
-#include <numeric>
 #include <limits>
+#include <numeric>
 #include <stdexcept>
 #include <string>
 
@@ -27,10 +27,10 @@ struct RandomForestMatcher::Impl {
   int same_column = -1;  // column of class kSame in getVotes() output
   // The forest flattened for fast evaluation (getVotes() costs ~8 us per sample).
   struct FlatNode {
-    int var = -1;       // split variable, -1 for a leaf
-    float c = 0.f;      // go left if value <= c
+    int var = -1;   // split variable, -1 for a leaf
+    float c = 0.f;  // go left if value <= c
     int left = -1, right = -1;
-    int same = 0;       // leaf: 1 if the tree votes "same object"
+    int same = 0;  // leaf: 1 if the tree votes "same object"
   };
   std::vector<FlatNode> nodes;
   std::vector<int> roots;
@@ -65,12 +65,14 @@ struct RandomForestMatcher::Impl {
   // `depth` steps of index arithmetic, no branch to mispredict, and walks of several rows
   // interleave. Used when the forest is shallow enough (SegMatch's: max depth 8).
   static constexpr int kMaxCompleteDepth = 12;
-  int depth = -1;                  // -1: forest too deep, use the node walk
-  std::vector<int> split_var;      // per tree 2^depth - 1 splits, heap order
+  int depth = -1;              // -1: forest too deep, use the node walk
+  std::vector<int> split_var;  // per tree 2^depth - 1 splits, heap order
   std::vector<float> split_c;
   std::vector<uint8_t> leaf_same;  // per tree 2^depth leaves
 
-  int depth_of(int n) const { return nodes[n].var < 0 ? 0 : 1 + std::max(depth_of(nodes[n].left), depth_of(nodes[n].right)); }
+  int depth_of(int n) const {
+    return nodes[n].var < 0 ? 0 : 1 + std::max(depth_of(nodes[n].left), depth_of(nodes[n].right));
+  }
 
   void pad(int tree, int n, size_t i, int level) {
     const size_t splits = (size_t{1} << depth) - 1;
@@ -179,16 +181,17 @@ struct RandomForestMatcher::Impl {
       t = t1;
       int kept = 0;
       for (int j = 0; j < m; ++j) {
-        if (t - out[idx[j]] <= max_no) idx[kept++] = idx[j];
-        else out[idx[j]] = -1;
+        if (t - out[idx[j]] <= max_no)
+          idx[kept++] = idx[j];
+        else
+          out[idx[j]] = -1;
       }
       m = kept;
     }
   }
 };
 
-RandomForestMatcher::RandomForestMatcher(const MatcherConfig& config)
-    : impl_(std::make_unique<Impl>()) {
+RandomForestMatcher::RandomForestMatcher(const MatcherConfig& config) : impl_(std::make_unique<Impl>()) {
   config.validate();
   impl_->config = config;
   impl_->config.type = MatcherType::kRandomForest;
@@ -221,17 +224,16 @@ void RandomForestMatcher::train(const std::vector<std::pair<const Segment*, cons
   size_t positives = 0;
   for (bool s : same_object) positives += s ? 1 : 0;
   if (positives == 0 || positives == same_object.size())
-    throw std::invalid_argument(
-        "RandomForestMatcher::train: needs both positive and negative pairs (got " +
-        std::to_string(positives) + " positives of " + std::to_string(same_object.size()) + ")");
+    throw std::invalid_argument("RandomForestMatcher::train: needs both positive and negative pairs (got " +
+                                std::to_string(positives) + " positives of " + std::to_string(same_object.size()) +
+                                ")");
   const MatcherConfig& cfg = impl_->config;
   const int dim = pair_feature_count(cfg.use_shapes);
   cv::Mat samples(static_cast<int>(pairs.size()), dim, CV_32F);
   cv::Mat responses(static_cast<int>(pairs.size()), 1, CV_32S);
   for (size_t i = 0; i < pairs.size(); ++i) {
     if (pairs[i].first == nullptr || pairs[i].second == nullptr)
-      throw std::invalid_argument("RandomForestMatcher::train: null segment in pair " +
-                                  std::to_string(i));
+      throw std::invalid_argument("RandomForestMatcher::train: null segment in pair " + std::to_string(i));
     const std::vector<float> f = pair_features(*pairs[i].first, *pairs[i].second, cfg.use_shapes);
     std::copy(f.begin(), f.end(), samples.ptr<float>(static_cast<int>(i)));
     responses.at<int>(static_cast<int>(i)) = same_object[i] ? kSame : kDifferent;
@@ -255,8 +257,8 @@ void RandomForestMatcher::train(const std::vector<std::pair<const Segment*, cons
   forest->setPriors(priors);
   cv::Mat var_type(dim + 1, 1, CV_8U, cv::Scalar(cv::ml::VAR_ORDERED));
   var_type.at<uchar>(dim) = cv::ml::VAR_CATEGORICAL;
-  forest->train(cv::ml::TrainData::create(samples, cv::ml::ROW_SAMPLE, responses, cv::noArray(),
-                                          cv::noArray(), cv::noArray(), var_type));
+  forest->train(cv::ml::TrainData::create(samples, cv::ml::ROW_SAMPLE, responses, cv::noArray(), cv::noArray(),
+                                          cv::noArray(), var_type));
   impl_->same_column = find_same_column(forest, dim);
   impl_->forest = forest;
   impl_->flatten();
@@ -265,8 +267,7 @@ void RandomForestMatcher::train(const std::vector<std::pair<const Segment*, cons
 std::vector<float> RandomForestMatcher::probabilities(const std::vector<float>& rows) const {
   if (!trained()) throw std::logic_error("RandomForestMatcher: not trained");
   const int dim = pair_feature_count(impl_->config.use_shapes);
-  if (rows.size() % dim != 0)
-    throw std::invalid_argument("RandomForestMatcher::probabilities: row size mismatch");
+  if (rows.size() % dim != 0) throw std::invalid_argument("RandomForestMatcher::probabilities: row size mismatch");
   const int n = static_cast<int>(rows.size() / dim);
   std::vector<float> out(n, 0.f);
   if (n == 0) return out;
@@ -277,8 +278,7 @@ std::vector<float> RandomForestMatcher::probabilities(const std::vector<float>& 
   return out;
 }
 
-void RandomForestMatcher::probabilities_at_least(const float* rows, size_t n, float min_probability,
-                                                 float* out) const {
+void RandomForestMatcher::probabilities_at_least(const float* rows, size_t n, float min_probability, float* out) const {
   if (!trained()) throw std::logic_error("RandomForestMatcher: not trained");
   if (n > static_cast<size_t>(std::numeric_limits<int>::max()))
     throw std::invalid_argument("RandomForestMatcher::probabilities_at_least: too many rows");
@@ -291,8 +291,10 @@ void RandomForestMatcher::probabilities_at_least(const float* rows, size_t n, fl
   int needed = trees + 1;
   for (int v = trees; v >= 0 && static_cast<float>(v) / ftrees >= min_probability; --v) needed = v;
   std::vector<int> votes(n);
-  if (needed > trees) std::fill(votes.begin(), votes.end(), -1);
-  else impl_->votes_at_least(rows, dim, static_cast<int>(n), needed, votes.data());
+  if (needed > trees)
+    std::fill(votes.begin(), votes.end(), -1);
+  else
+    impl_->votes_at_least(rows, dim, static_cast<int>(n), needed, votes.data());
   for (size_t i = 0; i < n; ++i) out[i] = votes[i] < 0 ? -1.f : static_cast<float>(votes[i]) / ftrees;
 }
 
@@ -306,8 +308,7 @@ std::vector<float> RandomForestMatcher::opencv_probabilities(const std::vector<f
   cv::Mat votes;
   impl_->forest->getVotes(samples, votes, 0);  // row 0: class labels, then counts per sample
   const float trees = static_cast<float>(impl_->forest->getRoots().size());
-  for (int i = 0; i < n; ++i)
-    out[i] = static_cast<float>(votes.at<int>(i + 1, impl_->same_column)) / trees;
+  for (int i = 0; i < n; ++i) out[i] = static_cast<float>(votes.at<int>(i + 1, impl_->same_column)) / trees;
   return out;
 }
 
@@ -327,7 +328,8 @@ std::string RandomForestMatcher::save() const {
   fs << "rf_trees" << c.rf_trees;
   fs << "rf_max_depth" << c.rf_max_depth;
   fs << "rf_min_samples" << c.rf_min_samples;
-  fs << "model" << "{";
+  fs << "model"
+     << "{";
   impl_->forest->write(fs);
   fs << "}";
   return fs.releaseAndGetString();
@@ -341,12 +343,11 @@ RandomForestMatcher RandomForestMatcher::load(const std::string& bytes) {
     if (!fs.isOpened()) throw std::runtime_error(what + "model bytes are not OpenCV FileStorage");
     const cv::FileNode format = fs["format"];
     if (!format.isString() || format.string() != kFormatTag)
-      throw std::runtime_error(what + "not a SegMatch random forest model (missing format tag '" +
-                               kFormatTag + "')");
+      throw std::runtime_error(what + "not a SegMatch random forest model (missing format tag '" + kFormatTag + "')");
     const int version = static_cast<int>(fs["version"].real());
     if (version != kFormatVersion)
-      throw std::runtime_error(what + "unsupported model version " + std::to_string(version) +
-                               " (expected " + std::to_string(kFormatVersion) + ")");
+      throw std::runtime_error(what + "unsupported model version " + std::to_string(version) + " (expected " +
+                               std::to_string(kFormatVersion) + ")");
     MatcherConfig c;
     c.type = MatcherType::kRandomForest;
     c.use_shapes = static_cast<int>(fs["use_shapes"].real()) != 0;

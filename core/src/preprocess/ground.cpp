@@ -88,9 +88,9 @@ struct ColumnStats {
 // independent of the numbering), with a lookup by integer coordinates.
 struct Columns {
   GridFrame frame;
-  KeyIndex index;                // packed (x, y) -> column
-  std::vector<int64_t> x, y;     // coordinates per column
-  std::vector<uint32_t> of;      // column of each point (kMissing if not finite)
+  KeyIndex index;             // packed (x, y) -> column
+  std::vector<int64_t> x, y;  // coordinates per column
+  std::vector<uint32_t> of;   // column of each point (kMissing if not finite)
   std::vector<ColumnStats> stats;
   size_t size() const { return x.size(); }
   uint32_t at(int64_t cx, int64_t cy) const {
@@ -135,15 +135,12 @@ struct ColumnSums {
 // Float box [x_lo, x_hi) x [y_lo, y_hi) of one column; the default is empty.
 struct ColumnBox {
   float x_lo = 1.f, x_hi = 0.f, y_lo = 1.f, y_hi = 0.f;
-  bool holds(const Point& p) const {
-    return p.x >= x_lo && p.x < x_hi && p.y >= y_lo && p.y < y_hi;
-  }
+  bool holds(const Point& p) const { return p.x >= x_lo && p.x < x_hi && p.y >= y_lo && p.y < y_hi; }
 };
 
 // Adds point i (in column c) and the run of points after it that lie in the box of c;
 // returns the index after the run. A local copy keeps the sums in registers.
-size_t add_run(const PointCloud& cloud, size_t i, const ColumnBox& box, uint32_t c,
-               ColumnSums* column, uint32_t* of) {
+size_t add_run(const PointCloud& cloud, size_t i, const ColumnBox& box, uint32_t c, ColumnSums* column, uint32_t* of) {
   ColumnSums s = *column;
   s.add(cloud[i].z);
   of[i] = c;
@@ -232,15 +229,13 @@ std::vector<float> lower_envelope(const Columns& cols, int64_t tile_cols) {
 }
 
 // Steps 2-4: flat seed columns near the envelope, grown over 8-connected flat columns.
-std::vector<char> ground_columns(const Columns& cols, const std::vector<float>& envelope,
-                                 const GroundConfig& cfg) {
+std::vector<char> ground_columns(const Columns& cols, const std::vector<float>& envelope, const GroundConfig& cfg) {
   const size_t n = cols.size();
   const std::vector<ColumnStats>& stats = cols.stats;
   std::vector<char> flat(n), ground(n, 0);
   std::vector<uint32_t> stack;
   for (uint32_t c = 0; c < n; ++c) {
-    flat[c] = stats[c].zmax - stats[c].zmin <= cfg.max_column_spread_m &&
-              stats[c].stddev <= cfg.max_column_stddev_m;
+    flat[c] = stats[c].zmax - stats[c].zmin <= cfg.max_column_spread_m && stats[c].stddev <= cfg.max_column_stddev_m;
     if (flat[c] && stats[c].mean - envelope[c] <= cfg.seed_tolerance_m) {
       ground[c] = 1;
       stack.push_back(c);
@@ -265,8 +260,7 @@ std::vector<char> ground_columns(const Columns& cols, const std::vector<float>& 
 
 // Ground height under a non-ground column: mean of the ground columns in the nearest ring
 // that has any (up to max_search_rings), else the lower envelope.
-float ground_height(const Columns& cols, uint32_t c, const std::vector<char>& ground,
-                    float envelope, int max_rings) {
+float ground_height(const Columns& cols, uint32_t c, const std::vector<char>& ground, float envelope, int max_rings) {
   for (int64_t r = 1; r <= max_rings; ++r) {
     double sum = 0;
     int count = 0;
@@ -289,8 +283,7 @@ std::vector<bool> column_variance_mask(const PointCloud& cloud, const GroundConf
   std::vector<bool> mask(cloud.size(), true);  // non-finite points count as ground
   if (cloud.empty()) return mask;
   const Columns cols = build_columns(cloud, cfg.column_size_m);
-  const int64_t tile_cols =
-      std::max<int64_t>(1, std::llround(cfg.envelope_tile_m / cfg.column_size_m));
+  const int64_t tile_cols = std::max<int64_t>(1, std::llround(cfg.envelope_tile_m / cfg.column_size_m));
   const std::vector<float> envelope = lower_envelope(cols, tile_cols);
   const std::vector<char> ground = ground_columns(cols, envelope, cfg);
   // Per column c: points below limit[c + 1] are ground (+inf: the whole column). Entry 0
@@ -299,8 +292,7 @@ std::vector<bool> column_variance_mask(const PointCloud& cloud, const GroundConf
   std::vector<float> limit(cols.size() + 1, std::numeric_limits<float>::infinity());
   for (uint32_t c = 0; c < cols.size(); ++c) {
     if (ground[c]) continue;
-    limit[c + 1] = ground_height(cols, c, ground, envelope[c], cfg.max_search_rings) +
-                   cfg.ground_margin_m;
+    limit[c + 1] = ground_height(cols, c, ground, envelope[c], cfg.max_search_rings) + cfg.ground_margin_m;
   }
   for (size_t i = 0; i < cloud.size(); ++i) {
     const uint32_t c = cols.of[i];
@@ -336,23 +328,19 @@ std::vector<bool> ground_mask(const PointCloud& cloud, const GroundConfig& confi
                               const Eigen::Vector3f& sensor_position) {
   config.validate();
   switch (config.method) {
-    case GroundRemoval::kNone:
-      return std::vector<bool>(cloud.size(), false);
+    case GroundRemoval::kNone: return std::vector<bool>(cloud.size(), false);
     case GroundRemoval::kHeightThreshold: {
-      const float limit =
-          sensor_position.z() - config.sensor_height_m + config.height_above_ground_m;
+      const float limit = sensor_position.z() - config.sensor_height_m + config.height_above_ground_m;
       std::vector<bool> mask(cloud.size());
       for (size_t i = 0; i < cloud.size(); ++i) mask[i] = !(cloud[i].z >= limit);
       return mask;
     }
-    case GroundRemoval::kColumnVariance:
-      return column_variance_mask(cloud, config);
+    case GroundRemoval::kColumnVariance: return column_variance_mask(cloud, config);
   }
   throw std::invalid_argument("GroundConfig.method is not a known GroundRemoval");
 }
 
-PointCloud remove_ground(const PointCloud& cloud, const GroundConfig& config,
-                         const Eigen::Vector3f& sensor_position,
+PointCloud remove_ground(const PointCloud& cloud, const GroundConfig& config, const Eigen::Vector3f& sensor_position,
                          const std::vector<uint32_t>* labels, std::vector<uint32_t>* labels_out) {
   if (labels && labels->size() != cloud.size()) {
     throw std::invalid_argument("remove_ground: labels size differs from cloud size");

@@ -16,8 +16,8 @@ namespace {
 
 using namespace voxel_table;
 
-constexpr double kMaxRangeM = 20000.0;       // farther from the sensor is refused (key wrap safety)
-constexpr double kTileMarginM = 1e-3;        // tiles this close to the boundary are recomputed
+constexpr double kMaxRangeM = 20000.0;  // farther from the sensor is refused (key wrap safety)
+constexpr double kTileMarginM = 1e-3;   // tiles this close to the boundary are recomputed
 
 // Voxel of a point, floor(v / leaf) per axis exactly as voxel_filter (GridFrame::coord), and
 // the position inside it in fixed point. False if the point is not finite.
@@ -49,13 +49,13 @@ struct Scan {
   std::vector<Tile> tiles;       // plus a sentinel holding points.size()
   float min_xy[2] = {0.f, 0.f};
   float max_xy[2] = {0.f, 0.f};
-  double added_at_m = 0.0;       // odometer when it was added (LocalCloud's)
+  double added_at_m = 0.0;  // odometer when it was added (LocalCloud's)
 };
 
 // Adds (sign +1) or subtracts (-1) points [begin, end) into the table, computing the keys of
 // a batch and prefetching their slots before touching any.
-void sum_points(const PointCloud& points, const std::vector<uint32_t>& labels, size_t begin, size_t end,
-                double leaf, int sign, VoxelTable* table) {
+void sum_points(const PointCloud& points, const std::vector<uint32_t>& labels, size_t begin, size_t end, double leaf,
+                int sign, VoxelTable* table) {
   constexpr size_t kBatch = 16;
   uint32_t keys[kBatch];
   int64_t frac[kBatch][3];
@@ -84,7 +84,10 @@ void sum_points(const PointCloud& points, const std::vector<uint32_t>& labels, s
 class TileClasses {
  public:
   TileClasses(double cx, double cy, double radius, double leaf)
-      : cx_(cx), cy_(cy), tile_m_(leaf * double(int64_t{1} << kTileShift)), inner_(radius - kTileMarginM),
+      : cx_(cx),
+        cy_(cy),
+        tile_m_(leaf * double(int64_t{1} << kTileShift)),
+        inner_(radius - kTileMarginM),
         outer_(radius + kTileMarginM) {
     x0_ = static_cast<int64_t>(std::floor((cx - radius) / tile_m_)) - 1;
     y0_ = static_cast<int64_t>(std::floor((cy - radius) / tile_m_)) - 1;
@@ -214,7 +217,7 @@ bool VoxelAccumulator::add_scan(const PointCloud& scan_sensor, const Pose3d& T_w
   for (size_t i = 0; i < n; ++i) {
     Voxelized v{};
     voxelize(world[i], m.leaf, &v);  // finite: checked above
-    tx[i] = v.v[0] >> kTileShift;  // arithmetic shift: floor division
+    tx[i] = v.v[0] >> kTileShift;    // arithmetic shift: floor division
     ty[i] = v.v[1] >> kTileShift;
     lo[0] = std::min(lo[0], tx[i]), hi[0] = std::max(hi[0], tx[i]);
     lo[1] = std::min(lo[1], ty[i]), hi[1] = std::max(hi[1], ty[i]);
@@ -285,8 +288,7 @@ PointCloud VoxelAccumulator::crop(const Pose3d& T_world_sensor, std::vector<uint
     const int64_t x = detail::unpack_x(key), y = detail::unpack_y(key);
     if (classes.at(x, y) == 1) kept.push_back({x, y, &table});
   }
-  for (const auto& [key, table] : boundary)
-    kept.push_back({detail::unpack_x(key), detail::unpack_y(key), &table});
+  for (const auto& [key, table] : boundary) kept.push_back({detail::unpack_x(key), detail::unpack_y(key), &table});
   const int64_t centre_z = static_cast<int64_t>(std::floor(T_world_sensor.translation().z() / leaf));
   return emit_in_key_order(kept, centre_z, leaf, static_cast<uint32_t>(m.voxel.min_points_per_voxel), labels_out,
                            &m.scratch);

@@ -61,9 +61,7 @@ struct VoxelKeyer {
     return true;
   }
   // Coordinate of the voxel's corner (low side) on `axis`.
-  double corner(uint64_t key, int axis) const {
-    return (double(detail::unpack21(key, axis)) + centre[axis]) * leaf;
-  }
+  double corner(uint64_t key, int axis) const { return (double(detail::unpack21(key, axis)) + centre[axis]) * leaf; }
 };
 
 // One voxel, two per cache line. The sums are of offsets from the voxel's corner (< leaf),
@@ -162,9 +160,8 @@ std::vector<uint32_t> occupied_in_key_order(const VoxelTable& table, int min_poi
 }
 
 // Majority label of each output voxel: the points are looked up again and grouped by voxel.
-std::vector<uint32_t> voxel_labels(const PointCloud& cloud, const VoxelKeyer& keyer,
-                                   const VoxelTable& table, const std::vector<uint32_t>& slots,
-                                   const std::vector<uint32_t>& labels) {
+std::vector<uint32_t> voxel_labels(const PointCloud& cloud, const VoxelKeyer& keyer, const VoxelTable& table,
+                                   const std::vector<uint32_t>& slots, const std::vector<uint32_t>& labels) {
   constexpr uint32_t kNone = detail::FlatHashMap::kMissing;
   std::vector<uint32_t> out_of_slot(table.capacity(), kNone), begin(slots.size() + 1, 0);
   for (size_t k = 0; k < slots.size(); ++k) {
@@ -188,10 +185,8 @@ std::vector<uint32_t> voxel_labels(const PointCloud& cloud, const VoxelKeyer& ke
 
 // The general path: sorts the keys of all points (any extent that fits in 64 bits).
 PointCloud voxel_filter_sorted(const PointCloud& cloud, const VoxelGridConfig& config,
-                               const std::vector<uint32_t>* labels,
-                               std::vector<uint32_t>* labels_out) {
-  const detail::CellGrid grid =
-      detail::CellGrid::build(cloud, config.leaf_m, false, "VoxelGridConfig.leaf_m", false);
+                               const std::vector<uint32_t>* labels, std::vector<uint32_t>* labels_out) {
+  const detail::CellGrid grid = detail::CellGrid::build(cloud, config.leaf_m, false, "VoxelGridConfig.leaf_m", false);
   PointCloud out;
   out.reserve(grid.cell_count());
   std::vector<uint32_t> scratch;
@@ -217,8 +212,8 @@ PointCloud voxel_filter_sorted(const PointCloud& cloud, const VoxelGridConfig& c
 
 }  // namespace
 
-PointCloud voxel_filter(const PointCloud& cloud, const VoxelGridConfig& config,
-                        const std::vector<uint32_t>* labels, std::vector<uint32_t>* labels_out) {
+PointCloud voxel_filter(const PointCloud& cloud, const VoxelGridConfig& config, const std::vector<uint32_t>* labels,
+                        std::vector<uint32_t>* labels_out) {
   config.validate();
   if (labels && labels->size() != cloud.size()) {
     throw std::invalid_argument("voxel_filter: labels size differs from cloud size");
@@ -239,8 +234,7 @@ PointCloud voxel_filter(const PointCloud& cloud, const VoxelGridConfig& config,
     const double n = v.n;
     out.push_back({float(keyer.corner(v.key, 0) + double(v.x) / n * keyer.leaf),
                    float(keyer.corner(v.key, 1) + double(v.y) / n * keyer.leaf),
-                   float(keyer.corner(v.key, 2) + double(v.z) / n * keyer.leaf),
-                   float(double(v.i) / n)});
+                   float(keyer.corner(v.key, 2) + double(v.z) / n * keyer.leaf), float(double(v.i) / n)});
   }
   if (labels && labels_out) *labels_out = voxel_labels(cloud, keyer, table, slots, *labels);
   return out;

@@ -3,8 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <stdexcept>
 #include <cstdint>
+#include <stdexcept>
 
 namespace segmatch {
 namespace {
@@ -93,7 +93,8 @@ class PointGrid {
 size_t stride_for(size_t n, size_t sample) { return std::max<size_t>(1, n / std::max<size_t>(1, sample)); }
 
 // Nearest-neighbour distances (capped at 1 m) of up to n evenly strided points of a scan.
-std::vector<double> nearest_neighbour_distances(const PointCloud& scan, size_t n, std::vector<double>* ranges_of_sampled) {
+std::vector<double> nearest_neighbour_distances(const PointCloud& scan, size_t n,
+                                                std::vector<double>* ranges_of_sampled) {
   const PointGrid grid(scan, 1.0);
   std::vector<double> out;
   const size_t step = stride_for(scan.size(), n);
@@ -135,7 +136,8 @@ Rings measure_rings(std::vector<double> e) {
   Rings r;
   if (e.size() < 100) return r;
   std::sort(e.begin(), e.end());
-  const size_t min_points = std::max<size_t>(3, static_cast<size_t>(InputMeasurements::kRingMinShare * double(e.size())));
+  const size_t min_points =
+      std::max<size_t>(3, static_cast<size_t>(InputMeasurements::kRingMinShare * double(e.size())));
   std::vector<double> centres;
   size_t held = 0;
   for (size_t begin = 0; begin < e.size();) {
@@ -213,7 +215,8 @@ InputMeasurements measure_input(const std::vector<PointCloud>& scans, const Pose
   config.validate();
   if (scans.empty()) throw std::invalid_argument("measure_input: no scans");
   constexpr double kRadToDeg = 180.0 / M_PI;
-  std::vector<double> points, coverage, el_lo, el_hi, r50, r95, spacing, per_range, steps, rings, ring_steps, ring_shares;
+  std::vector<double> points, coverage, el_lo, el_hi, r50, r95, spacing, per_range, steps, rings, ring_steps,
+      ring_shares;
   for (size_t s = 0; s < scans.size(); ++s) {
     const PointCloud& scan = scans[s];
     if (scan.size() < 10) continue;

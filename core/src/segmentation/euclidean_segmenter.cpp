@@ -10,8 +10,8 @@
 #include <string>
 
 #include "detail/seg_grid.h"
-#include "segmentation/seg_segmenters.h"
 #include "segmatch/core/detail/simd.h"
+#include "segmentation/seg_segmenters.h"
 
 namespace segmatch {
 namespace detail {
@@ -64,8 +64,8 @@ int close_mask4(const Positions& p, uint32_t i, uint32_t j, uint32_t end, simd::
 }
 
 // Merges the close pairs between the slot ranges [a0, a1) and [b0, b1).
-void link_ranges(const Positions& p, uint32_t a0, uint32_t a1, uint32_t b0, uint32_t b1,
-                 simd::F4 d2, bool same, UnionFind* uf) {
+void link_ranges(const Positions& p, uint32_t a0, uint32_t a1, uint32_t b0, uint32_t b1, simd::F4 d2, bool same,
+                 UnionFind* uf) {
   for (uint32_t i = a0; i < a1; ++i) {
     for (uint32_t j = same ? i + 1 : b0; j < b1; j += 4) {
       for (int m = close_mask4(p, i, j, b1, d2); m; m &= m - 1) uf->unite(i, j + __builtin_ctz(m));
@@ -74,8 +74,7 @@ void link_ranges(const Positions& p, uint32_t a0, uint32_t a1, uint32_t b0, uint
 }
 
 // True if some point of [a0, a1) is within sqrt(d2) of some point of [b0, b1).
-bool any_close(const Positions& p, uint32_t a0, uint32_t a1, uint32_t b0, uint32_t b1,
-               simd::F4 d2) {
+bool any_close(const Positions& p, uint32_t a0, uint32_t a1, uint32_t b0, uint32_t b1, simd::F4 d2) {
   for (uint32_t i = a0; i < a1; ++i) {
     for (uint32_t j = b0; j < b1; j += 4) {
       if (close_mask4(p, i, j, b1, d2)) return true;
@@ -87,12 +86,12 @@ bool any_close(const Positions& p, uint32_t a0, uint32_t a1, uint32_t b0, uint32
 // Points bucketed into cubic cells, in key order: the cells of one (x, y) column are
 // contiguous and sorted by z, so neighbours are found per column pair rather than per cell.
 struct Cells {
-  std::vector<uint32_t> order;           // input index of each slot
-  Positions xyz;                         // position of each slot
-  std::vector<uint32_t> begin;           // cell c spans slots [begin[c], begin[c + 1])
-  std::vector<uint32_t> z;               // z coordinate of each cell
-  std::vector<uint64_t> column;          // (x, y) key of each column
-  std::vector<uint32_t> column_begin;    // column k spans cells [column_begin[k], ...[k + 1])
+  std::vector<uint32_t> order;         // input index of each slot
+  Positions xyz;                       // position of each slot
+  std::vector<uint32_t> begin;         // cell c spans slots [begin[c], begin[c + 1])
+  std::vector<uint32_t> z;             // z coordinate of each cell
+  std::vector<uint64_t> column;        // (x, y) key of each column
+  std::vector<uint32_t> column_begin;  // column k spans cells [column_begin[k], ...[k + 1])
   int y_bits = 0;
   int64_t x_extent = 1, y_extent = 1;
 };
@@ -155,8 +154,8 @@ Cells bucket_points(const PointCloud& cloud, float cell_m) {
 // Calls fn(c, nb) for the cells c of [a0, a1) and nb of [b0, b1) (two columns) whose z
 // differs by at most one.
 template <typename Fn>
-void for_each_pair_in_columns(const std::vector<uint32_t>& z, uint32_t a0, uint32_t a1,
-                              uint32_t b0, uint32_t b1, Fn& fn) {
+void for_each_pair_in_columns(const std::vector<uint32_t>& z, uint32_t a0, uint32_t a1, uint32_t b0, uint32_t b1,
+                              Fn& fn) {
   for (uint32_t c = a0; c < a1 && b0 < b1; ++c) {
     while (b0 < b1 && z[b0] + 1 < z[c]) ++b0;
     for (uint32_t j = b0; j < b1 && z[j] <= z[c] + 1; ++j) fn(c, j);
@@ -235,8 +234,7 @@ float box_gap2(const CellBox& a, const CellBox& b) {
 
 // Links the points within each cell; returns the cells' boxes and whether each cell is
 // already one component.
-std::vector<CellBox> link_cells(const Cells& g, float d2, UnionFind* uf,
-                                std::vector<uint8_t>* connected) {
+std::vector<CellBox> link_cells(const Cells& g, float d2, UnionFind* uf, std::vector<uint8_t>* connected) {
   const simd::F4 d2x4 = simd::splat(d2);
   const uint32_t cells = static_cast<uint32_t>(g.z.size());
   std::vector<CellBox> boxes(cells);
@@ -343,8 +341,7 @@ void SegmenterConfig::validate() const {
   }
 }
 
-Segments segment_cloud(const PointCloud& cloud, const SegmenterConfig& config,
-                       const std::vector<uint32_t>* labels) {
+Segments segment_cloud(const PointCloud& cloud, const SegmenterConfig& config, const std::vector<uint32_t>* labels) {
   config.validate();
   if (labels && labels->size() != cloud.size()) {
     throw std::invalid_argument("segment_cloud: labels size differs from cloud size");
@@ -352,14 +349,9 @@ Segments segment_cloud(const PointCloud& cloud, const SegmenterConfig& config,
   if (cloud.empty()) return {};
   detail::Clusters clusters;
   switch (config.type) {
-    case SegmenterType::kEuclidean:
-      clusters = detail::euclidean_clusters(cloud, config);
-      break;
-    case SegmenterType::kRegionGrowing:
-      clusters = detail::region_growing_clusters(cloud, config);
-      break;
-    default:
-      throw std::invalid_argument("SegmenterConfig.type is not a known SegmenterType");
+    case SegmenterType::kEuclidean: clusters = detail::euclidean_clusters(cloud, config); break;
+    case SegmenterType::kRegionGrowing: clusters = detail::region_growing_clusters(cloud, config); break;
+    default: throw std::invalid_argument("SegmenterConfig.type is not a known SegmenterType");
   }
   Segments segments(clusters.size());
   std::vector<uint32_t> scratch;

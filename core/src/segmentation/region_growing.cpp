@@ -31,14 +31,12 @@ struct NeighbourGrid {
   CellGrid grid;
   std::vector<uint32_t> neighbours;
   NeighbourGrid(const PointCloud& cloud, float cell_m, const char* field)
-      : grid(CellGrid::build(cloud, cell_m, false, field, false)),
-        neighbours(neighbour_table(grid)) {}
+      : grid(CellGrid::build(cloud, cell_m, false, field, false)), neighbours(neighbour_table(grid)) {}
 };
 
 // Calls fn(j) for every point j within sqrt(radius2) of point i (i itself included).
 template <typename Fn>
-void for_each_neighbour(const NeighbourGrid& ng, const PointCloud& cloud, uint32_t i, float radius2,
-                        Fn&& fn) {
+void for_each_neighbour(const NeighbourGrid& ng, const PointCloud& cloud, uint32_t i, float radius2, Fn&& fn) {
   const Eigen::Vector3f p = cloud[i].xyz();
   const uint32_t* cells = &ng.neighbours[size_t(ng.grid.point_cell[i]) * kNeighbourCells];
   for (int o = 0; o < kNeighbourCells; ++o) {
@@ -51,8 +49,7 @@ void for_each_neighbour(const NeighbourGrid& ng, const PointCloud& cloud, uint32
   }
 }
 
-SurfaceInfo surface_at(const NeighbourGrid& grid, const PointCloud& cloud, uint32_t i,
-                       const SegmenterConfig& config) {
+SurfaceInfo surface_at(const NeighbourGrid& grid, const PointCloud& cloud, uint32_t i, const SegmenterConfig& config) {
   const Eigen::Vector3f p = cloud[i].xyz();
   Eigen::Vector3d sum = Eigen::Vector3d::Zero();
   Eigen::Matrix3d sum2 = Eigen::Matrix3d::Zero();
@@ -89,9 +86,7 @@ Clusters region_growing_clusters(const PointCloud& cloud, const SegmenterConfig&
 
   std::vector<uint32_t> seeds(finite.begin(), finite.end());
   std::sort(seeds.begin(), seeds.end(), [&](uint32_t a, uint32_t b) {
-    return surface[a].curvature != surface[b].curvature
-               ? surface[a].curvature < surface[b].curvature
-               : a < b;
+    return surface[a].curvature != surface[b].curvature ? surface[a].curvature < surface[b].curvature : a < b;
   });
   const float cos_max = std::cos(config.max_normal_angle_deg * 3.14159265f / 180.0f);
   const float d2 = config.cluster_distance_m * config.cluster_distance_m;

@@ -59,8 +59,8 @@ TrainingPairs label_candidates(const Segments& queries, const Segments& targets,
 
 }  // namespace
 
-TrainingPairs label_pairs_by_instance(const Segments& queries, const Segments& targets,
-                                      const FeatureIndex& index, const TrainingPairConfig& config) {
+TrainingPairs label_pairs_by_instance(const Segments& queries, const Segments& targets, const FeatureIndex& index,
+                                      const TrainingPairConfig& config) {
   return label_candidates(queries, targets, index, config, [&](const Segment& q, const Segment& t) {
     const uint16_t inst = label_instance(q.label), other = label_instance(t.label);
     if (inst == 0 || other == 0) return PairLabel::kLeftOut;  // ground, unknown
@@ -71,8 +71,8 @@ TrainingPairs label_pairs_by_instance(const Segments& queries, const Segments& t
   });
 }
 
-TrainingPairs label_pairs_by_distance(const Segments& queries, const Segments& targets,
-                                      const FeatureIndex& index, const TrainingPairConfig& config) {
+TrainingPairs label_pairs_by_distance(const Segments& queries, const Segments& targets, const FeatureIndex& index,
+                                      const TrainingPairConfig& config) {
   return label_candidates(queries, targets, index, config, [&](const Segment& q, const Segment& t) {
     const float d = (q.centroid - t.centroid).norm();
     if (d <= config.max_centroid_distance_m) return PairLabel::kPositive;

@@ -20,12 +20,10 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 
-
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
-
 
 namespace segmatch {
 
@@ -35,7 +33,8 @@ void RefineConfig::validate() const {
     throw std::invalid_argument("RefineConfig.max_correspondence_m must be finite and > 0");
   if (!(convergence_m > 0.f)) throw std::invalid_argument("RefineConfig.convergence_m must be > 0");
   if (max_query_points < 6) throw std::invalid_argument("RefineConfig.max_query_points must be >= 6");
-  if (max_segment_points < 0) throw std::invalid_argument("RefineConfig.max_segment_points must be >= 0 (0: every point)");
+  if (max_segment_points < 0)
+    throw std::invalid_argument("RefineConfig.max_segment_points must be >= 0 (0: every point)");
   if (!(recent_window_m >= 0.f) || !std::isfinite(recent_window_m))
     throw std::invalid_argument("RefineConfig.recent_window_m must be finite and >= 0 (0: off)");
   if (min_recent_points < 6) throw std::invalid_argument("RefineConfig.min_recent_points must be >= 6");
@@ -128,8 +127,7 @@ PlaneSystem plane_system(const std::vector<Correspondence>& corr, LazyNormals& n
 
 // One linearised point-to-plane step: minimises sum (n . (R p + t - q))^2 over x = [omega, t].
 // False if too few correspondences have normals or the system is singular.
-bool point_to_plane_step(const std::vector<Correspondence>& corr, LazyNormals& normals,
-                         Pose3d* delta) {
+bool point_to_plane_step(const std::vector<Correspondence>& corr, LazyNormals& normals, Pose3d* delta) {
   PlaneSystem s = plane_system(corr, normals, Eigen::Vector3d::Zero());
   if (s.used < kMinCorrespondences) return false;
   s.A.diagonal().array() += 1e-9 * static_cast<double>(s.used);  // guards degenerate geometry
@@ -179,14 +177,15 @@ std::vector<Eigen::Vector3d> subsampled_source(const PointCloud& query_points, s
 
 }  // namespace
 
-RefineResult refine_alignment(const PointCloud& query_points, const PointCloud& target_points,
-                              const Pose3d& initial, const RefineConfig& config, const Eigen::Vector3d& pivot_target) {
+RefineResult refine_alignment(const PointCloud& query_points, const PointCloud& target_points, const Pose3d& initial,
+                              const RefineConfig& config, const Eigen::Vector3d& pivot_target) {
   config.validate();
   RefineResult result;
   result.T_target_query = initial;
   if (query_points.empty() || target_points.empty()) return result;
 
-  const std::vector<Eigen::Vector3d> source = subsampled_source(query_points, static_cast<size_t>(config.max_query_points));
+  const std::vector<Eigen::Vector3d> source =
+      subsampled_source(query_points, static_cast<size_t>(config.max_query_points));
 
   // Cells as wide as the correspondence distance: a query rarely needs more than its own cell
   // and the nearest faces of its neighbours.
@@ -237,7 +236,8 @@ RefineResult refine_alignment(const PointCloud& query_points, const PointCloud& 
     const double rot = Eigen::AngleAxisd(delta.linear()).angle();
     result.last_step_m = static_cast<float>(delta.translation().norm() + rot);
     if (every > 1) {
-      if ((delta.translation().norm() < kCoarseUntil && rot < kCoarseUntil) || it + 1 >= kMaxCoarseIterations) every = 1;
+      if ((delta.translation().norm() < kCoarseUntil && rot < kCoarseUntil) || it + 1 >= kMaxCoarseIterations)
+        every = 1;
       continue;
     }
     if (delta.translation().norm() < config.convergence_m && rot < config.convergence_m) {

@@ -45,8 +45,7 @@ int CentroidIndex::nearest_within(const Eigen::Vector3f& p, float radius_m) cons
   return best;
 }
 
-Support support_of(const Segments& query, const CentroidIndex& map, const Pose3d& T_map_query,
-                   float radius_m) {
+Support support_of(const Segments& query, const CentroidIndex& map, const Pose3d& T_map_query, float radius_m) {
   Support s;
   const Eigen::Isometry3f T = T_map_query.cast<float>();
   for (size_t i = 0; i < query.size(); ++i) {

@@ -4,8 +4,8 @@
 // authors' implementation. The largest mutually consistent set (a clique) is grown greedily
 // from every seed (or max_iterations seeds), then fitted with Umeyama (rigid, no scale).
 #include "segmatch/core/verification/verification.h"
-#include "segmatch/core/detail/random.h"
 #include "detail/seg_grid.h"
+#include "segmatch/core/detail/random.h"
 
 #include <Eigen/Geometry>
 
@@ -20,12 +20,9 @@ namespace segmatch {
 void VerificationConfig::validate() const {
   if (!(resolution_m > 0.f) || !std::isfinite(resolution_m))
     throw std::invalid_argument("VerificationConfig.resolution_m must be finite and > 0");
-  if (min_inliers < 3)
-    throw std::invalid_argument("VerificationConfig.min_inliers must be >= 3 (6DOF fit)");
-  if (max_iterations <= 0)
-    throw std::invalid_argument("VerificationConfig.max_iterations must be > 0");
-  if (max_hypotheses < 1)
-    throw std::invalid_argument("VerificationConfig.max_hypotheses must be >= 1");
+  if (min_inliers < 3) throw std::invalid_argument("VerificationConfig.min_inliers must be >= 3 (6DOF fit)");
+  if (max_iterations <= 0) throw std::invalid_argument("VerificationConfig.max_iterations must be > 0");
+  if (max_hypotheses < 1) throw std::invalid_argument("VerificationConfig.max_hypotheses must be >= 1");
   if (max_candidates < 0) throw std::invalid_argument("VerificationConfig.max_candidates must be >= 0 (0: no bound)");
   if (!(distinct_translation_m > 0.f) || !(distinct_rotation_deg > 0.f))
     throw std::invalid_argument("VerificationConfig.distinct_translation_m and distinct_rotation_deg must be > 0");
@@ -73,8 +70,7 @@ Pose3d umeyama_fit(const Points& q, const Points& t, const std::vector<int>& mem
 
 // Fits the clique, drops members whose residual exceeds the resolution (pairwise consistency
 // does not exclude e.g. mirror-image configurations) and refits until stable.
-Fit fit_and_prune(const Points& q, const Points& t, std::vector<int> members, double resolution,
-                  size_t min_inliers) {
+Fit fit_and_prune(const Points& q, const Points& t, std::vector<int> members, double resolution, size_t min_inliers) {
   Fit fit;
   for (int round = 0; round < 5 && members.size() >= min_inliers; ++round) {
     fit.T = umeyama_fit(q, t, members);
@@ -110,8 +106,7 @@ void keep_distinct(std::vector<Fit>& kept, Fit fit, size_t max_kept, const Vec3&
     kept.erase(kept.begin() + static_cast<long>(i));
     break;
   }
-  auto at = std::find_if(kept.begin(), kept.end(),
-                         [&](const Fit& f) { return f.members.size() < fit.members.size(); });
+  auto at = std::find_if(kept.begin(), kept.end(), [&](const Fit& f) { return f.members.size() < fit.members.size(); });
   kept.insert(at, std::move(fit));
   if (kept.size() > max_kept) kept.pop_back();
 }
@@ -256,9 +251,8 @@ std::vector<int> choose_seeds(const std::vector<int>& order, size_t max_seeds, u
 
 }  // namespace
 
-VerificationResult verify_matches(const Segments& queries, const Segments& targets,
-                                  const Matches& all_candidates, const VerificationConfig& config,
-                                  const Deadline& deadline) {
+VerificationResult verify_matches(const Segments& queries, const Segments& targets, const Matches& all_candidates,
+                                  const VerificationConfig& config, const Deadline& deadline) {
   config.validate();
   const size_t bound = static_cast<size_t>(config.max_candidates);
   const Matches bounded = bound > 0 && all_candidates.size() > bound ? best_scored(all_candidates, bound) : Matches{};
@@ -273,8 +267,7 @@ VerificationResult verify_matches(const Segments& queries, const Segments& targe
     const Match& m = candidates[i];
     if (m.query < 0 || m.query >= static_cast<int>(queries.size()) || m.target < 0 ||
         m.target >= static_cast<int>(targets.size()))
-      throw std::invalid_argument("verify_matches: candidate " + std::to_string(i) +
-                                  " index out of range");
+      throw std::invalid_argument("verify_matches: candidate " + std::to_string(i) + " index out of range");
     q[i] = queries[m.query].centroid.cast<double>();
     t[i] = targets[m.target].centroid.cast<double>();
   }
@@ -292,8 +285,7 @@ VerificationResult verify_matches(const Segments& queries, const Segments& targe
   // Seeds and growth order: most-connected first (ties by candidate order) - deterministic.
   std::vector<int> order(n);
   std::iota(order.begin(), order.end(), 0);
-  std::stable_sort(order.begin(), order.end(),
-                   [&](int a, int b) { return degree[a] > degree[b]; });
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return degree[a] > degree[b]; });
   const std::vector<int> seeds = choose_seeds(order, static_cast<size_t>(config.max_iterations), config.seed);
 
   // Distinct clusters, largest first. A seed already inside a kept cluster would mostly grow

@@ -1,6 +1,6 @@
 // Blocking TCP client of segmatch-server. One Client is one connection at a time (a new one
-// when the last was lost: ClientOptions::retries), used from one thread at a time. Every failure throws ClientError saying what went wrong; a server ERROR reply
-// carries the server's code and message.
+// when the last was lost: ClientOptions::retries), used from one thread at a time. Every failure throws ClientError
+// saying what went wrong; a server ERROR reply carries the server's code and message.
 #pragma once
 
 #include <segmatch/api/protocol.h>
@@ -75,7 +75,10 @@ class Client {
   // next call connects again (ClientOptions::retries > 0) or throws kClosed (retries = 0). A
   // server ERROR leaves the connection usable.
   bool broken() const { return broken_; }
-  void close() { socket_.close(); broken_ = true; }
+  void close() {
+    socket_.close();
+    broken_ = true;
+  }
   // Requests sent again on a new connection so far (ClientOptions::retries).
   int retries_used() const { return retries_used_; }
 

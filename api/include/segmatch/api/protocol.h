@@ -7,8 +7,8 @@
 // the output was filled.
 #pragma once
 
-#include <segmatch/core/segmentation/segment.h>
 #include <segmatch/core/common/types.h>
+#include <segmatch/core/segmentation/segment.h>
 
 #include <array>
 #include <cstddef>
@@ -28,12 +28,12 @@ constexpr int kProtocolRevision = 12;
 constexpr size_t kHeaderBytes = 12;
 
 enum class MessageType : uint16_t {
-  kHello = 0x0001,      // request: shared-secret token (first message when the server has one)
+  kHello = 0x0001,  // request: shared-secret token (first message when the server has one)
   kPing = 0x0002,
   kInfo = 0x0003,
   kLocalize = 0x0004,
   kLocalizeSegments = 0x0005,  // revision 3: the vehicle's segments instead of its cloud
-  kHelloOk = 0x8001,    // replies have the high bit set
+  kHelloOk = 0x8001,           // replies have the high bit set
   kPong = 0x8002,
   kInfoReply = 0x8003,
   kLocalizeReply = 0x8004,
@@ -44,18 +44,18 @@ const char* to_string(MessageType type);
 
 enum class DecodeStatus {
   kOk,
-  kIncomplete,       // header: fewer than kHeaderBytes; frame: payload not all there yet
+  kIncomplete,  // header: fewer than kHeaderBytes; frame: payload not all there yet
   kBadMagic,
   kBadVersion,
   kUnknownType,
-  kTooLarge,         // payload length over the configured limit
-  kTruncated,        // payload shorter than its fields need
-  kTrailingBytes,    // payload longer than its fields
-  kBadPointCount,    // point count * stride disagrees with the payload length
-  kBadStride,        // point stride other than 3 or 4
-  kNonFinite,        // NaN or Inf in a coordinate, pose or radius
-  kBadQuaternion,    // norm not within kQuaternionNormTolerance of 1
-  kBadField,         // reserved flag bits set, string too long, negative radius, ...
+  kTooLarge,       // payload length over the configured limit
+  kTruncated,      // payload shorter than its fields need
+  kTrailingBytes,  // payload longer than its fields
+  kBadPointCount,  // point count * stride disagrees with the payload length
+  kBadStride,      // point stride other than 3 or 4
+  kNonFinite,      // NaN or Inf in a coordinate, pose or radius
+  kBadQuaternion,  // norm not within kQuaternionNormTolerance of 1
+  kBadField,       // reserved flag bits set, string too long, negative radius, ...
 };
 const char* to_string(DecodeStatus status);
 
@@ -64,15 +64,15 @@ enum class ErrorCode : uint16_t {
   kBadMagic = 1,
   kUnsupportedVersion = 2,
   kUnknownType = 3,
-  kMalformed = 4,         // truncated payload, trailing bytes, bad field
+  kMalformed = 4,  // truncated payload, trailing bytes, bad field
   kFrameTooLarge = 5,
   kBadPointCount = 6,
   kNonFinite = 7,
   kBadQuaternion = 8,
-  kAuthRequired = 9,      // the server has a token and the first message was not HELLO
-  kAuthFailed = 10,       // wrong token
-  kServerBusy = 11,       // max connections reached
-  kInternal = 12,         // the localizer threw; the connection stays usable
+  kAuthRequired = 9,        // the server has a token and the first message was not HELLO
+  kAuthFailed = 10,         // wrong token
+  kServerBusy = 11,         // max connections reached
+  kInternal = 12,           // the localizer threw; the connection stays usable
   kUnexpectedMessage = 13,  // a reply type sent as a request, or a second HELLO
   kShuttingDown = 14,
   // Revision 3: LOCALIZE_SEGMENTS computed with other parameters than the map's (digest), or
@@ -104,10 +104,16 @@ DecodeStatus decode_header(const uint8_t* data, size_t size, const Limits& limit
 
 // ---- messages -----------------------------------------------------------------------------
 
-struct HelloRequest { std::string token; };
+struct HelloRequest {
+  std::string token;
+};
 struct HelloOkReply {};
-struct PingRequest { uint64_t nonce = 0; };
-struct PongReply { uint64_t nonce = 0; };
+struct PingRequest {
+  uint64_t nonce = 0;
+};
+struct PongReply {
+  uint64_t nonce = 0;
+};
 struct InfoRequest {};
 
 struct InfoReply {
@@ -165,8 +171,8 @@ struct LocalizeRequest {
 // as u16 mantissas of a power-of-two scale, points as i16 offsets from the centroid in
 // power-of-two steps, the finest that holds the segment (a point moves by less than 1/32767 of
 // the segment's reach: 0.07 mm on a car, 1 mm on a facade 32 m long).
-constexpr uint32_t kSegmentsFlagHasPrior = 1u << 0;  // as LOCALIZE bit 0 (heading tolerance always sent)
-constexpr uint32_t kSegmentsFlagEsf = 1u << 1;       // every segment carries its ESF histogram
+constexpr uint32_t kSegmentsFlagHasPrior = 1u << 0;     // as LOCALIZE bit 0 (heading tolerance always sent)
+constexpr uint32_t kSegmentsFlagEsf = 1u << 1;          // every segment carries its ESF histogram
 constexpr uint32_t kSegmentsFlagRefusalCode = 1u << 2;  // revision 5, as LOCALIZE bit 3
 constexpr uint32_t kSegmentsFlagDetail = 1u << 3;       // revision 6, as LOCALIZE bit 4
 constexpr uint32_t kSegmentsFlagNewestScans = 1u << 4;  // revision 10, as LOCALIZE bit 5
@@ -221,15 +227,15 @@ enum class RefusalCode : uint16_t {
   kAmbiguous = 6,
   kSurfacesDisagree = 7,
   kLowConfidence = 8,
-  kOffMap = 9,  // revision 9: the vehicle's newest scans do not lie on the map at the answer
+  kOffMap = 9,                // revision 9: the vehicle's newest scans do not lie on the map at the answer
   kNewestScansDisagree = 10,  // revision 9: they do, but settle away from the answer
-  kTrackingLost = 11,  // revision 11: a tracking request (segments bit 5) without points did not register
+  kTrackingLost = 11,         // revision 11: a tracking request (segments bit 5) without points did not register
 };
 const char* to_string(RefusalCode code);
 
 struct ModuleTimingsMs {
-  float voxel = 0, ground = 0, segment = 0, describe = 0, retrieve = 0, classify = 0, verify = 0,
-        refine = 0, total = 0, server_total = 0;  // server_total: receipt to reply, crop included
+  float voxel = 0, ground = 0, segment = 0, describe = 0, retrieve = 0, classify = 0, verify = 0, refine = 0, total = 0,
+        server_total = 0;  // server_total: receipt to reply, crop included
 };
 constexpr size_t kTimingCount = 10;
 
@@ -263,8 +269,8 @@ struct LocalizeReply {
   uint64_t request_id = 0;
   LocalizeStatus status = LocalizeStatus::kNotLocalized;
   RefusalCode refusal = RefusalCode::kNone;  // with the request's refusal-code bit (revision 5)
-  std::string reason;                    // empty when localized
-  Pose3d T_map_local = Pose3d::Identity();  // on the wire: quaternion w x y z + translation
+  std::string reason;                        // empty when localized
+  Pose3d T_map_local = Pose3d::Identity();   // on the wire: quaternion w x y z + translation
   uint32_t inliers = 0;
   float confidence = 0.f;
   uint32_t support = 0;

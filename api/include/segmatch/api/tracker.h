@@ -61,7 +61,8 @@ inline bool can_track(bool has_prior, bool has_newest_scans, double radius_m, do
 }
 // Sets LOCALIZE bit 6 when can_track holds for the request.
 inline void ask_to_track_first(LocalizeRequest& request, double max_prior_radius_m) {
-  if (can_track(request.flags & kFlagHasPrior, request.flags & kFlagNewestScans, request.prior_radius_m, max_prior_radius_m))
+  if (can_track(request.flags & kFlagHasPrior, request.flags & kFlagNewestScans, request.prior_radius_m,
+                max_prior_radius_m))
     request.flags |= kFlagTrack;
 }
 

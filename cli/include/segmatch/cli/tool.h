@@ -54,8 +54,8 @@ std::string shipped_model(const std::string& file_name);
 }  // namespace segmatch::cli
 
 // In main(): SEGMATCH_CLI_PARSE(app, argc, argv); returns from main when the parse ends the run.
-#define SEGMATCH_CLI_PARSE(app, argc, argv)                                          \
-  do {                                                                               \
-    const int segmatch_cli_status = ::segmatch::cli::parse((app), (argc), (argv));   \
-    if (segmatch_cli_status >= 0) return segmatch_cli_status;                        \
+#define SEGMATCH_CLI_PARSE(app, argc, argv)                                        \
+  do {                                                                             \
+    const int segmatch_cli_status = ::segmatch::cli::parse((app), (argc), (argv)); \
+    if (segmatch_cli_status >= 0) return segmatch_cli_status;                      \
   } while (false)

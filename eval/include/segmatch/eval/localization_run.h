@@ -19,9 +19,9 @@ namespace eval {
 using LocalizeFn = std::function<api::LocalizeReply(const api::LocalizeRequest&)>;
 
 struct LocalizationRunConfig {
-  std::string map_path;     // the map (its trajectory decides which streets are mapped)
-  std::string query_folder; // sequence to replay: a folder or a ROS 2 bag
-  io::BagOptions bag;       // which topics of a bag (io/sequence.h); its poses are the truth
+  std::string map_path;      // the map (its trajectory decides which streets are mapped)
+  std::string query_folder;  // sequence to replay: a folder or a ROS 2 bag
+  io::BagOptions bag;        // which topics of a bag (io/sequence.h); its poses are the truth
   // Ground truth T_map_sensor of every query scan: by default the query sequence's own poses
   // are in the map frame (same recording, e.g. riverside02 even / odd keyframes). With
   // sim_dataset, a segmatch-sim folder: queries = sequences/01, truth from ground_truth/
@@ -29,7 +29,7 @@ struct LocalizationRunConfig {
   std::string sim_dataset;
   io::ReplayConfig replay;
   Thresholds thresholds;
-  bool print_each = true;   // one line per query on stdout
+  bool print_each = true;  // one line per query on stdout
   // With a narrow prior and newest scans, ask the server to track on the surface layer first
   // (LOCALIZE bit 6, protocol revision 11); --track-surfaces off clears it.
   bool track_surfaces = true;

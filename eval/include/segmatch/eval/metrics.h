@@ -21,23 +21,23 @@ namespace eval {
 struct Thresholds {
   double false_translation_m = 1.0;  // a localization farther off than this is false
   double false_rotation_deg = 3.0;
-  double mapped_radius_m = 10.0;     // a query is on a mapped street within this of the map's trajectory
+  double mapped_radius_m = 10.0;  // a query is on a mapped street within this of the map's trajectory
 };
 
 struct QueryOutcome {
   size_t frame = 0;
   double odometer_m = 0.0;
   bool mapped = true;
-  bool localized = false;            // the localizer said so
-  bool correct = false;              // localized and within the thresholds
+  bool localized = false;                 // the localizer said so
+  bool correct = false;                   // localized and within the thresholds
   double error_m = 0.0, error_deg = 0.0;  // when localized
   double latency_ms = 0.0;
   uint32_t inliers = 0, support = 0;  // the localizer's evidence (LocalizeReply)
   float confidence = 0.f;
-  std::string status;                // the localizer's status word, for reports
-  std::string mode = "global";       // how the query was asked: global, tracked (Tracker), gnss, wrong
-  bool rejected = false;             // --track: the tracker's gate rejected this LOCALIZED answer
-  double server_ms = 0.0;            // the server's own time (server_total)
+  std::string status;           // the localizer's status word, for reports
+  std::string mode = "global";  // how the query was asked: global, tracked (Tracker), gnss, wrong
+  bool rejected = false;        // --track: the tracker's gate rejected this LOCALIZED answer
+  double server_ms = 0.0;       // the server's own time (server_total)
   // The reply's detail (docs/protocol.md 6.4): how far the whole local cloud's pose and its
   // recent window's differ at the sensor (the odometry's warp over the cloud). 0 without.
   double window_warp_m = 0.0, window_warp_deg = 0.0;
@@ -51,9 +51,9 @@ struct QueryOutcome {
   double sigma_h_m = 0.0, mahalanobis_h = 0.0;
   Eigen::Vector3d truth_xy = Eigen::Vector3d::Zero();     // map-frame truth position
   Eigen::Vector3d estimate_xy = Eigen::Vector3d::Zero();  // map-frame estimate when localized
-  Pose3d T_map_sensor = Pose3d::Identity();              // the estimate when localized
-  Pose3d T_map_sensor_truth = Pose3d::Identity();        // the reference pose of the query scan
-  double time_s = 0.0;                                   // the query scan's time (times.txt)
+  Pose3d T_map_sensor = Pose3d::Identity();               // the estimate when localized
+  Pose3d T_map_sensor_truth = Pose3d::Identity();         // the reference pose of the query scan
+  double time_s = 0.0;                                    // the query scan's time (times.txt)
 };
 
 // Fills correct / error_m / error_deg of a localized outcome from the estimated and true
@@ -72,10 +72,10 @@ struct Distribution {
 Distribution distribution_of(std::vector<double> values);
 
 struct PxCurve {
-  std::vector<double> gaps_m;    // distance (on mapped streets) between consecutive true localizations
-  double total_m = 0.0;          // mapped distance driven
-  double x95_m = 0.0;            // smallest x with P(x) <= 0.05
-  double p_of(double x) const;   // equation 1
+  std::vector<double> gaps_m;   // distance (on mapped streets) between consecutive true localizations
+  double total_m = 0.0;         // mapped distance driven
+  double x95_m = 0.0;           // smallest x with P(x) <= 0.05
+  double p_of(double x) const;  // equation 1
 };
 PxCurve px_curve(const std::vector<QueryOutcome>& outcomes);
 

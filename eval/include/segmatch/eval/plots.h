@@ -18,12 +18,11 @@ void plot_trajectory(const std::string& png, const std::vector<Eigen::Vector3d>&
 // P(x) against x, with x95 marked.
 void plot_px(const std::string& png, const PxCurve& curve, const std::string& title);
 // Histogram of the translation errors of correct localizations (centimetres).
-void plot_error_histogram(const std::string& png, const std::vector<QueryOutcome>& outcomes,
-                          const std::string& title);
+void plot_error_histogram(const std::string& png, const std::vector<QueryOutcome>& outcomes, const std::string& title);
 
 struct RocCurve {
   std::string name;
-  std::vector<double> fpr, tpr;  // from (0, 0) to (1, 1)
+  std::vector<double> fpr, tpr;                 // from (0, 0) to (1, 1)
   double operating_fpr = 0, operating_tpr = 0;  // marked with a dot
   double operating_threshold = 0;               // score threshold of the operating point
   double auc = 0;                               // area under the curve

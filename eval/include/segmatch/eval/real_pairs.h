@@ -17,11 +17,11 @@
 namespace segmatch::eval {
 
 struct RealPairsConfig {
-  double map_every_m = 5.0;      // targets: a segmented local cloud every this many metres
-  double query_every_m = 10.0;   // queries: likewise, unmerged
-  double warmup_m = 30.0;        // no query local cloud before this much driving
-  double block_m = 300.0;        // stretch of the drive that goes wholly to one side
-  int held_out_every = 3;        // every 3rd stretch is held out (a third of the drive)
+  double map_every_m = 5.0;     // targets: a segmented local cloud every this many metres
+  double query_every_m = 10.0;  // queries: likewise, unmerged
+  double warmup_m = 30.0;       // no query local cloud before this much driving
+  double block_m = 300.0;       // stretch of the drive that goes wholly to one side
+  int held_out_every = 3;       // every 3rd stretch is held out (a third of the drive)
   TrainingPairConfig pairs;
 };
 

@@ -34,8 +34,8 @@ namespace io {
 inline constexpr size_t kBagHeadBytes = 128;
 
 struct BagTopic {
-  std::string name;   // "/points"
-  std::string type;   // "sensor_msgs/msg/PointCloud2"
+  std::string name;  // "/points"
+  std::string type;  // "sensor_msgs/msg/PointCloud2"
   size_t messages = 0;
 };
 
@@ -90,8 +90,8 @@ struct RosHeader {
 struct PointCloud2Message {
   RosHeader header;
   uint32_t height = 0, width = 0;
-  CloudData cloud;                 // finite points; intensity when a field "intensity" exists
-  std::vector<uint16_t> rings;     // one per kept point when a field "ring" exists, else empty
+  CloudData cloud;              // finite points; intensity when a field "intensity" exists
+  std::vector<uint16_t> rings;  // one per kept point when a field "ring" exists, else empty
 };
 // Any field order, offsets and point_step; is_bigendian either way; x, y, z as float32 or
 // float64; intensity as any numeric type; ring as any integer type (its low 16 bits);
@@ -110,8 +110,8 @@ struct StampedPose {
   std::string child_frame_id;
   Pose3d T_parent_child = Pose3d::Identity();
 };
-StampedPose decode_odometry(std::string_view cdr);      // nav_msgs/msg/Odometry (pose.pose)
-StampedPose decode_pose_stamped(std::string_view cdr);  // geometry_msgs/msg/PoseStamped (child "")
+StampedPose decode_odometry(std::string_view cdr);                 // nav_msgs/msg/Odometry (pose.pose)
+StampedPose decode_pose_stamped(std::string_view cdr);             // geometry_msgs/msg/PoseStamped (child "")
 std::vector<StampedPose> decode_tf_message(std::string_view cdr);  // tf2_msgs/msg/TFMessage
 
 // ---------------------------------------------------------------------------------------
@@ -120,9 +120,9 @@ std::vector<StampedPose> decode_tf_message(std::string_view cdr);  // tf2_msgs/m
 enum class McapCompression { kNone, kZstd, kLz4 };
 
 struct McapWriterOptions {
-  bool chunked = true;                               // false: messages outside chunks
+  bool chunked = true;  // false: messages outside chunks
   McapCompression compression = McapCompression::kZstd;
-  size_t chunk_size_bytes = 4 * 1024 * 1024;         // uncompressed bytes per chunk
+  size_t chunk_size_bytes = 4 * 1024 * 1024;  // uncompressed bytes per chunk
 };
 
 // Chunks carry their CRC-32, each is followed by its MessageIndex records, and the summary holds

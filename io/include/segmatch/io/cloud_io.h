@@ -43,8 +43,7 @@ enum class PcdEncoding { kAscii, kBinary, kBinaryCompressed };
 CloudData read_pcd(const std::string& path);
 // Writes fields x y z intensity (F4) and, when labels is given, label (U4). labels must have
 // one entry per point.
-void write_pcd(const std::string& path, const PointCloud& cloud,
-               PcdEncoding encoding = PcdEncoding::kBinary,
+void write_pcd(const std::string& path, const PointCloud& cloud, PcdEncoding encoding = PcdEncoding::kBinary,
                const std::vector<uint32_t>* labels = nullptr);
 
 enum class PlyEncoding { kAscii, kBinaryLittleEndian };

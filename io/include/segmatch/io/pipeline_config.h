@@ -22,12 +22,12 @@
 // units and defaults).
 #pragma once
 
-#include <segmatch/core/profile/input_profile.h>
 #include <segmatch/core/localization/local_cloud.h>
-#include <segmatch/core/loop/loop_closure.h>
 #include <segmatch/core/localization/localizer.h>
+#include <segmatch/core/loop/loop_closure.h>
 #include <segmatch/core/mapping/segment_map.h>
 #include <segmatch/core/mapping/surface_layer.h>
+#include <segmatch/core/profile/input_profile.h>
 
 #include <optional>
 #include <string>

@@ -37,17 +37,17 @@ struct ReplayConfig {
   // Cold start: every query is one raw scan alone (no accumulation, no warm-up), as a vehicle
   // that has just woken up has; its newest scans are that scan, thinned.
   bool single_scan = false;
-  void validate() const;   // throws std::invalid_argument naming the field
+  void validate() const;  // throws std::invalid_argument naming the field
 };
 
 struct ReplayQuery {
-  size_t frame = 0;                         // scan index in the sequence
-  double odometer_m = 0.0;                  // distance driven since the first used scan
+  size_t frame = 0;         // scan index in the sequence
+  double odometer_m = 0.0;  // distance driven since the first used scan
   Pose3d T_odom_sensor = Pose3d::Identity();
   Pose3d T_world_sensor = Pose3d::Identity();  // the sequence's own pose of that scan
-  PointCloud cloud_odom;                    // the local cylinder, odometry frame
-  bool voxelized = false;                   // cloud_odom holds voxel centroids (config.voxelize)
-  PointCloud newest_odom;                   // the scans of the last newest_m, thinned (odometry frame)
+  PointCloud cloud_odom;                       // the local cylinder, odometry frame
+  bool voxelized = false;                      // cloud_odom holds voxel centroids (config.voxelize)
+  PointCloud newest_odom;                      // the scans of the last newest_m, thinned (odometry frame)
 };
 
 // Which poses put a replayed query's scans into its local cloud. A vehicle has only its own

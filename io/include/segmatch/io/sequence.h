@@ -39,7 +39,9 @@ struct BagOptions {
   std::string points_topic;  // default: the only PointCloud2 topic (an error lists several)
   std::string pose_topic;
   std::string map_frame, sensor_frame;  // poses from /tf: both, or map_frame alone
-  bool any() const { return !points_topic.empty() || !pose_topic.empty() || !map_frame.empty() || !sensor_frame.empty(); }
+  bool any() const {
+    return !points_topic.empty() || !pose_topic.empty() || !map_frame.empty() || !sensor_frame.empty();
+  }
 };
 
 struct SequenceOptions {
@@ -48,7 +50,6 @@ struct SequenceOptions {
                                             //        PCD keyframes => LiDAR
   BagOptions bag;                           // a bag only; given for a folder of scans: IoError
 };
-
 
 class Sequence {
  public:

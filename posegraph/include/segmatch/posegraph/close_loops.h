@@ -25,7 +25,7 @@ struct CloseLoopsOptions {
   // Given: each scan is registered onto the previous ones and the step becomes a scan edge
   // (scan_edges.h); the graph is then also solved once at the end, loops or not.
   std::optional<ScanMatchConfig> scan_edges;
-  bool verbose = false;        // print what each local cloud did (stderr)
+  bool verbose = false;  // print what each local cloud did (stderr)
   // Called after each scan with how many of `frames` are done (e.g. a progress bar with ETA;
   // the caller owns its output, so this library prints none).
   std::function<void(size_t done, size_t total)> on_scan;
@@ -44,12 +44,12 @@ struct ClosedLoops {
   // where it was rejected), and how many were tried and accepted.
   std::vector<std::optional<Pose3d>> scan_steps;
   size_t scan_edges_tried = 0;
-  PoseGraph graph;                // odometry chain and one edge per loop (initial = odometry)
+  PoseGraph graph;                               // odometry chain and one edge per loop (initial = odometry)
   std::optional<OptimizationResult> last_solve;  // the final optimisation, if any loop
-  std::vector<double> solve_ms;   // every optimisation, in order (one per loop)
-  Segments map_odom;              // the detector's segment map (odometry frame)
-  CorrectedMap map_corrected;     // the same on the corrected trajectory, duplicates merged
-  size_t node_of(size_t frame) const;  // index into frames; throws std::out_of_range
+  std::vector<double> solve_ms;                  // every optimisation, in order (one per loop)
+  Segments map_odom;                             // the detector's segment map (odometry frame)
+  CorrectedMap map_corrected;                    // the same on the corrected trajectory, duplicates merged
+  size_t node_of(size_t frame) const;            // index into frames; throws std::out_of_range
 };
 
 // classifier: required when the detector's matcher is kRandomForest.

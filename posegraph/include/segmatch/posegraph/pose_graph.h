@@ -44,9 +44,9 @@ struct PoseGraphConfig {
   // errors are correlated along a route; white per-step noise alone lets a loop's correction
   // be spread as the smallest change, not as a drift would have made it. 0: off.
   double bias_stretch_m = 100.0;
-  double bias_yaw_sigma_deg_per_m = 0.02;   // prior on the first stretch's yaw-rate bias
-  double bias_climb_sigma = 0.01;           // ... and its climb bias (metres per metre)
-  double bias_yaw_walk_deg_per_m = 0.002;   // change from one stretch to the next
+  double bias_yaw_sigma_deg_per_m = 0.02;  // prior on the first stretch's yaw-rate bias
+  double bias_climb_sigma = 0.01;          // ... and its climb bias (metres per metre)
+  double bias_yaw_walk_deg_per_m = 0.002;  // change from one stretch to the next
   double bias_climb_walk = 0.001;
   // ... and its scale (a step read this fraction too long; a wheel's radius). Loops back to the
   // same places cannot see it, so without scan edges it stays at its prior, 0.
@@ -112,20 +112,20 @@ Edge loop_edge(size_t query, size_t match, const Pose3d& T_query_match, double c
                const PoseGraphConfig& config);
 
 struct LoopReport {
-  size_t index = 0;              // into PoseGraph::loops
-  double weight = 1.0;           // Cauchy weight at the solution (1: fully trusted)
+  size_t index = 0;                         // into PoseGraph::loops
+  double weight = 1.0;                      // Cauchy weight at the solution (1: fully trusted)
   double residual_m = 0, residual_deg = 0;  // disagreement left at the solution
-  bool downweighted = false;     // weight < downweighted_weight
+  bool downweighted = false;                // weight < downweighted_weight
 };
 
 struct OptimizationResult {
-  Poses T_world_node;                // optimised; node 0 is held fixed
-  std::vector<LoopReport> loops;     // one per loop edge, same order
-  size_t scans_downweighted = 0;     // scan edges whose weight ended below downweighted_weight
+  Poses T_world_node;             // optimised; node 0 is held fixed
+  std::vector<LoopReport> loops;  // one per loop edge, same order
+  size_t scans_downweighted = 0;  // scan edges whose weight ended below downweighted_weight
   double initial_cost = 0, final_cost = 0;
   int iterations = 0;
   bool converged = false;
-  std::string message;               // Ceres' summary line
+  std::string message;  // Ceres' summary line
   double solve_ms = 0;
 };
 
@@ -159,8 +159,8 @@ class IncrementalPoseGraph {
 
  private:
   PoseGraphConfig config_;
-  PoseGraph graph_;                 // initial poses = odometry
-  Poses solved_;                    // estimate of the nodes present at the last solve
+  PoseGraph graph_;  // initial poses = odometry
+  Poses solved_;     // estimate of the nodes present at the last solve
   std::vector<OptimizationResult> solves_;
 };
 

@@ -10,8 +10,8 @@
 // slides along it). The edge still carries the graph's robust loss.
 #pragma once
 
-#include "segmatch/core/preprocess/preprocess.h"
 #include "segmatch/core/common/types.h"
+#include "segmatch/core/preprocess/preprocess.h"
 #include "segmatch/core/verification/verification.h"
 
 #include <deque>
@@ -20,11 +20,11 @@
 namespace segmatch::posegraph {
 
 struct ScanMatchConfig {
-  float voxel_m = 0.3f;        // scans are thinned to one point per voxel of this size
-  float min_range_m = 1.0f;    // points nearer than this are dropped (the vehicle itself)
-  float max_range_m = 60.0f;   // and farther (sparse, where a small rotation moves points most)
-  int target_scans = 3;        // the new scan is aligned onto this many previous scans, merged
-  float min_fitness = 0.5f;    // fraction of the scan's points within max_correspondence_m
+  float voxel_m = 0.3f;       // scans are thinned to one point per voxel of this size
+  float min_range_m = 1.0f;   // points nearer than this are dropped (the vehicle itself)
+  float max_range_m = 60.0f;  // and farther (sparse, where a small rotation moves points most)
+  int target_scans = 3;       // the new scan is aligned onto this many previous scans, merged
+  float min_fitness = 0.5f;   // fraction of the scan's points within max_correspondence_m
   // The registration may differ from the odometry's step by at most this (metres, plus
   // max_deviation_fraction of the step's length; degrees).
   double max_deviation_m = 0.5, max_deviation_fraction = 0.2, max_deviation_deg = 5.0;
@@ -43,7 +43,7 @@ struct ScanStep {
   bool accepted = false;
   Pose3d T_previous_this = Pose3d::Identity();  // the registration (previous node -> this node)
   float fitness = 0, rmse_m = 0;
-  const char* rejected_because = "";            // when not accepted
+  const char* rejected_because = "";  // when not accepted
 };
 
 // Feed scans in node order. The first scan gives no step.
@@ -55,11 +55,11 @@ class ScanMatcher {
 
  private:
   struct Kept {
-    PointCloud points;        // thinned, sensor frame
-    Pose3d T_last_this;       // this scan's pose in the newest kept scan's frame
+    PointCloud points;   // thinned, sensor frame
+    Pose3d T_last_this;  // this scan's pose in the newest kept scan's frame
   };
   ScanMatchConfig config_;
-  std::deque<Kept> kept_;     // newest first
+  std::deque<Kept> kept_;  // newest first
   Pose3d T_odom_last_ = Pose3d::Identity();
 };
 

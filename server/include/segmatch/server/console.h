@@ -30,10 +30,10 @@ struct ConsoleConfig {
   // opens the page as /?token=TOKEN: the page then names its script and style sheet with the
   // token, and its API calls send the header. Empty: none.
   std::string token;
-  int threads = 4;                 // HTTP worker threads (each serves one connection at a time)
-  int request_timeout_ms = 5000;   // a request (headers) not read whole in this time: dropped
+  int threads = 4;                // HTTP worker threads (each serves one connection at a time)
+  int request_timeout_ms = 5000;  // a request (headers) not read whole in this time: dropped
   int keep_alive_timeout_ms = 5000;
-  size_t max_request_bytes = 16384;  // request line and headers; beyond: 400
+  size_t max_request_bytes = 16384;     // request line and headers; beyond: 400
   size_t max_answers_per_reply = 1000;  // /api/answers lists at most this many per call
   size_t tile_cache_entries = 1024;     // tiles' JSON kept (LRU)
   std::shared_ptr<Metrics> metrics;     // also serve GET /metrics from it; null: 404 there

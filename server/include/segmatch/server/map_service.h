@@ -28,7 +28,7 @@ namespace server {
 struct LoadedMap {
   std::string path;
   storage::MapMetadata metadata;
-  io::PipelineConfig config;  // as served (after the L2 fallback, if any)
+  io::PipelineConfig config;                             // as served (after the L2 fallback, if any)
   Eigen::Vector3d extent_min = Eigen::Vector3d::Zero();  // bbox of the segment centroids (map frame)
   Eigen::Vector3d extent_max = Eigen::Vector3d::Zero();
   std::unique_ptr<const Localizer> localizer;  // targets in map order; targets()[i].id = map id
@@ -38,7 +38,7 @@ struct LoadedMap {
   uint64_t segments_digest = 0;
   std::vector<std::string> warnings;
   std::shared_ptr<const storage::LazyPoints> lazy_points;  // kLazy: the localizer's point source
-  std::shared_ptr<const MapSurfaces> surfaces;  // the map's surface layer, read lazily (null: none)
+  std::shared_ptr<const MapSurfaces> surfaces;             // the map's surface layer, read lazily (null: none)
   // The map's places for cold starts, described from the layer in the background from load on
   // (invalid: none); set `stop_places` to stop that early.
   PlacesFuture places;
@@ -47,7 +47,7 @@ struct LoadedMap {
   LoadedMap(const LoadedMap&) = delete;
   LoadedMap& operator=(const LoadedMap&) = delete;
   ~LoadedMap() { stop_places->store(true); }  // a map dropped at once does not wait for its places
-  int schema_version = 0;  // of the map file as read (an old one is served as it is)
+  int schema_version = 0;                     // of the map file as read (an old one is served as it is)
   // The sensor positions of the mapping traversal's keyframes (map frame; empty when the map
   // stores none): the operator's page draws them.
   std::vector<Eigen::Vector3d> trajectory;

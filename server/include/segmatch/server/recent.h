@@ -17,17 +17,17 @@ namespace server {
 
 // One LOCALIZE or LOCALIZE_SEGMENTS answered (a reply or an ERROR).
 struct Answer {
-  uint64_t cursor = 0;        // 1, 2, ... in answer order (set by Recent::add)
-  double unix_time_s = 0.0;   // when the reply was ready (set by Recent::add)
-  std::string peer;           // "ADDR:PORT" of the connection
-  std::string type;           // LOCALIZE or LOCALIZE_SEGMENTS
+  uint64_t cursor = 0;       // 1, 2, ... in answer order (set by Recent::add)
+  double unix_time_s = 0.0;  // when the reply was ready (set by Recent::add)
+  std::string peer;          // "ADDR:PORT" of the connection
+  std::string type;          // LOCALIZE or LOCALIZE_SEGMENTS
   uint64_t request_id = 0;
-  std::string status;         // localized, not_localized, outside_prior or error
-  std::string refusal;        // api::RefusalCode's name (NONE when localized or an ERROR)
+  std::string status;   // localized, not_localized, outside_prior or error
+  std::string refusal;  // api::RefusalCode's name (NONE when localized or an ERROR)
   uint16_t refusal_code = 0;
-  std::string reason;         // the reply's reason or the ERROR's message
-  uint16_t error_code = 0;    // with status error
-  std::string method;         // segments, registration, surfaces, places ("" for an ERROR)
+  std::string reason;       // the reply's reason or the ERROR's message
+  uint16_t error_code = 0;  // with status error
+  std::string method;       // segments, registration, surfaces, places ("" for an ERROR)
   // The sensor in the map frame: where the answer puts it (localized, outside_prior) or, for a
   // refusal with a prior, where the prior puts it (pose_from_prior).
   bool has_pose = false, pose_from_prior = false;
@@ -35,7 +35,7 @@ struct Answer {
   // The horizontal block of the position covariance (m^2), when the localizer estimated one.
   bool has_covariance = false;
   double cov_xx_m2 = 0.0, cov_xy_m2 = 0.0, cov_yy_m2 = 0.0;
-  double latency_ms = 0.0;    // frame received to reply ready
+  double latency_ms = 0.0;  // frame received to reply ready
 };
 
 struct RecentStats {

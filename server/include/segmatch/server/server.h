@@ -40,8 +40,8 @@ struct ServerConfig {
   // stages, core/deadline.h) and takes the next request. <= 0: no limit.
   double request_timeout_s = 30.0;
   int max_connections = 64;
-  double stats_interval_s = 10.0;            // periodic counters line; <= 0 = none
-  bool log_requests = true;                  // one line per request
+  double stats_interval_s = 10.0;  // periodic counters line; <= 0 = none
+  bool log_requests = true;        // one line per request
   // Where log lines go (one call per line, without newline); default: stderr, each line with a
   // timestamp and a level (log.h).
   std::function<void(const std::string&)> log;
@@ -52,13 +52,13 @@ struct ServerConfig {
 };
 
 struct ServerCounters {
-  uint64_t frames_received = 0; // frames read whole (answered or still in work)
-  uint64_t requests = 0;        // frames answered (any type)
+  uint64_t frames_received = 0;  // frames read whole (answered or still in work)
+  uint64_t requests = 0;         // frames answered (any type)
   uint64_t localize_requests = 0;
   uint64_t localized = 0;
-  uint64_t errors = 0;          // ERROR replies sent
-  uint64_t timed_out = 0;       // of which REQUEST_TIMEOUT (request_timeout_s)
-  uint64_t connections = 0;     // accepted and served
+  uint64_t errors = 0;               // ERROR replies sent
+  uint64_t timed_out = 0;            // of which REQUEST_TIMEOUT (request_timeout_s)
+  uint64_t connections = 0;          // accepted and served
   uint64_t refused_connections = 0;  // over max_connections
 };
 

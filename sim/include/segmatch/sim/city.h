@@ -15,20 +15,20 @@
 namespace segmatch::sim {
 
 struct City {
-  World world;      // as mapped (sequence 00)
-  World changed;    // as revisited (sequence 01)
-  Traversal first;  // sequence 00
-  Traversal second; // sequence 01
+  World world;       // as mapped (sequence 00)
+  World changed;     // as revisited (sequence 01)
+  Traversal first;   // sequence 00
+  Traversal second;  // sequence 01
 };
 
 City make_city(const DatasetConfig& config);
 
 struct SegmentsAlongConfig {
-  LocalCloudSchedule schedule;        // where local clouds are taken
-  LocalCloudConfig local_cloud;       // paper III-A: 60 m cylinder, a scan every metre
+  LocalCloudSchedule schedule;   // where local clouds are taken
+  LocalCloudConfig local_cloud;  // paper III-A: 60 m cylinder, a scan every metre
   SegmentationConfig segmentation;
-  bool merge = true;                  // views of one object merged as in a map
-  SegmentMapConfig segment_map;       // with merge
+  bool merge = true;             // views of one object merged as in a map
+  SegmentMapConfig segment_map;  // with merge
 };
 
 // Segments (world frame, Segment::label = ground truth) of the local clouds along `traversal`

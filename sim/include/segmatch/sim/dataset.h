@@ -35,18 +35,18 @@ struct DatasetConfig {
   std::string preset = "custom";
   WorldConfig world;
   ChangeConfig change;
-  DriveConfig drive_first;       // sequence 00
-  DriveConfig drive_second;      // sequence 01 (inner lane, shifted)
+  DriveConfig drive_first;   // sequence 00
+  DriveConfig drive_second;  // sequence 01 (inner lane, shifted)
   std::string sensor = "hdl64e";
-  double first_length_m = 1200.0;   // route length of sequence 00
+  double first_length_m = 1200.0;  // route length of sequence 00
   // Route of sequence 00: "random" (first_length_m, preferring new streets) or "loop" (around
   // the city and along its first streets again: plan_loop_route, for loop closure).
   std::string first_route = "random";
-  double second_length_m = 800.0;   // route length of sequence 01
-  int threads = 0;                  // 0: one per core
+  double second_length_m = 800.0;  // route length of sequence 01
+  int threads = 0;                 // 0: one per core
   bool write_labels = true;
   bool write_images = true;
-  KeyframeConfig keyframes;         // every_m 0 (default): no keyframes
+  KeyframeConfig keyframes;  // every_m 0 (default): no keyframes
 
   // Sets the sensor and drives both traversals with it at its mount height (to the mm), e.g.
   // 1.0 m for the handheld livox-avia. Throws std::invalid_argument on an unknown name.
@@ -66,9 +66,9 @@ struct DatasetSummary {
   size_t objects = 0;
   size_t primitives = 0;
   double street_length_m = 0;
-  size_t revisit_frames = 0;        // frames of 01 within 5 m of a frame of 00
-  size_t unmapped_frames = 0;       // frames of 01 more than 30 m from every frame of 00
-  size_t keyframes[2] = {0, 0};     // with keyframes
+  size_t revisit_frames = 0;     // frames of 01 within 5 m of a frame of 00
+  size_t unmapped_frames = 0;    // frames of 01 more than 30 m from every frame of 00
+  size_t keyframes[2] = {0, 0};  // with keyframes
   size_t keyframe_points = 0;
   double seconds = 0;
 };

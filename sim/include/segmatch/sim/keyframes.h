@@ -68,9 +68,9 @@ std::vector<size_t> keyframe_frames(const Traversal& traversal, double every_m, 
 Poses drifted_odometry(const Poses& T_world_sensor, const KeyframeConfig& config);
 
 struct KeyframeSummary {
-  std::vector<size_t> frames;   // scan index of each keyframe
-  Poses T_world_keyframe;       // in the traversal's world frame (not the keyframe world)
-  size_t points = 0;            // in all keyframes
+  std::vector<size_t> frames;  // scan index of each keyframe
+  Poses T_world_keyframe;      // in the traversal's world frame (not the keyframe world)
+  size_t points = 0;           // in all keyframes
 };
 
 // Returns scan `frame` of the traversal (sensor frame, labels optional). Called from one

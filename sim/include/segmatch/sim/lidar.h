@@ -23,11 +23,11 @@ enum class ScanPattern {
 // whose petals all pass through the axis, denser in the centre than at the rim, rotated a
 // little further every petal so it never closes on itself.
 struct RosetteConfig {
-  float fov_horizontal_deg = 70.4f;   // full width of the field of view
-  float fov_vertical_deg = 77.2f;     // full height (the cone is slightly elliptic)
-  double point_rate_hz = 240000.0;    // rays per second (0.1 s frame: 24000 rays)
-  double prism1_hz = 0.0;             // revolutions per second of the first prism
-  double prism2_hz = 0.0;             // of the second, counter-rotating (negative)
+  float fov_horizontal_deg = 70.4f;  // full width of the field of view
+  float fov_vertical_deg = 77.2f;    // full height (the cone is slightly elliptic)
+  double point_rate_hz = 240000.0;   // rays per second (0.1 s frame: 24000 rays)
+  double prism1_hz = 0.0;            // revolutions per second of the first prism
+  double prism2_hz = 0.0;            // of the second, counter-rotating (negative)
 };
 
 struct LidarModel {
@@ -75,13 +75,13 @@ struct SimulatedScan {
 // Simulates one scan (a revolution, or 1 / rate_hz of a rosette) from pose T_world_sensor
 // (all rays from one pose, i.e. a motion-compensated scan). Deterministic for a given seed.
 // Single-threaded. A rosette starts at a point of its endless pattern derived from the seed.
-SimulatedScan simulate_scan(const RayCaster& caster, const LidarModel& model,
-                            const Pose3d& T_world_sensor, uint64_t seed);
+SimulatedScan simulate_scan(const RayCaster& caster, const LidarModel& model, const Pose3d& T_world_sensor,
+                            uint64_t seed);
 // The same with the rosette's start given: pattern_time_s is the time since the prisms were
 // at phase zero, so scans at t, t + 1 / rate_hz, ... continue one another like the frames
 // of a recording. Spinning models ignore it.
-SimulatedScan simulate_scan(const RayCaster& caster, const LidarModel& model,
-                            const Pose3d& T_world_sensor, uint64_t seed, double pattern_time_s);
+SimulatedScan simulate_scan(const RayCaster& caster, const LidarModel& model, const Pose3d& T_world_sensor,
+                            uint64_t seed, double pattern_time_s);
 
 // Scans at T_world_sensor[frames[k]] for every k, seeded with the frame index, simulated on
 // `threads` threads (the calling thread included; < 2 means the calling thread only).

@@ -12,20 +12,20 @@
 namespace segmatch::sim {
 
 struct SimulatedLocalCloud {
-  size_t frame = 0;                 // traversal scan index at which the cloud was taken
-  Pose3d T_world_sensor;            // sensor pose at that scan (the truth)
-  Pose3d T_cloud_sensor;            // the sensor in the cloud's frame: T_world_sensor, or the
-                                    // schedule's odometry pose
-  PointCloud cloud;                 // world frame (voxels for for_each_voxelized_cloud)
-  std::vector<uint32_t> labels;     // per point (voxel), SemanticKITTI
+  size_t frame = 0;              // traversal scan index at which the cloud was taken
+  Pose3d T_world_sensor;         // sensor pose at that scan (the truth)
+  Pose3d T_cloud_sensor;         // the sensor in the cloud's frame: T_world_sensor, or the
+                                 // schedule's odometry pose
+  PointCloud cloud;              // world frame (voxels for for_each_voxelized_cloud)
+  std::vector<uint32_t> labels;  // per point (voxel), SemanticKITTI
 };
 
 struct LocalCloudSchedule {
-  double every_m = 10.0;            // one local cloud each time the vehicle drove this far
-  double warmup_m = 30.0;           // first local cloud only after this much accumulation
+  double every_m = 10.0;   // one local cloud each time the vehicle drove this far
+  double warmup_m = 30.0;  // first local cloud only after this much accumulation
   size_t first_frame = 0, last_frame = SIZE_MAX;
-  int threads = 0;                  // scan simulation threads (0: one per core)
-  uint64_t seed = 1;                // noise seed of the scans
+  int threads = 0;    // scan simulation threads (0: one per core)
+  uint64_t seed = 1;  // noise seed of the scans
   // The vehicle's odometry, one pose per traversal scan (e.g. drifted_odometry of the
   // traversal's poses): scans are cast at the true poses but accumulated and cropped at these,
   // and `cloud` is in the odometry's frame. Null: the true poses (world frame).

@@ -11,9 +11,9 @@
 namespace segmatch::sim {
 
 struct RayHit {
-  float range_m = 0.0f;           // distance along the (unit) ray direction
-  uint32_t label = 0;             // label of the primitive hit
-  float reflectivity = 0.0f;      // reflectivity of the primitive hit
+  float range_m = 0.0f;                               // distance along the (unit) ray direction
+  uint32_t label = 0;                                 // label of the primitive hit
+  float reflectivity = 0.0f;                          // reflectivity of the primitive hit
   Eigen::Vector3f normal = Eigen::Vector3f::UnitZ();  // unit surface normal at the hit, facing the ray
 };
 
@@ -28,8 +28,8 @@ class RayCaster {
   // Nearest hit along origin + t * direction for t in [min_range_m, max_range_m];
   // direction must be unit length. A ray that starts inside a solid primitive hits its far
   // side. Thread-safe (const, no shared mutable state).
-  bool cast(const Eigen::Vector3f& origin, const Eigen::Vector3f& direction, float min_range_m,
-            float max_range_m, RayHit* hit) const;
+  bool cast(const Eigen::Vector3f& origin, const Eigen::Vector3f& direction, float min_range_m, float max_range_m,
+            RayHit* hit) const;
 
   size_t primitive_count() const;
 

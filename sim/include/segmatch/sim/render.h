@@ -13,8 +13,8 @@ namespace segmatch::sim {
 // Draws `world` (and, when given, what changed in `changed`: new cars and pedestrians) with
 // the first traversal in blue and the second in orange. Throws std::runtime_error if the
 // image cannot be written.
-void write_world_png(const std::string& path, const World& world, const World* changed,
-                     const Traversal& first, const Traversal* second);
+void write_world_png(const std::string& path, const World& world, const World* changed, const Traversal& first,
+                     const Traversal* second);
 
 void write_scan_png(const std::string& path, const SimulatedScan& scan, const LidarModel& model,
                     const std::string& title);

@@ -28,17 +28,17 @@ struct Primitive {
   Eigen::Vector3f b = Eigen::Vector3f::Zero();
   Eigen::Vector3f c = Eigen::Vector3f::Zero();
   float yaw = 0.0f;
-  uint32_t label = 0;          // SemanticKITTI: instance << 16 | class
-  float reflectivity = 0.5f;   // 0..1, drives the simulated intensity
+  uint32_t label = 0;         // SemanticKITTI: instance << 16 | class
+  float reflectivity = 0.5f;  // 0..1, drives the simulated intensity
 
-  static Primitive box(const Eigen::Vector3f& centre, const Eigen::Vector3f& half_extents,
-                       float yaw, uint32_t label, float reflectivity);
-  static Primitive cylinder(const Eigen::Vector3f& base_centre, float radius, float height,
+  static Primitive box(const Eigen::Vector3f& centre, const Eigen::Vector3f& half_extents, float yaw, uint32_t label,
+                       float reflectivity);
+  static Primitive cylinder(const Eigen::Vector3f& base_centre, float radius, float height, uint32_t label,
+                            float reflectivity);
+  static Primitive ellipsoid(const Eigen::Vector3f& centre, const Eigen::Vector3f& semi_axes, uint32_t label,
+                             float reflectivity);
+  static Primitive triangle(const Eigen::Vector3f& v0, const Eigen::Vector3f& v1, const Eigen::Vector3f& v2,
                             uint32_t label, float reflectivity);
-  static Primitive ellipsoid(const Eigen::Vector3f& centre, const Eigen::Vector3f& semi_axes,
-                             uint32_t label, float reflectivity);
-  static Primitive triangle(const Eigen::Vector3f& v0, const Eigen::Vector3f& v1,
-                            const Eigen::Vector3f& v2, uint32_t label, float reflectivity);
 };
 
 using Scene = std::vector<Primitive>;

@@ -2,8 +2,8 @@
 // lane with rounded corners, a speed profile, and one sensor pose every scan period.
 #pragma once
 
-#include "segmatch/core/detail/random.h"
 #include "segmatch/core/common/types.h"
+#include "segmatch/core/detail/random.h"
 #include "segmatch/sim/world.h"
 
 #include <vector>
@@ -16,8 +16,8 @@ struct DriveConfig {
   double max_accel_mps2 = 1.5;          // acceleration and braking limit
   double right_turn_radius_m = 7.0;
   double left_turn_radius_m = 11.0;
-  double scan_period_s = 0.1;           // one scan every 0.1 s (10 Hz)
-  double sensor_height_m = 1.73;        // LiDAR above the road (KITTI)
+  double scan_period_s = 0.1;     // one scan every 0.1 s (10 Hz)
+  double sensor_height_m = 1.73;  // LiDAR above the road (KITTI)
   // Lane choice. Traffic drives on the right. On streets with two lanes per direction,
   // inner_lane picks the left one; lane_shift_m moves the vehicle towards the centre line
   // within its lane (negative: towards the kerb).
@@ -31,11 +31,11 @@ struct Route {
 };
 
 struct Traversal {
-  std::vector<double> times_s;   // scan time stamps
-  Poses T_world_lidar;           // sensor pose of every scan
+  std::vector<double> times_s;     // scan time stamps
+  Poses T_world_lidar;             // sensor pose of every scan
   std::vector<double> odometer_m;  // distance driven at every scan
-  std::vector<int> edge;         // street-graph edge driven at every scan
-  std::vector<bool> forward;     // whether that edge is driven from its node a to b
+  std::vector<int> edge;           // street-graph edge driven at every scan
+  std::vector<bool> forward;       // whether that edge is driven from its node a to b
 
   size_t size() const { return times_s.size(); }
   double length_m() const { return odometer_m.empty() ? 0.0 : odometer_m.back(); }
@@ -57,9 +57,9 @@ Traversal drive(const World& world, const Route& route, const DriveConfig& confi
 
 // For each scan of `revisit`, the nearest scan of `reference` (by sensor position).
 struct RevisitMatch {
-  int frame = 0;             // scan index in the revisit
-  int reference_frame = -1;  // nearest scan of the reference traversal
-  double distance_m = 0.0;   // horizontal distance between the two sensor positions
+  int frame = 0;                  // scan index in the revisit
+  int reference_frame = -1;       // nearest scan of the reference traversal
+  double distance_m = 0.0;        // horizontal distance between the two sensor positions
   double heading_diff_deg = 0.0;  // 0: same direction, 180: opposite
 };
 std::vector<RevisitMatch> match_revisits(const Traversal& reference, const Traversal& revisit);

@@ -35,19 +35,29 @@ constexpr uint16_t kOtherObject = 99;
 }  // namespace semantic
 
 enum class ObjectKind : uint8_t {
-  kBuilding, kStreetLamp, kPole, kSign, kTree, kBush, kHedge, kWall, kFence, kCar,
-  kPedestrian, kBench,
+  kBuilding,
+  kStreetLamp,
+  kPole,
+  kSign,
+  kTree,
+  kBush,
+  kHedge,
+  kWall,
+  kFence,
+  kCar,
+  kPedestrian,
+  kBench,
 };
 const char* to_string(ObjectKind kind);
 
 struct WorldObject {
   ObjectKind kind = ObjectKind::kBuilding;
-  uint16_t instance = 0;                    // unique in the world, 0 = ground
+  uint16_t instance = 0;                                   // unique in the world, 0 = ground
   Eigen::Vector2f position = Eigen::Vector2f::Zero();      // footprint centre (m)
   Eigen::Vector2f half_extents = Eigen::Vector2f::Zero();  // footprint half size (m)
-  float yaw = 0.0f;                         // footprint orientation (rad)
+  float yaw = 0.0f;                                        // footprint orientation (rad)
   float height_m = 0.0f;
-  std::vector<Primitive> parts;             // geometry in world coordinates
+  std::vector<Primitive> parts;  // geometry in world coordinates
 };
 
 // Street graph: nodes are intersections, edges are street segments between them.
@@ -83,15 +93,15 @@ struct Terrain {
 
 struct WorldConfig {
   uint64_t seed = 1;
-  int blocks_x = 4;                 // street grid size in blocks
+  int blocks_x = 4;  // street grid size in blocks
   int blocks_y = 4;
-  float block_min_m = 70.0f;        // block size range (kerb to kerb distance between streets)
+  float block_min_m = 70.0f;  // block size range (kerb to kerb distance between streets)
   float block_max_m = 120.0f;
   float lane_width_m = 3.5f;
   float parking_lane_width_m = 2.3f;
   float sidewalk_width_m = 3.0f;
   float kerb_height_m = 0.15f;
-  float max_grade = 0.04f;          // terrain slope bound (rise over run)
+  float max_grade = 0.04f;             // terrain slope bound (rise over run)
   float wide_street_fraction = 0.25f;  // streets with two lanes per direction
   float park_block_fraction = 0.15f;   // blocks that are parks instead of buildings
   float parked_car_fill = 0.55f;       // fraction of parking length occupied
@@ -107,7 +117,7 @@ struct World {
   Terrain terrain;
   StreetGraph streets;
   Eigen::AlignedBox2d bounds;
-  std::vector<Primitive> ground;      // terrain, roads, sidewalks and kerbs
+  std::vector<Primitive> ground;  // terrain, roads, sidewalks and kerbs
   std::vector<WorldObject> objects;
   uint16_t next_instance = 1;
 
@@ -130,8 +140,8 @@ struct ChangeConfig {
   uint64_t seed = 2;
   float car_removed_fraction = 0.3f;
   float car_moved_fraction = 0.2f;
-  float new_car_fill = 0.25f;            // fraction of free parking length filled with new cars
-  float pedestrians_per_100m = 1.5f;     // per 100 m of street
+  float new_car_fill = 0.25f;                 // fraction of free parking length filled with new cars
+  float pedestrians_per_100m = 1.5f;          // per 100 m of street
   float vegetation_changed_fraction = 0.15f;  // bushes removed/added, tree crowns regrown
 };
 

@@ -71,7 +71,8 @@ class SegmentQuery {
     out.request_bytes += api::encode(full).size();
     out.reply = send(full);
     out.reply.timings.server_total += tracking_ms;
-    if (out.lost && out.reply.status != api::LocalizeStatus::kLocalized) out.reply.reason += " [" + tracking_reason + "]";
+    if (out.lost && out.reply.status != api::LocalizeStatus::kLocalized)
+      out.reply.reason += " [" + tracking_reason + "]";
     return out;
   }
 

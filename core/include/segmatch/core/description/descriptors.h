@@ -7,8 +7,8 @@
 #pragma once
 
 #include "segmatch/core/common/deadline.h"
-#include "segmatch/core/segmentation/segment.h"
 #include "segmatch/core/common/types.h"
+#include "segmatch/core/segmentation/segment.h"
 
 #include <cstdint>
 

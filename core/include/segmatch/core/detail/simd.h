@@ -77,9 +77,15 @@ inline F4 load(const float* p) { return {{p[0], p[1], p[2], p[3]}}; }
 inline F4 splat(float x) { return {{x, x, x, x}}; }
 inline F4 make(float l0, float l1, float l2, float l3) { return {{l0, l1, l2, l3}}; }
 inline F4 zero() { return splat(0.0f); }
-inline F4 operator+(F4 a, F4 b) { return each(a, b, [](float x, float y) { return x + y; }); }
-inline F4 operator-(F4 a, F4 b) { return each(a, b, [](float x, float y) { return x - y; }); }
-inline F4 operator*(F4 a, F4 b) { return each(a, b, [](float x, float y) { return x * y; }); }
+inline F4 operator+(F4 a, F4 b) {
+  return each(a, b, [](float x, float y) { return x + y; });
+}
+inline F4 operator-(F4 a, F4 b) {
+  return each(a, b, [](float x, float y) { return x - y; });
+}
+inline F4 operator*(F4 a, F4 b) {
+  return each(a, b, [](float x, float y) { return x * y; });
+}
 inline F4 min(F4 a, F4 b) { return each(a, b, lane::min); }
 inline F4 max(F4 a, F4 b) { return each(a, b, lane::max); }
 inline int le_bits(F4 a, F4 b) {

@@ -21,18 +21,18 @@ struct CorrelativeSearchConfig {
   // Priors up to this wide (and wider than RegistrationConfig::max_prior_radius_m) are searched;
   // wider ones go to segment matching alone.
   float max_radius_m = 40.0f;
-  float resolution_m = 1.0f;     // grid cell and translation step (ICP's coarse stage reaches 1.5 m)
-  float angle_step_deg = 1.0f;   // heading step within the prior's tolerance
-  int max_query_points = 1000;   // one query point per occupied cell, then every k-th
-  int candidates = 3;            // distinct peaks handed to registration, best first
-  float min_separation_m = 3.0f; // peaks closer than this are one
+  float resolution_m = 1.0f;      // grid cell and translation step (ICP's coarse stage reaches 1.5 m)
+  float angle_step_deg = 1.0f;    // heading step within the prior's tolerance
+  int max_query_points = 1000;    // one query point per occupied cell, then every k-th
+  int candidates = 3;             // distinct peaks handed to registration, best first
+  float min_separation_m = 3.0f;  // peaks closer than this are one
   // A registration from a peak answers with this fitness at least (RegistrationConfig's is for
   // a prior within ICP's reach): along a street of facades the disc holds wrong minima that fit
   // about as well as a narrow prior's floor lets through. Its support must also reach the
   // localizer's own floors (LocalizerConfig::min_support and min_support_with_prior, the higher):
   // over a wide prior the search is nearly a global one.
   float min_fitness = 0.65f;
-  void validate() const;         // throws std::invalid_argument naming the field
+  void validate() const;  // throws std::invalid_argument naming the field
 };
 
 struct SearchCandidate {

@@ -22,8 +22,8 @@ struct LocalCloudConfig {
   // it a scan stays until the vehicle is radius + range away, and on a block it drives around
   // far longer: odometry that built the cloud drifts over all that driving, and where the route
   // returns the same street is held twice, metres apart. 60 m (one radius): chosen on the demo
-  // city with simulated LiDAR-inertial odometry, riverside02 0-164, hku-mb and hku-loop1 (docs/how-defaults-were-chosen.md,
-  // "What we measured"); maps written before it keep 0.
+  // city with simulated LiDAR-inertial odometry, riverside02 0-164, hku-mb and hku-loop1
+  // (docs/how-defaults-were-chosen.md, "What we measured"); maps written before it keep 0.
   double max_scan_age_m = 60.0;
   void validate() const;  // throws std::invalid_argument naming the field
 };
@@ -61,7 +61,7 @@ class LocalCloud {
     std::vector<uint32_t> labels;  // empty if none were given
     float min_xy[2] = {0.f, 0.f};  // horizontal bounding box, for dropping whole scans
     float max_xy[2] = {0.f, 0.f};
-    double added_at_m = 0.0;       // odometer when it was added
+    double added_at_m = 0.0;  // odometer when it was added
   };
   LocalCloudConfig config_;
   std::deque<Scan> scans_;

@@ -4,13 +4,13 @@
 // matches are verified geometrically, giving the 6DOF pose of the query in the map.
 #pragma once
 
+#include "segmatch/core/description/descriptors.h"
 #include "segmatch/core/localization/correlative_search.h"
 #include "segmatch/core/localization/place_recognition.h"
-#include "segmatch/core/description/descriptors.h"
-#include "segmatch/core/matching/matcher.h"
-#include "segmatch/core/preprocess/preprocess.h"
 #include "segmatch/core/localization/registration.h"
+#include "segmatch/core/matching/matcher.h"
 #include "segmatch/core/matching/retrieval.h"
+#include "segmatch/core/preprocess/preprocess.h"
 #include "segmatch/core/segmentation/segment.h"
 #include "segmatch/core/segmentation/segmenter.h"
 #include "segmatch/core/verification/support.h"
@@ -40,8 +40,8 @@ struct LocalizerConfig {
   // Beyond the paper: a query with a prior is first registered to the map around it
   // (registration.h); segment matching answers when that does not.
   RegistrationConfig registration;
-  CovarianceConfig covariance;  // of every localized answer
-  NewestScansConfig newest;     // the sensor's pose now, when the query has its newest scans
+  CovarianceConfig covariance;     // of every localized answer
+  NewestScansConfig newest;        // the sensor's pose now, when the query has its newest scans
   CorrelativeSearchConfig search;  // registration over priors too wide for ICP alone
   SurfaceTrackingConfig track;     // the newest scans onto the surface layer (Localizer::track)
   PlaceRecognitionConfig places;   // cold start: which place a scan shows (Localizer::recognize_place)
@@ -53,7 +53,7 @@ struct LocalizerConfig {
   float support_radius_m = 1.0f;
   int min_support = 10;
   float max_ambiguity = 0.8f;
-  bool refine_pose = true;        // beyond the paper: ICP on the supporting segments' points
+  bool refine_pose = true;  // beyond the paper: ICP on the supporting segments' points
   // Refined poses whose point fitness falls below this are reported as not localized: the
   // centroids agreed but the surfaces do not.
   float min_refine_fitness = 0.5f;
@@ -114,18 +114,18 @@ const char* to_string(Refusal refusal);
 
 // Wall-clock time of each module for one query (milliseconds).
 struct ModuleTimings {
-  double voxel_ms = 0, ground_ms = 0, segment_ms = 0, describe_ms = 0, retrieve_ms = 0,
-         classify_ms = 0, verify_ms = 0, refine_ms = 0, total_ms = 0;
+  double voxel_ms = 0, ground_ms = 0, segment_ms = 0, describe_ms = 0, retrieve_ms = 0, classify_ms = 0, verify_ms = 0,
+         refine_ms = 0, total_ms = 0;
 };
 
 struct LocalizationResult {
   LocalizationStatus status = LocalizationStatus::kNotLocalized;
-  Refusal refusal = Refusal::kNone;                 // why not localized, typed
-  std::string reason;                               // the same in words (empty if localized)
-  Pose3d T_map_query = Pose3d::Identity();          // maps query-frame points into the map frame
-  Matches inliers;                                  // query index -> map segment index
-  float confidence = 0.0f;                          // 0..1
-  float refine_fitness = 0.0f;                      // fraction of query points on map surfaces
+  Refusal refusal = Refusal::kNone;         // why not localized, typed
+  std::string reason;                       // the same in words (empty if localized)
+  Pose3d T_map_query = Pose3d::Identity();  // maps query-frame points into the map frame
+  Matches inliers;                          // query index -> map segment index
+  float confidence = 0.0f;                  // 0..1
+  float refine_fitness = 0.0f;              // fraction of query points on map surfaces
   float refine_rmse_m = 0.0f;
   // The recent window's refinement (RefineConfig::recent_window_m): how far the whole cloud's
   // pose and the window's differ at the sensor, and the window's query points (0: not run,
@@ -146,9 +146,9 @@ struct LocalizationResult {
   RegistrationRefusal newest_refusal = RegistrationRefusal::kNone;
   std::string newest_reason;
   size_t query_segments = 0, candidates = 0, matches = 0;
-  size_t hypotheses = 0;                            // distinct verified poses considered
-  size_t support = 0, runner_up_support = 0;        // of the chosen and the next-best pose
-  Segments query;                                   // the query's described segments (query frame)
+  size_t hypotheses = 0;                      // distinct verified poses considered
+  size_t support = 0, runner_up_support = 0;  // of the chosen and the next-best pose
+  Segments query;                             // the query's described segments (query frame)
   ModuleTimings timings;
   bool localized() const { return status == LocalizationStatus::kLocalized; }
 };
@@ -164,8 +164,7 @@ inline void keep_tracking_reason(const std::string& tracking_reason, Localizatio
 // segment with its majority ground-truth label.
 // Once `deadline` has passed, the stages still to run are skipped (the caller checks it).
 Segments extract_segments(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
-                          const SegmentationConfig& config,
-                          const std::vector<uint32_t>* labels = nullptr,
+                          const SegmentationConfig& config, const std::vector<uint32_t>* labels = nullptr,
                           ModuleTimings* timings = nullptr, const Deadline& deadline = {});
 
 // The same without the voxel grid: ground removal, segmentation and description of an
@@ -210,8 +209,8 @@ enum class CloudKind { kRaw, kVoxelized };
 // (in radians) of where the prior puts it.
 struct PosePrior {
   Pose3d T_map_query = Pose3d::Identity();
-  double radius_m = 10.0;         // search radius around the prior's sensor position (finite, > 0)
-  double max_rotation_deg = 10.0; // heading error the prior may have (finite, >= 0)
+  double radius_m = 10.0;          // search radius around the prior's sensor position (finite, > 0)
+  double max_rotation_deg = 10.0;  // heading error the prior may have (finite, >= 0)
 };
 
 // The map segments' points, for a localizer whose targets are held without them (a server
@@ -247,8 +246,7 @@ class Localizer {
   // the segments' points, ground removed from the scans).
   Localizer(const LocalizerConfig& config, Segments targets,
             std::shared_ptr<const RandomForestMatcher> classifier = nullptr,
-            std::shared_ptr<const TargetPoints> points = nullptr,
-            std::shared_ptr<const MapSurfaces> surfaces = nullptr,
+            std::shared_ptr<const TargetPoints> points = nullptr, std::shared_ptr<const MapSurfaces> surfaces = nullptr,
             PlacesFuture places = {});
 
   // cloud: local cloud in the query (vehicle odometry) frame; sensor_position: the sensor in
@@ -280,8 +278,9 @@ class Localizer {
   // localize() for a tracked vehicle that sends its newest scans (LOCALIZE bit 6, revision 11):
   // the cloud's segments go to track() first; when it does not answer, the same segments go on
   // to localize_segments() with the prior, and the answer is refined to the newest scans.
-  LocalizationResult localize_tracking_first(const PointCloud& cloud, const Eigen::Vector3f& sensor_position, CloudKind kind,
-                                             const PointCloud& newest, const PosePrior& prior, const Deadline& deadline = {}) const;
+  LocalizationResult localize_tracking_first(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
+                                             CloudKind kind, const PointCloud& newest, const PosePrior& prior,
+                                             const Deadline& deadline = {}) const;
 
   // Tracking on the surface layer (SurfaceTrackingConfig): the newest scans (query frame)
   // registered onto the map's surface layer around `prior`, the pose checked against the

@@ -49,9 +49,9 @@ struct PlaceRecognitionConfig {
   // segments, too few to witness a pose (true and false poses alike had 0-11 landing, 0-3
   // matched): the registration's fitness decides. True poses fitted 0.957-0.999, the best false
   // ones 0.883 (simulated demo city, HDL-64E) and 0.723 (riverside02 keyframes); docs/how-defaults-were-chosen.md.
-  int min_support = 0;            // query segments landing on map segments under the pose
-  int min_matched_segments = 0;   // of those, passing the matcher
-  float min_fitness = 0.92f;      // of the registration (and of the search's peaks)
+  int min_support = 0;               // query segments landing on map segments under the pose
+  int min_matched_segments = 0;      // of those, passing the matcher
+  float min_fitness = 0.92f;         // of the registration (and of the search's peaks)
   float max_shifted_support = 0.0f;  // SurfaceTrackingConfig's look-alike check (0: off)
   float fitness_margin = 0.05f;      // a distinct place fitting within this of the best: ambiguous
   // The elevations the map's sensor saw, from the sensor (the profile's 1st and 99th
@@ -65,7 +65,7 @@ struct PlaceRecognitionConfig {
   float map_elevation_max_deg = 90.0f;
   float elevation_excess_deg = 5.0f;
   float elevation_margin_deg = 1.5f;
-  void validate() const;      // throws std::invalid_argument naming the field
+  void validate() const;  // throws std::invalid_argument naming the field
 };
 
 struct PlaceDescriptor {

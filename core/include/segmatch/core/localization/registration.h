@@ -76,12 +76,12 @@ struct RegistrationConfig {
 // when they fit, settled, near it, and constrain every axis.
 struct NewestScansConfig {
   bool enabled = true;
-  float window_m = 40.0f;      // newest points within this horizontal distance of the sensor
-  float leaf_m = 0.2f;         // voxel grid they are thinned to (one point per occupied voxel)
-  int min_points = 300;        // after thinning and ground removal
-  float min_fitness = 0.55f;   // as RegistrationConfig::min_fitness
-  float max_shift_m = 1.0f;    // farther from the answer at the sensor: the answer stands
-  float max_turn_deg = 2.0f;   // ... or turned more than this
+  float window_m = 40.0f;     // newest points within this horizontal distance of the sensor
+  float leaf_m = 0.2f;        // voxel grid they are thinned to (one point per occupied voxel)
+  int min_points = 300;       // after thinning and ground removal
+  float min_fitness = 0.55f;  // as RegistrationConfig::min_fitness
+  float max_shift_m = 1.0f;   // farther from the answer at the sensor: the answer stands
+  float max_turn_deg = 2.0f;  // ... or turned more than this
   // With a surface layer (every surface the mapping run saw), newest scans that do not lie on
   // it at the answer (fitness below min_fitness, or no layer near the sensor) mean the sensor
   // sees what the map never saw: an unmapped street. The answer is then a pose extrapolated
@@ -91,7 +91,7 @@ struct NewestScansConfig {
   // Off: such answers stand. Without a layer the segments cover too little of the scene
   // for their fitness to say this, and the answer stands.
   bool refuse_off_map = true;
-  void validate() const;       // throws std::invalid_argument naming the field
+  void validate() const;  // throws std::invalid_argument naming the field
 };
 
 // Tracking on the surface layer (beyond the paper; docs/protocol.md 5.5, bit 5): a vehicle with
@@ -104,9 +104,9 @@ struct NewestScansConfig {
 // not the segments' tens of thousands, and no segment points travel (docs/how-defaults-were-chosen.md).
 struct SurfaceTrackingConfig {
   bool enabled = true;
-  float leaf_m = 0.5f;        // the newest scans are thinned to this voxel grid
-  float window_m = 40.0f;     // ... within this horizontal distance of the sensor
-  int min_points = 200;       // after thinning
+  float leaf_m = 0.5f;     // the newest scans are thinned to this voxel grid
+  float window_m = 40.0f;  // ... within this horizontal distance of the sensor
+  int min_points = 200;    // after thinning
   // A tracking request carries at most this many newest points (every k-th after thinning) and
   // only the segments within window_m of the sensor: the ICP reads RefineConfig::max_query_points
   // (2000) of them anyway, and nearby segments are those the odometry placed best.
@@ -150,7 +150,7 @@ struct SurfaceTrackingConfig {
   // Held without a false fix on riverside02, hku-mb and the demo city, tracked, under GNSS
   // priors and under wrong priors (docs/how-defaults-were-chosen.md). 0: off.
   int min_support_for_fewer_matched = 20;
-  void validate() const;      // throws std::invalid_argument naming the field
+  void validate() const;  // throws std::invalid_argument naming the field
 };
 
 // How a refined pose's covariance is made (pose_covariance): scale * s^2 * inverse(information),
@@ -161,22 +161,22 @@ struct SurfaceTrackingConfig {
 // on data (docs/how-defaults-were-chosen.md).
 struct CovarianceConfig {
   float scale = 25.0f;
-  float floor_m = 0.05f;    // standard deviation added on each position axis
-  float floor_deg = 0.2f;   // ... and on each rotation axis
+  float floor_m = 0.05f;   // standard deviation added on each position axis
+  float floor_deg = 0.2f;  // ... and on each rotation axis
   void validate() const;
 };
 
 enum class RegistrationRefusal {
-  kNone,            // accepted
-  kWidePrior,       // the prior's radius exceeds max_prior_radius_m
-  kFewPoints,       // fewer than min_query_points query points in the window, or no map points
-  kNotConverged,    // the ICP was still moving after RefineConfig::max_iterations
-  kLowFitness,      // the query points do not lie on the map's surfaces
-  kHighRmse,        // ... not closely enough
-  kOutsidePrior,    // the registered sensor left the prior's radius, or turned past its tolerance
-  kDegenerate,      // some direction is not constrained
-  kLowSupport,      // too few query segments land on (and match) map segments (the localizer's check)
-  kAmbiguous,       // over a wide prior, registrations from distinct search peaks passed every gate
+  kNone,          // accepted
+  kWidePrior,     // the prior's radius exceeds max_prior_radius_m
+  kFewPoints,     // fewer than min_query_points query points in the window, or no map points
+  kNotConverged,  // the ICP was still moving after RefineConfig::max_iterations
+  kLowFitness,    // the query points do not lie on the map's surfaces
+  kHighRmse,      // ... not closely enough
+  kOutsidePrior,  // the registered sensor left the prior's radius, or turned past its tolerance
+  kDegenerate,    // some direction is not constrained
+  kLowSupport,    // too few query segments land on (and match) map segments (the localizer's check)
+  kAmbiguous,     // over a wide prior, registrations from distinct search peaks passed every gate
 };
 
 struct RegistrationResult {
@@ -184,9 +184,9 @@ struct RegistrationResult {
   std::string reason;  // the refusal in words
   Pose3d T_map_query = Pose3d::Identity();
   float fitness = 0.0f, rmse_m = 0.0f;
-  float weakest_axis_share = 0.0f;                // see RegistrationConfig::min_axis_share
+  float weakest_axis_share = 0.0f;                         // see RegistrationConfig::min_axis_share
   Eigen::Vector3d weakest_axis = Eigen::Vector3d::Zero();  // its direction (map frame)
-  Matrix6d covariance = Matrix6d::Zero();          // see pose_covariance
+  Matrix6d covariance = Matrix6d::Zero();                  // see pose_covariance
   bool accepted() const { return refusal == RegistrationRefusal::kNone; }
 };
 

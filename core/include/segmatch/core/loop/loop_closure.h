@@ -105,7 +105,7 @@ struct LoopDetectorConfig {
 // A detected loop: the vehicle at query_frame is where it was at match_frame.
 struct LoopClosure {
   size_t query_frame = 0;
-  size_t match_frame = 0;    // local cloud most matched target segments' points come from (their kept view)
+  size_t match_frame = 0;  // local cloud most matched target segments' points come from (their kept view)
   double query_time_s = 0, match_time_s = 0;
   double query_odometer_m = 0, match_odometer_m = 0;
   // Relative pose (a pose-graph edge): maps points of the sensor at match_frame into the
@@ -122,15 +122,15 @@ struct LoopClosure {
 
 // What one call of process() did.
 struct LoopStep {
-  bool processed = false;          // a local cloud was segmented and matched in this call
-  std::optional<LoopClosure> loop; // set when a loop was detected
-  std::string reason;              // why no loop (empty when a loop was found or not processed)
-  size_t query_segments = 0;       // segments of this local cloud
-  size_t eligible_targets = 0;     // target segments matched against (older than the window)
-  size_t map_segments = 0;         // all map segments after insertion
+  bool processed = false;           // a local cloud was segmented and matched in this call
+  std::optional<LoopClosure> loop;  // set when a loop was detected
+  std::string reason;               // why no loop (empty when a loop was found or not processed)
+  size_t query_segments = 0;        // segments of this local cloud
+  size_t eligible_targets = 0;      // target segments matched against (older than the window)
+  size_t map_segments = 0;          // all map segments after insertion
   bool rebuilt_index = false;
-  ModuleTimings timings;           // of the localization (voxel = the incremental voxel grid's crop .. refine)
-  double total_ms = 0;             // whole call, including local cloud crop, index rebuild, insertion
+  ModuleTimings timings;  // of the localization (voxel = the incremental voxel grid's crop .. refine)
+  double total_ms = 0;    // whole call, including local cloud crop, index rebuild, insertion
 };
 
 class LoopDetector {
@@ -150,10 +150,10 @@ class LoopDetector {
                    double time_s);
 
   const LoopDetectorConfig& config() const;
-  double odometer_m() const;         // distance driven so far (sum of odometry steps)
-  size_t map_size() const;           // target segments in the growing map
+  double odometer_m() const;                      // distance driven so far (sum of odometry steps)
+  size_t map_size() const;                        // target segments in the growing map
   const std::vector<LoopClosure>& loops() const;  // every loop detected so far
-  Segments map_segments() const;     // copy of the map (odometry frame), for pictures and tests
+  Segments map_segments() const;                  // copy of the map (odometry frame), for pictures and tests
   // For each map segment (same order), the local cloud its points come from (its kept view):
   // the keyframe it moves with when the trajectory is corrected (map_correction.h).
   std::vector<size_t> map_segment_frames() const;

@@ -1,9 +1,9 @@
 // Building a segment map from a mapping traversal (paper III-A and IV-A): scans are
 // accumulated into a local cloud, kept voxelized incrementally (VoxelAccumulator: the same
 // voxels as voxel_filter of the cropped cloud, without re-voxelizing millions of points), and
-// every map_every_m of driving the cylinder around the vehicle is segmented and described; the segments (world frame) go into a SegmentMap, which
-// keeps one segment per object, its most complete view. Knows no files: the caller reads the
-// scans and writes the map.
+// every map_every_m of driving the cylinder around the vehicle is segmented and described; the segments (world frame)
+// go into a SegmentMap, which keeps one segment per object, its most complete view. Knows no files: the caller reads
+// the scans and writes the map.
 #pragma once
 
 #include "segmatch/core/localization/local_cloud.h"
@@ -28,7 +28,7 @@ struct MapBuilderConfig {
   // 10 m/s and 10 Hz (segmentation dominates the cost).
   double map_every_m = 5.0;
   SurfaceLayerConfig surfaces;  // the map's surface layer (surface_layer.h), from every scan
-  void validate() const;  // throws std::invalid_argument naming the field
+  void validate() const;        // throws std::invalid_argument naming the field
 };
 
 // Wall-clock time summed over the whole build, per stage (milliseconds).
@@ -37,7 +37,7 @@ struct MapBuilderTimings {
   double crop_ms = 0;        // VoxelAccumulator::crop: the voxelized cylinder
   // voxel_ms stays 0: the voxel grid is maintained by add_scan and crop above.
   double voxel_ms = 0, ground_ms = 0, segment_ms = 0, describe_ms = 0;  // extract_segments_from_voxels
-  double merge_ms = 0;       // SegmentMap::add
+  double merge_ms = 0;                                                  // SegmentMap::add
   double total_ms() const {
     return accumulate_ms + crop_ms + voxel_ms + ground_ms + segment_ms + describe_ms + merge_ms;
   }

@@ -5,8 +5,8 @@
 // merged, keeping the most complete view as SegmentMap does.
 #pragma once
 
-#include "segmatch/core/segmentation/segment.h"
 #include "segmatch/core/mapping/segment_map.h"
+#include "segmatch/core/segmentation/segment.h"
 
 #include <cstddef>
 #include <functional>
@@ -15,8 +15,8 @@
 namespace segmatch {
 
 struct CorrectedMap {
-  Segments segments;   // in the corrected frame, duplicates merged
-  size_t merged = 0;   // input segments dropped as views of an object already kept
+  Segments segments;  // in the corrected frame, duplicates merged
+  size_t merged = 0;  // input segments dropped as views of an object already kept
 };
 
 // frame_of_segment[i]: the keyframe segments[i] was seen from. T_corrected_odom(frame): maps
@@ -25,7 +25,6 @@ struct CorrectedMap {
 // config.duplicate_distance_m and resolve_moved_duplicates on. Throws std::invalid_argument
 // when the two lists differ in length.
 CorrectedMap correct_segment_map(const Segments& segments, const std::vector<size_t>& frame_of_segment,
-                                 const std::function<Pose3d(size_t)>& T_corrected_odom,
-                                 SegmentMapConfig config);
+                                 const std::function<Pose3d(size_t)>& T_corrected_odom, SegmentMapConfig config);
 
 }  // namespace segmatch

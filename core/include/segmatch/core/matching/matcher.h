@@ -27,15 +27,15 @@ struct MatcherConfig {
   // kRandomForest: accept if the fraction of trees voting "same object" is >= this.
   // Paper Table I: 0.72 with shapes, 0.81 eigen only.
   float rf_threshold = 0.72f;
-  int rf_trees = 25;         // paper Table I
+  int rf_trees = 25;  // paper Table I
   // Tree size. Deep trees (the authors' release used depth 25, 2 samples) memorise the
   // absolute features of the training objects and give unseen true pairs low votes: on a
   // held-out simulated city, true pairs voted 0.04 (median) with depth 25, 0.56 with depth 8
   // and 20 samples per split, and localization went from 0 to 13 of 13 revisit queries (see
   // the core issue's closing note). Shallow trees also classify faster.
   int rf_max_depth = 8;
-  int rf_min_samples = 20;   // minimum samples in a node to split it further
-  void validate() const;     // throws std::invalid_argument naming the field
+  int rf_min_samples = 20;  // minimum samples in a node to split it further
+  void validate() const;    // throws std::invalid_argument naming the field
   // Whether query segments must carry ESF histograms (the L2 matcher reads eigen features only).
   bool needs_esf() const { return type == MatcherType::kRandomForest && use_shapes; }
 };
@@ -60,8 +60,7 @@ class RandomForestMatcher {
 
   // Trains on labelled pairs (query, target), true = same object. Throws std::invalid_argument
   // if the sizes differ, a pointer is null, or there are no positives or no negatives.
-  void train(const std::vector<std::pair<const Segment*, const Segment*>>& pairs,
-             const std::vector<bool>& same_object);
+  void train(const std::vector<std::pair<const Segment*, const Segment*>>& pairs, const std::vector<bool>& same_object);
   bool trained() const;
   // Fraction of trees voting "same object", in [0, 1]. Throws std::logic_error if untrained.
   float probability(const Segment& query, const Segment& target) const;

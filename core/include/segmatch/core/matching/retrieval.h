@@ -12,7 +12,7 @@
 namespace segmatch {
 
 struct RetrievalConfig {
-  int k = 200;  // neighbours per query segment (paper IV-A: 200)
+  int k = 200;            // neighbours per query segment (paper IV-A: 200)
   void validate() const;  // throws std::invalid_argument naming the field
 };
 
@@ -55,8 +55,7 @@ class FeatureIndex {
 // Candidate pairs: for each query segment its k nearest targets, score = -distance
 // (Euclidean, normalised units), ordered by query then nearest first.
 // Throws std::invalid_argument if a query has no eigen features.
-Matches retrieve_candidates(const Segments& queries, const FeatureIndex& index,
-                            const RetrievalConfig& config);
+Matches retrieve_candidates(const Segments& queries, const FeatureIndex& index, const RetrievalConfig& config);
 
 // The same restricted to allowed targets: for each query segment qi, its k nearest (in the
 // index's normalised feature space) among the targets t with allowed(qi, t), by brute force.

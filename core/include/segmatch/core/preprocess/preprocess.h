@@ -25,8 +25,7 @@ struct VoxelGridConfig {
 // label; 0 if none) goes to labels_out. Output sorted by voxel key (x, then y, then z), so it
 // is deterministic. Non-finite points are ignored.
 PointCloud voxel_filter(const PointCloud& cloud, const VoxelGridConfig& config,
-                        const std::vector<uint32_t>* labels = nullptr,
-                        std::vector<uint32_t>* labels_out = nullptr);
+                        const std::vector<uint32_t>* labels = nullptr, std::vector<uint32_t>* labels_out = nullptr);
 
 enum class GroundRemoval {
   kNone,             // keep every point
@@ -73,10 +72,8 @@ struct GroundConfig {
 // Removes ground points. sensor_position: world-frame position of the sensor (used by the
 // height threshold only). Labels (if given, same size as cloud) of the kept points go to
 // labels_out. Kept points keep their input order.
-PointCloud remove_ground(const PointCloud& cloud, const GroundConfig& config,
-                         const Eigen::Vector3f& sensor_position,
-                         const std::vector<uint32_t>* labels = nullptr,
-                         std::vector<uint32_t>* labels_out = nullptr);
+PointCloud remove_ground(const PointCloud& cloud, const GroundConfig& config, const Eigen::Vector3f& sensor_position,
+                         const std::vector<uint32_t>* labels = nullptr, std::vector<uint32_t>* labels_out = nullptr);
 
 // The same decision as a mask (true = ground), for callers that need indices.
 std::vector<bool> ground_mask(const PointCloud& cloud, const GroundConfig& config,

@@ -39,9 +39,9 @@
 #include <memory>
 #include <vector>
 
+#include "segmatch/core/common/types.h"
 #include "segmatch/core/localization/local_cloud.h"
 #include "segmatch/core/preprocess/preprocess.h"
-#include "segmatch/core/common/types.h"
 
 namespace segmatch {
 

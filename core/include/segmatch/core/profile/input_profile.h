@@ -16,16 +16,16 @@ namespace segmatch {
 
 struct InputMeasurements {
   size_t scans_measured = 0;
-  double points_per_scan = 0;        // median
-  double azimuth_coverage = 0;       // fraction of 1-degree azimuth bins holding points (median)
-  double elevation_min_deg = 0;      // 1st / 99th percentile of point elevations (median over scans)
+  double points_per_scan = 0;    // median
+  double azimuth_coverage = 0;   // fraction of 1-degree azimuth bins holding points (median)
+  double elevation_min_deg = 0;  // 1st / 99th percentile of point elevations (median over scans)
   double elevation_max_deg = 0;
-  double range_p50_m = 0;            // median and 95th percentile of point ranges (median over scans)
+  double range_p50_m = 0;  // median and 95th percentile of point ranges (median over scans)
   double range_p95_m = 0;
-  double spacing_p10_m = 0;          // nearest-neighbour distance within a scan: 10th percentile
-  double spacing_p50_m = 0;          // and median (over sampled points of every measured scan)
-  double spacing_per_range = 0;      // median of nearest-neighbour distance / range (angular step)
-  double scan_distance_m = 0;        // median distance between consecutive scans' positions
+  double spacing_p10_m = 0;      // nearest-neighbour distance within a scan: 10th percentile
+  double spacing_p50_m = 0;      // and median (over sampled points of every measured scan)
+  double spacing_per_range = 0;  // median of nearest-neighbour distance / range (angular step)
+  double scan_distance_m = 0;    // median distance between consecutive scans' positions
   // Do the poses agree with the scans? Consecutive scans less than kAgreementMaxDistanceM apart
   // are put in the world by their poses; a pair disagrees when under half of the later scan's
   // points lie within kAgreementRadiusM of the earlier one (riverside02: 0.88-0.92 where the
@@ -39,10 +39,10 @@ struct InputMeasurements {
   // within kRingMaxWidthDeg (a continuous spread of elevations is one wide group, no ring).
   // Resolved (ring_count > 0) when the rings hold kRingsResolvedShare of the points (median over
   // scans); keyframes a SLAM front end voxelized and non-repetitive scans (Livox) have no rings.
-  double ring_count = 0;             // 0: not resolved
-  double ring_spacing_deg = 0;       // median elevation step between neighbouring rings
-  bool downsampled = false;          // spacing_p10_m >= kDownsampledSpacingM
-  bool wide_fov = false;             // azimuth_coverage >= kWideFovCoverage
+  double ring_count = 0;        // 0: not resolved
+  double ring_spacing_deg = 0;  // median elevation step between neighbouring rings
+  bool downsampled = false;     // spacing_p10_m >= kDownsampledSpacingM
+  bool wide_fov = false;        // azimuth_coverage >= kWideFovCoverage
   // A raw scan has its 10th-percentile neighbour a few centimetres away (hku-loop1 / hku-mb:
   // 0.023 / 0.029 m); keyframes voxelized at 0.2 m have it near half the leaf (riverside02:
   // 0.096 m), centroids of neighbouring voxels being closer than the leaf.
@@ -67,8 +67,8 @@ struct InputMeasurements {
 };
 
 struct InputProfileConfig {
-  size_t max_scans = 24;            // scans measured, spread evenly over the input
-  size_t sample_points = 3000;      // points per scan whose nearest neighbour is measured
+  size_t max_scans = 24;        // scans measured, spread evenly over the input
+  size_t sample_points = 3000;  // points per scan whose nearest neighbour is measured
   void validate() const;
 };
 

@@ -10,8 +10,8 @@
 
 namespace segmatch {
 
-constexpr int kEigenFeatureCount = 7;   // Weinmann et al. 2014 (paper III-C)
-constexpr int kEsfBins = 640;           // 10 histograms x 64 bins (Wohlkinger 2011)
+constexpr int kEigenFeatureCount = 7;  // Weinmann et al. 2014 (paper III-C)
+constexpr int kEsfBins = 640;          // 10 histograms x 64 bins (Wohlkinger 2011)
 constexpr int kEsfHistograms = 10;
 
 using EigenFeatures = std::array<float, kEigenFeatureCount>;
@@ -23,11 +23,11 @@ struct Segment {
   uint64_t id = 0;
   PointCloud points;
   Eigen::Vector3f centroid = Eigen::Vector3f::Zero();
-  EigenFeatures eigen{};          // filled by describe_eigen()
-  EsfDescriptor esf{};            // filled by describe_esf()
+  EigenFeatures eigen{};  // filled by describe_eigen()
+  EsfDescriptor esf{};    // filled by describe_esf()
   bool has_eigen = false;
   bool has_esf = false;
-  uint32_t label = 0;             // optional ground truth (SemanticKITTI majority label), 0 = unknown
+  uint32_t label = 0;  // optional ground truth (SemanticKITTI majority label), 0 = unknown
 };
 using Segments = std::vector<Segment>;
 

@@ -8,8 +8,8 @@
 #include <cstdint>
 #include <vector>
 
-#include "segmatch/core/segmentation/segment.h"
 #include "segmatch/core/common/types.h"
+#include "segmatch/core/segmentation/segment.h"
 
 namespace segmatch {
 

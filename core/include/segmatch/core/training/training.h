@@ -12,9 +12,9 @@
 namespace segmatch {
 
 struct TrainingPairConfig {
-  int k = 200;                        // candidates per query segment
-  int negatives_per_positive = 50;    // paper: 1:50
-  uint64_t seed = 7;                  // which negatives are kept
+  int k = 200;                      // candidates per query segment
+  int negatives_per_positive = 50;  // paper: 1:50
+  uint64_t seed = 7;                // which negatives are kept
   // Positives must also have centroids this close (both sets in one frame, e.g. world
   // ground truth): one building is one instance but yields facade pieces of different shape
   // from different places, and calling those "the same" teaches the classifier noise.
@@ -36,15 +36,16 @@ struct TrainingPairs {
 
 // Segments are the same object when their labels carry the same non-zero instance id
 // (Segment::label, SemanticKITTI encoding) and their centroids are within
-// max_centroid_distance_m. Segments with instance 0 (ground, unknown) give no pairs. Pointers refer into `queries` and `targets`, which must outlive the result.
-TrainingPairs label_pairs_by_instance(const Segments& queries, const Segments& targets,
-                                      const FeatureIndex& index, const TrainingPairConfig& config);
+// max_centroid_distance_m. Segments with instance 0 (ground, unknown) give no pairs. Pointers refer into `queries` and
+// `targets`, which must outlive the result.
+TrainingPairs label_pairs_by_instance(const Segments& queries, const Segments& targets, const FeatureIndex& index,
+                                      const TrainingPairConfig& config);
 
 // Real data (paper IV-B on KITTI): queries and targets already in one frame by the ground-truth
 // poses; a candidate is positive when the centroids are within max_centroid_distance_m,
 // negative beyond min_negative_distance_m, left out in between. Same k-NN candidates and 1:N
 // negative subsampling as label_pairs_by_instance().
-TrainingPairs label_pairs_by_distance(const Segments& queries, const Segments& targets,
-                                      const FeatureIndex& index, const TrainingPairConfig& config);
+TrainingPairs label_pairs_by_distance(const Segments& queries, const Segments& targets, const FeatureIndex& index,
+                                      const TrainingPairConfig& config);
 
 }  // namespace segmatch

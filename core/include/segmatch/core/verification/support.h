@@ -6,8 +6,8 @@
 // is the number of query segments whose transformed centroid has a map centroid nearby.
 #pragma once
 
-#include "segmatch/core/segmentation/segment.h"
 #include "segmatch/core/common/types.h"
+#include "segmatch/core/segmentation/segment.h"
 
 #include <cstdint>
 #include <unordered_map>
@@ -38,7 +38,6 @@ struct Support {
 };
 
 // Query segments (query frame) that, moved by T_map_query, have a map centroid within radius_m.
-Support support_of(const Segments& query, const CentroidIndex& map, const Pose3d& T_map_query,
-                   float radius_m);
+Support support_of(const Segments& query, const CentroidIndex& map, const Pose3d& T_map_query, float radius_m);
 
 }  // namespace segmatch

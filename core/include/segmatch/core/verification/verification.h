@@ -11,8 +11,8 @@
 #pragma once
 
 #include "segmatch/core/common/deadline.h"
-#include "segmatch/core/segmentation/segment.h"
 #include "segmatch/core/common/types.h"
+#include "segmatch/core/segmentation/segment.h"
 
 #include <cstdint>
 
@@ -66,9 +66,8 @@ struct VerificationResult {
 // distinct clusters of at least min_inliers are returned as further hypotheses.
 // Once `deadline` has passed (checked while the consistency graph is built and between seeds,
 // the O(n^2) part), it gives up: found = false, and the caller sees the deadline passed.
-VerificationResult verify_matches(const Segments& queries, const Segments& targets,
-                                  const Matches& candidates, const VerificationConfig& config,
-                                  const Deadline& deadline = {});
+VerificationResult verify_matches(const Segments& queries, const Segments& targets, const Matches& candidates,
+                                  const VerificationConfig& config, const Deadline& deadline = {});
 
 struct RefineConfig {
   int max_iterations = 30;
@@ -123,8 +122,8 @@ struct RefineResult {
 // ICP of the query points onto the target points starting at `initial` (T_target_query).
 // With fewer than 6 correspondences the result keeps the last estimate, converged = false.
 // pivot_target: where RefineResult::information is taken (target frame; e.g. the sensor).
-RefineResult refine_alignment(const PointCloud& query_points, const PointCloud& target_points,
-                              const Pose3d& initial, const RefineConfig& config,
+RefineResult refine_alignment(const PointCloud& query_points, const PointCloud& target_points, const Pose3d& initial,
+                              const RefineConfig& config,
                               const Eigen::Vector3d& pivot_target = Eigen::Vector3d::Zero());
 
 }  // namespace segmatch
