@@ -20,9 +20,10 @@ if [ "${1:-}" = "--sanitize" ]; then
   # would report "Not Run".
   export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
   # Also left out: Deploy (replicas behind HAProxy: the server code test_server runs),
-  # InstallAndPackage (installs and packages every tool, most not built here) and PythonClient
-  # (Python code; its server is test_server's).
-  ctest --output-on-failure -j "$jobs" -E '^(EndToEnd|RegressionMap|Recordings/RealLocalization|SimulatedLoop|ClosedRoute|HkuLoop|MapBuilderFixture|BagInterop|TrackedDrift|Deploy|InstallAndPackage|PythonClient|.*_NOT_BUILT)$' "$@"
+  # InstallAndPackage (installs and packages every tool, most not built here), PythonClient
+  # (Python code; its server is test_server's) and DocsRunnableBlocks (the manual's commands, run
+  # with tools not built here).
+  ctest --output-on-failure -j "$jobs" -E '^(EndToEnd|RegressionMap|Recordings/RealLocalization|SimulatedLoop|ClosedRoute|HkuLoop|MapBuilderFixture|BagInterop|TrackedDrift|Deploy|InstallAndPackage|PythonClient|DocsRunnableBlocks|.*_NOT_BUILT)$' "$@"
   exit 0
 fi
 bash "$root/scripts/build.sh"
