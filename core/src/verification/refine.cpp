@@ -127,8 +127,16 @@ PlaneSystem plane_system(const std::vector<Correspondence>& corr, LazyNormals& n
 
 // One linearised point-to-plane step: minimises sum (n . (R p + t - q))^2 over x = [omega, t].
 // False if too few correspondences have normals or the system is singular.
-bool point_to_plane_step(const std::vector<Correspondence>& corr, LazyNormals& normals, Pose3d* delta) {
-  PlaneSystem s = plane_system(corr, normals, Eigen::Vector3d::Zero());
+bool point_to_plane_step(const std::vector<Correspondence>& corr, LazyNormals& normals, Pose3d* delta, double* sq_sum) {
+  // Linearised about the correspondences' centroid, not the target frame's origin: there a turn
+  // of 1e-5 rad moves points hundreds of metres away by millimetres, the rotation and
+  // translation blocks of A differ by the squared lever (badly conditioned), and the step's
+  // translation (the convergence test) stays at a millimetre while the points no longer move.
+  Eigen::Vector3d pivot = Eigen::Vector3d::Zero();
+  for (const Correspondence& c : corr) pivot += c.p;
+  if (!corr.empty()) pivot /= static_cast<double>(corr.size());
+  PlaneSystem s = plane_system(corr, normals, pivot);
+  *sq_sum = s.sq;
   if (s.used < kMinCorrespondences) return false;
   s.A.diagonal().array() += 1e-9 * static_cast<double>(s.used);  // guards degenerate geometry
   const Eigen::Matrix<double, 6, 1> x = s.A.ldlt().solve(s.b);
@@ -137,9 +145,50 @@ bool point_to_plane_step(const std::vector<Correspondence>& corr, LazyNormals& n
   const double angle = omega.norm();
   *delta = Pose3d::Identity();
   if (angle > 0.0) delta->linear() = Eigen::AngleAxisd(angle, omega / angle).toRotationMatrix();
-  delta->translation() = x.tail<3>();
+  // p -> R (p - pivot) + pivot + t
+  delta->translation() = pivot - delta->linear() * pivot + x.tail<3>();
   return true;
 }
+
+// Coarse phase: while the estimate still moves by centimetres, every kCoarse-th source point
+// is enough to point the way, and those early iterations are the expensive ones (points
+// far off the surface search many cells; new correspondences need new normals).
+constexpr size_t kCoarse = 4;
+constexpr double kCoarseUntil = 0.001;  // metres (and radians) per iteration
+// The coarse subset can oscillate at the millimetre level and never reach kCoarseUntil; it
+// then hands over after this many iterations, so that every refinement ends on all points
+// (a pose left in the coarse phase moved by up to 2 cm with 0.5 mm changes to its input).
+constexpr int kMaxCoarseIterations = 10;
+
+// How far delta moves the centroid of the correspondences' query points: the step's size.
+// delta's own translation also carries the lever of its turn about the target frame's origin
+// (1e-5 rad at 100 m is a millimetre), which would keep a settled estimate from ever passing
+// convergence_m.
+double step_at_centroid(const std::vector<Correspondence>& corr, const Pose3d& delta) {
+  Eigen::Vector3d c = Eigen::Vector3d::Zero();
+  for (const Correspondence& k : corr) c += k.p;
+  if (!corr.empty()) c /= static_cast<double>(corr.size());
+  return (delta * c - c).norm();
+}
+
+// When the fine loop may stop: a step below convergence_m, or a cycle. Cycling: steps of a few
+// convergence_m that bring back the plane residuals of one or two iterations before (a
+// correspondence flipping between two neighbours and back): settled, though it would cycle to
+// the iteration limit (docs/measurements.md, tracking).
+struct Settling {
+  double convergence_m;
+  double plane_sq_before[2] = {-1.0, -1.0};  // the plane residuals 1 and 2 iterations before
+  static constexpr double kCycleSteps = 10.0;
+
+  bool after(double moved_m, double rot, double plane_sq) {
+    const double cycle_m = kCycleSteps * convergence_m;
+    const auto same = [&](double before) { return before >= 0.0 && std::abs(before - plane_sq) <= 1e-9 * before; };
+    const bool cycling = moved_m < cycle_m && rot < cycle_m && (same(plane_sq_before[0]) || same(plane_sq_before[1]));
+    plane_sq_before[1] = plane_sq_before[0];
+    plane_sq_before[0] = plane_sq;
+    return (moved_m < convergence_m && rot < convergence_m) || cycling;
+  }
+};
 
 // The final pose's point-to-plane information (RefineResult::information) about `pivot`.
 void plane_information(const std::vector<Correspondence>& corr, LazyNormals& normals, const Eigen::Vector3d& pivot,
@@ -199,15 +248,6 @@ RefineResult refine_alignment(const PointCloud& query_points, const PointCloud& 
   corr.reserve(source.size());
   double sq_sum = 0.0;
 
-  // Coarse phase: while the estimate still moves by centimetres, every kCoarse-th source point
-  // is enough to point the way, and those early iterations are the expensive ones (points
-  // far off the surface search many cells; new correspondences need new normals).
-  constexpr size_t kCoarse = 4;
-  constexpr double kCoarseUntil = 0.001;  // metres (and radians) per iteration
-  // The coarse subset can oscillate at the millimetre level and never reach kCoarseUntil; it
-  // then hands over after this many iterations, so that every refinement ends on all points
-  // (a pose left in the coarse phase moved by up to 2 cm with 0.5 mm changes to its input).
-  constexpr int kMaxCoarseIterations = 10;
   size_t every = source.size() >= 50 * kCoarse ? kCoarse : 1;
   std::vector<uint32_t> hint(source.size(), detail::FlatHashMap::kMissing);
   auto associate = [&]() {
@@ -222,33 +262,34 @@ RefineResult refine_alignment(const PointCloud& query_points, const PointCloud& 
     }
   };
 
+  Settling settled{config.convergence_m};
   for (int it = 0; it < config.max_iterations; ++it) {
     associate();
     if (corr.size() < kMinCorrespondences) break;
     result.iterations = it + 1;
     Pose3d delta = Pose3d::Identity();
+    double plane_sq = -1.0;
     if (config.point_to_plane) {
-      if (!point_to_plane_step(corr, normals, &delta)) break;
+      if (!point_to_plane_step(corr, normals, &delta, &plane_sq)) break;
     } else {
       delta = point_to_point_step(corr);
     }
     T = delta * T;
     const double rot = Eigen::AngleAxisd(delta.linear()).angle();
-    result.last_step_m = static_cast<float>(delta.translation().norm() + rot);
+    const double moved = step_at_centroid(corr, delta);
+    result.last_step_m = static_cast<float>(moved + rot);
     if (every > 1) {
-      if ((delta.translation().norm() < kCoarseUntil && rot < kCoarseUntil) || it + 1 >= kMaxCoarseIterations)
-        every = 1;
+      if ((moved < kCoarseUntil && rot < kCoarseUntil) || it + 1 >= kMaxCoarseIterations) every = 1;
       continue;
     }
-    if (delta.translation().norm() < config.convergence_m && rot < config.convergence_m) {
+    if (settled.after(moved, rot, plane_sq)) {
       result.converged = true;
       break;
     }
   }
 
-  // Final statistics at the returned pose, over every source point: the loop may end while
-  // still in the coarse phase (iteration limit, a failed step), and counting only every
-  // kCoarse-th point then would report a quarter of the true fitness.
+  // Final statistics at the returned pose over every source point (the loop may end in the
+  // coarse phase, whose every kCoarse-th point would report a quarter of the fitness).
   every = 1;
   associate();
   result.T_target_query = T;
