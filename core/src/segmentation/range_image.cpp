@@ -36,7 +36,20 @@ constexpr double kPi = 3.14159265358979323846;
 constexpr double kDeg = kPi / 180.0;
 constexpr int kMinFitPoints = 100;  // fewer far points: no rings can be told (measure_rings)
 constexpr size_t kAxisSamples = 2000;
+constexpr size_t kRingSamples = 30000;
 constexpr float kMinStepDeg = 0.05f;  // validate()'s floor, also for a measured step
+
+// Up to n items spread over v, one from each of n equal strides at a pseudo-random place in it:
+// scans are stored column by column, and a plain stride that is a multiple of the ring count
+// would sample one ring only.
+template <typename T>
+std::vector<T> spread_sample(const std::vector<T>& v, size_t n) {
+  if (v.size() <= n) return v;
+  const size_t stride = v.size() / n;
+  std::vector<T> out(n);
+  for (size_t k = 0; k < n; ++k) out[k] = v[k * stride + (k * 2654435761u) % stride];
+  return out;
+}
 
 // Unit vector and range of every point from the sensor (range 0: not finite or at the sensor).
 struct Beams {
@@ -83,14 +96,19 @@ double sharpness(const std::vector<Eigen::Vector3f>& dirs, const Eigen::Vector3f
   return score;
 }
 
-// The rings' axis: tilts up to 8 deg in 0.5-deg steps, then 0.1 and 0.02 around the best.
+// The rings' axis: tilts up to 8 deg in 0.25-deg steps, then 0.05 and 0.01 around the best.
 // A vehicle on a 4 % grade pitches 2.3 deg, so queries in an odometry frame tilt by up to twice
-// that against the frame's first scan; the ring steps are 0.3 .. 2 deg.
-Eigen::Vector3f rings_axis(const std::vector<Eigen::Vector3f>& dirs) {
+// that against the frame's first scan; the ring steps are 0.3 .. 2 deg. The coarse search, most
+// of the candidates, looks at a quarter of the beams: a few per ring still tell sharp from smeared.
+Eigen::Vector3f rings_axis(const std::vector<Eigen::Vector3f>& all) {
+  std::vector<Eigen::Vector3f> quarter;
+  for (size_t k = 0; k < all.size(); k += 4) quarter.push_back(all[k]);
   std::vector<int> bins(size_t(2.0 / kSineBin + 2.0) * 2, 0);
   std::vector<size_t> touched;
-  double best_a = 0.0, best_b = 0.0, best = sharpness(dirs, tilted_axis(0.0, 0.0), bins, touched);
-  for (const auto& [step, reach] : {std::pair{0.5, 8.0}, std::pair{0.1, 0.5}, std::pair{0.02, 0.1}}) {
+  double best_a = 0.0, best_b = 0.0, best = 0.0;
+  for (const auto& [step, reach] : {std::pair{0.25, 8.0}, std::pair{0.05, 0.3}, std::pair{0.01, 0.05}}) {
+    const std::vector<Eigen::Vector3f>& dirs = step == 0.25 ? quarter : all;
+    best = sharpness(dirs, tilted_axis(best_a, best_b), bins, touched);
     const double ca = best_a, cb = best_b;
     const int n = int(std::lround(reach / step));
     for (int i = -n; i <= n; ++i) {
@@ -144,10 +162,12 @@ int row_of(const std::vector<float>& bounds, double elevation) {
 }
 
 // Median azimuth step between neighbouring points of one row (gaps over 2 deg are holes, not
-// steps), or 0 if no row holds two points.
+// steps), or 0 if no row holds two points. Up to 16 rows spread over the image are enough.
 double measured_step_deg(std::vector<std::vector<double>>& row_azimuths) {
   std::vector<double> gaps;
-  for (std::vector<double>& az : row_azimuths) {
+  const size_t stride = std::max<size_t>(1, row_azimuths.size() / 16);
+  for (size_t r = 0; r < row_azimuths.size(); r += stride) {
+    std::vector<double>& az = row_azimuths[r];
     std::sort(az.begin(), az.end());
     for (size_t k = 1; k < az.size(); ++k) {
       const double g = az[k] - az[k - 1];
@@ -239,10 +259,8 @@ RangeImageGrid fit_range_image(const PointCloud& scan, const Eigen::Vector3f& se
   for (size_t i = 0; i < scan.size(); ++i)
     if (b.range[i] >= InputMeasurements::kRingMinRangeM) far.push_back(b.dir[i]);
   if (far.size() < size_t(kMinFitPoints)) return g;
-  std::vector<Eigen::Vector3f> sample;
-  for (size_t k = 0, stride = std::max<size_t>(1, far.size() / kAxisSamples); k < far.size(); k += stride)
-    sample.push_back(far[k]);
-  g.to_image = image_frame(config.range_image_rows > 0 ? Eigen::Vector3f::UnitZ() : rings_axis(sample));
+  g.to_image = image_frame(config.range_image_rows > 0 ? Eigen::Vector3f::UnitZ()
+                                                       : rings_axis(spread_sample(far, kAxisSamples)));
   double lo = 90.0, hi = -90.0;
   std::vector<double> far_elevations;
   for (size_t i = 0; i < scan.size(); ++i) {
@@ -252,6 +270,7 @@ RangeImageGrid fit_range_image(const PointCloud& scan, const Eigen::Vector3f& se
     lo = std::min(lo, e), hi = std::max(hi, e);
     if (b.range[i] >= InputMeasurements::kRingMinRangeM) far_elevations.push_back(e);
   }
+  far_elevations = spread_sample(far_elevations, kRingSamples);  // measure_rings sorts them
   const int uniform = config.range_image_rows;
   if (uniform > 0) {
     hi = std::max(hi, lo + 1e-3);
