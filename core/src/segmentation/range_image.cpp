@@ -79,20 +79,21 @@ Eigen::Vector3f tilted_axis(double a, double b) {
 // How sharp the elevations about `axis` are: the sum of squared counts of bins 0.05 deg high
 // (at the horizon; binned by sine, which is monotonic and spares an asin per point), twice,
 // the second grid shifted by half a bin, so that a ring on a bin edge scores as one inside.
+// Summed as each point's count of earlier points in its bins, (sum n^2 - N) / 2: the same order.
 constexpr double kSineBin = 0.05 * kDeg;
-double sharpness(const std::vector<Eigen::Vector3f>& dirs, const Eigen::Vector3f& axis, std::vector<int>& bins,
-                 std::vector<size_t>& touched) {
-  double score = 0.0;
-  touched.clear();
-  for (const Eigen::Vector3f& d : dirs) {
-    const double s = (std::clamp(double(d.dot(axis)), -1.0, 1.0) + 1.0) / kSineBin;
-    for (const size_t k : {size_t(s) * 2, size_t(s + 0.5) * 2 + 1}) {
-      score += 2.0 * bins[k] + 1.0;
-      ++bins[k];
-      touched.push_back(k);
-    }
+int64_t sharpness(const std::vector<Eigen::Vector3f>& dirs, const Eigen::Vector3f& axis, std::vector<int>& bins,
+                  std::vector<uint32_t>& keys) {
+  const float per_bin = float(1.0 / kSineBin);
+  int64_t score = 0;
+  keys.resize(dirs.size());
+  for (size_t k = 0; k < dirs.size(); ++k) {
+    const float s = (std::min(std::max(dirs[k].dot(axis), -1.0f), 1.0f) + 1.0f) * per_bin;
+    const uint32_t a = uint32_t(s) * 2, b = uint32_t(s + 0.5f) * 2 + 1;  // < 2^16
+    score += bins[a]++;
+    score += bins[b]++;
+    keys[k] = a | b << 16;
   }
-  for (const size_t k : touched) bins[k] = 0;
+  for (const uint32_t key : keys) bins[key & 0xFFFF] = bins[key >> 16] = 0;
   return score;
 }
 
@@ -104,17 +105,18 @@ Eigen::Vector3f rings_axis(const std::vector<Eigen::Vector3f>& all) {
   std::vector<Eigen::Vector3f> quarter;
   for (size_t k = 0; k < all.size(); k += 4) quarter.push_back(all[k]);
   std::vector<int> bins(size_t(2.0 / kSineBin + 2.0) * 2, 0);
-  std::vector<size_t> touched;
-  double best_a = 0.0, best_b = 0.0, best = 0.0;
+  std::vector<uint32_t> keys;
+  double best_a = 0.0, best_b = 0.0;
+  int64_t best = 0;
   for (const auto& [step, reach] : {std::pair{0.25, 8.0}, std::pair{0.05, 0.3}, std::pair{0.01, 0.05}}) {
     const std::vector<Eigen::Vector3f>& dirs = step == 0.25 ? quarter : all;
-    best = sharpness(dirs, tilted_axis(best_a, best_b), bins, touched);
+    best = sharpness(dirs, tilted_axis(best_a, best_b), bins, keys);
     const double ca = best_a, cb = best_b;
     const int n = int(std::lround(reach / step));
     for (int i = -n; i <= n; ++i) {
       for (int j = -n; j <= n; ++j) {
         const double a = ca + i * step * kDeg, b = cb + j * step * kDeg;
-        const double s = sharpness(dirs, tilted_axis(a, b), bins, touched);
+        const int64_t s = sharpness(dirs, tilted_axis(a, b), bins, keys);
         if (s > best) best = s, best_a = a, best_b = b;
       }
     }
