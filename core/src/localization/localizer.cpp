@@ -176,14 +176,15 @@ Segments segments_of_voxels(const PointCloud& voxels, const Eigen::Vector3f& sen
 // kRangeImage on a raw scan (segmenter.h): the ground-free raw points are labelled in the scan's
 // range image, which voxels would blur, then voxelized with their components as labels, so the
 // segments hold voxels as every other segmenter's do. False (nothing done) when the scan shows
-// no range image (no rings): the caller clusters it as kEuclidean.
+// no range image (no rings): the caller clusters it as kEuclidean, and counts fit_ms (the time
+// spent finding that out) as segmentation.
 bool segments_of_scan(const PointCloud& cloud, const Eigen::Vector3f& sensor_position, const SegmentationConfig& config,
                       const std::vector<uint32_t>* labels, ModuleTimings& t, const Deadline& deadline, bool describe,
-                      Segments* out) {
+                      Segments* out, double* fit_ms) {
   Stopwatch clock;
   const RangeImageGrid grid = fit_range_image(cloud, sensor_position, config.segmenter);
+  double segment_ms = *fit_ms = clock.lap();
   if (!grid.valid()) return false;
-  double segment_ms = clock.lap();
   std::vector<uint32_t> foreground_labels;
   const PointCloud foreground =
       remove_ground(cloud, config.ground, sensor_position, labels, labels ? &foreground_labels : nullptr);
@@ -208,15 +209,19 @@ Segments segments_of_cloud(const PointCloud& cloud, const Eigen::Vector3f& senso
                            const SegmentationConfig& config, const std::vector<uint32_t>* labels, ModuleTimings& t,
                            const Deadline& deadline, bool describe) {
   Segments scan_segments;
+  double fit_ms = 0.0;
   if (config.segmenter.type == SegmenterType::kRangeImage &&
-      segments_of_scan(cloud, sensor_position, config, labels, t, deadline, describe, &scan_segments))
+      segments_of_scan(cloud, sensor_position, config, labels, t, deadline, describe, &scan_segments, &fit_ms))
     return scan_segments;
   Stopwatch clock;
   std::vector<uint32_t> voxel_labels;
   const PointCloud voxels = voxel_filter(cloud, config.voxel, labels, labels ? &voxel_labels : nullptr);
   t.voxel_ms = clock.lap();
   if (deadline.passed()) return {};
-  return segments_of_voxels(voxels, sensor_position, config, labels ? &voxel_labels : nullptr, t, deadline, describe);
+  Segments segments =
+      segments_of_voxels(voxels, sensor_position, config, labels ? &voxel_labels : nullptr, t, deadline, describe);
+  t.segment_ms += fit_ms;
+  return segments;
 }
 
 }  // namespace
