@@ -58,7 +58,8 @@ struct SegmenterConfig {
   // Rows. 0: one per ring of the sensor, recovered from the points' elevations seen from the
   // sensor (measure_rings, after fitting the rings' axis, which a tilted scan or vehicle
   // moves); a cloud showing no rings is clustered as kEuclidean. > 0: this many rows of equal
-  // height between the lowest and the highest elevation (a sensor without rings), at most 1024.
+  // height between the lowest and the highest elevation (a sensor without rings), at most 1024;
+  // every raw cloud given to extract_segments() is then taken for one scan, even an accumulated one.
   int range_image_rows = 0;
   // Column width (azimuth). 0: the median azimuth step between neighbouring points of one
   // ring (with range_image_rows > 0: the row height, square pixels). Otherwise >= 0.05 deg.
