@@ -201,6 +201,11 @@ int run_classifier(const ClassifierOptions& o) {
   return 0;
 }
 
+SegmenterType segmenter_of(const std::string& name) {
+  if (name == "region_growing") return SegmenterType::kRegionGrowing;
+  return name == "range_image" ? SegmenterType::kRangeImage : SegmenterType::kEuclidean;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -269,6 +274,12 @@ int main(int argc, char** argv) {
          "--search", search,
          "in-process only: the wide-prior search (search.enabled) on or off instead of as the map says; a what-if")
       ->check(CLI::IsMember({"map", "on", "off"}));
+  std::string segmenter = "map";
+  const auto segmenter_names = CLI::IsMember({"map", "euclidean", "region_growing", "range_image"});
+  loc->add_option("--segmenter", segmenter,
+                  "in-process only: segment the queries with this segmenter instead of the map's (the map's segments "
+                  "stay); a what-if, e.g. range_image for --single-scan")
+      ->check(segmenter_names);
   bool segments = false;
   loc->add_flag(
       "--segments", segments,
@@ -293,6 +304,9 @@ int main(int argc, char** argv) {
   fun->add_option("--last", fc.replay.last, "last scan");
   fun->add_option("--stride", fc.replay.stride, "use every n-th scan");
   fun->add_flag("--single-scan", fc.replay.single_scan, "every query one raw scan alone, as for localize");
+  fun->add_option("--segmenter", segmenter,
+                  "segment the queries with this segmenter instead of the map's, as for localize")
+      ->check(segmenter_names);
   fun->add_option("--odometry", fc.odometry_path, "the vehicle's odometry poses (default: QUERY/odom_poses.txt)");
   std::string funnel_cloud_poses = "odometry";
   fun->add_option("--cloud-poses", funnel_cloud_poses, "odometry (default) or reference, as for localize")
@@ -326,13 +340,20 @@ int main(int argc, char** argv) {
         if (!server.empty()) throw std::runtime_error("--search is for in-process runs (the server serves its map's)");
         load.search_enabled = search == "on";
       }
+      if (segmenter != "map") {
+        if (!server.empty())
+          throw std::runtime_error("--segmenter is for in-process runs (the server serves its map's)");
+        load.segmenter = segmenter_of(segmenter);
+      }
       lc.track_surfaces = track_surfaces == "on";
       return run_localize(lc, server, token_file, out_dir, segments, lc.track_surfaces, load);
     }
     if (*fun) {
       if (fc.query_folder.empty() == fc.sim_dataset.empty())
         throw std::runtime_error("give exactly one of --query and --sim");
-      const auto loaded = server::load_map(fc.map_path);
+      server::MapLoadOptions funnel_load;
+      if (segmenter != "map") funnel_load.segmenter = segmenter_of(segmenter);
+      const auto loaded = server::load_map(fc.map_path, funnel_load);
       fc.replay.local_cloud = loaded->config.local_cloud;
       fc.cloud_poses = io::parse_cloud_poses(funnel_cloud_poses);
       fc.replay.voxel = loaded->config.localizer.segmentation.voxel;

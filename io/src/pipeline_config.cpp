@@ -30,7 +30,8 @@ const EnumNames<GroundRemoval>& names(GroundRemoval*) {
 }
 const EnumNames<SegmenterType>& names(SegmenterType*) {
   static const EnumNames<SegmenterType> n = {{SegmenterType::kEuclidean, "euclidean"},
-                                             {SegmenterType::kRegionGrowing, "region_growing"}};
+                                             {SegmenterType::kRegionGrowing, "region_growing"},
+                                             {SegmenterType::kRangeImage, "range_image"}};
   return n;
 }
 const EnumNames<MatcherType>& names(MatcherType*) {
@@ -73,6 +74,9 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("max_normal_angle_deg", s.segmenter.max_normal_angle_deg);
   v("max_curvature", s.segmenter.max_curvature);
   v("min_normal_neighbours", s.segmenter.min_normal_neighbours);
+  v("range_image_beta_deg", s.segmenter.range_image_beta_deg);
+  v("range_image_rows", s.segmenter.range_image_rows);
+  v("range_image_azimuth_step_deg", s.segmenter.range_image_azimuth_step_deg);
   v.section("descriptors");
   v("compute_eigen", s.descriptors.compute_eigen);
   v("compute_esf", s.descriptors.compute_esf);

@@ -77,6 +77,7 @@ std::shared_ptr<const LoadedMap> load_map(const std::string& path, const MapLoad
     map->config.localizer.refine.validate();
   }
   if (options.search_enabled) map->config.localizer.search.enabled = *options.search_enabled;
+  if (options.segmenter) map->config.localizer.segmentation.segmenter.type = *options.segmenter;
   std::shared_ptr<const RandomForestMatcher> classifier = load_classifier(reader);
   MatcherConfig& matcher = map->config.localizer.matcher;
   if (matcher.type == MatcherType::kRandomForest && !classifier) {

@@ -63,6 +63,20 @@ TEST(PipelineConfig, JsonRoundTripKeepsEveryField) {
   EXPECT_FLOAT_EQ(back.segment_map.duplicate_distance_m, 0.75f);
 }
 
+TEST(PipelineConfig, RangeImageSegmenterAndItsFields) {
+  const PipelineConfig c = parse_pipeline_config(
+      R"({"segmenter": {"type": "range_image", "range_image_beta_deg": 8, "range_image_rows": 64,
+          "range_image_azimuth_step_deg": 0.2}})",
+      "cfg");
+  const SegmenterConfig& s = c.localizer.segmentation.segmenter;
+  EXPECT_EQ(s.type, SegmenterType::kRangeImage);
+  EXPECT_FLOAT_EQ(s.range_image_beta_deg, 8.0f);
+  EXPECT_EQ(s.range_image_rows, 64);
+  EXPECT_FLOAT_EQ(s.range_image_azimuth_step_deg, 0.2f);
+  EXPECT_EQ(to_json(parse_pipeline_config(to_json(c), "roundtrip")), to_json(c));
+  EXPECT_THROW(parse_pipeline_config(R"({"segmenter": {"range_image_beta_deg": 95}})", "cfg"), std::exception);
+}
+
 TEST(PipelineConfig, PresetThenOverrides) {
   const PipelineConfig c = parse_pipeline_config(
       R"({"preset": "sparse-keyframes", "segmenter": {"min_points": 50}, "ground": {"method": "none"}})", "cfg");

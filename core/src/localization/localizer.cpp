@@ -173,15 +173,55 @@ Segments segments_of_voxels(const PointCloud& voxels, const Eigen::Vector3f& sen
   return segments;
 }
 
+// kRangeImage on a raw scan (segmenter.h): the ground-free raw points are labelled in the scan's
+// range image, which voxels would blur, then voxelized with their components as labels, so the
+// segments hold voxels as every other segmenter's do. False (nothing done) when the scan shows
+// no range image (no rings): the caller clusters it as kEuclidean, and counts fit_ms (the time
+// spent finding that out) as segmentation.
+bool segments_of_scan(const PointCloud& cloud, const Eigen::Vector3f& sensor_position, const SegmentationConfig& config,
+                      const std::vector<uint32_t>* labels, ModuleTimings& t, const Deadline& deadline, bool describe,
+                      Segments* out, double* fit_ms) {
+  Stopwatch clock;
+  const RangeImageGrid grid = fit_range_image(cloud, sensor_position, config.segmenter);
+  double segment_ms = *fit_ms = clock.lap();
+  if (!grid.valid()) return false;
+  std::vector<uint32_t> foreground_labels;
+  const PointCloud foreground =
+      remove_ground(cloud, config.ground, sensor_position, labels, labels ? &foreground_labels : nullptr);
+  t.ground_ms = clock.lap();
+  if (deadline.passed()) return true;
+  const std::vector<uint32_t> components = range_image_components(grid, foreground, config.segmenter);
+  segment_ms += clock.lap();
+  std::vector<uint32_t> voxel_components, voxel_labels;
+  const PointCloud voxels = voxel_filter(foreground, config.voxel, &components, &voxel_components);
+  if (labels) voxel_filter(foreground, config.voxel, &foreground_labels, &voxel_labels);  // same voxels, same order
+  t.voxel_ms = clock.lap();
+  if (deadline.passed()) return true;
+  *out = segments_of_components(voxels, voxel_components, config.segmenter, labels ? &voxel_labels : nullptr);
+  t.segment_ms = segment_ms + clock.lap();
+  if (deadline.passed()) return true;
+  if (describe) describe_segments(*out, config.descriptors, deadline);
+  t.describe_ms = clock.lap();
+  return true;
+}
+
 Segments segments_of_cloud(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
                            const SegmentationConfig& config, const std::vector<uint32_t>* labels, ModuleTimings& t,
                            const Deadline& deadline, bool describe) {
+  Segments scan_segments;
+  double fit_ms = 0.0;
+  if (config.segmenter.type == SegmenterType::kRangeImage &&
+      segments_of_scan(cloud, sensor_position, config, labels, t, deadline, describe, &scan_segments, &fit_ms))
+    return scan_segments;
   Stopwatch clock;
   std::vector<uint32_t> voxel_labels;
   const PointCloud voxels = voxel_filter(cloud, config.voxel, labels, labels ? &voxel_labels : nullptr);
   t.voxel_ms = clock.lap();
   if (deadline.passed()) return {};
-  return segments_of_voxels(voxels, sensor_position, config, labels ? &voxel_labels : nullptr, t, deadline, describe);
+  Segments segments =
+      segments_of_voxels(voxels, sensor_position, config, labels ? &voxel_labels : nullptr, t, deadline, describe);
+  t.segment_ms += fit_ms;
+  return segments;
 }
 
 }  // namespace

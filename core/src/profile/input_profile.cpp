@@ -151,6 +151,7 @@ Rings measure_rings(std::vector<double> e) {
   }
   r.count = centres.size();
   r.share = double(held) / double(e.size());
+  r.centres_deg = centres;
   if (centres.size() < 2) return r;
   std::vector<double> steps;
   for (size_t k = 1; k < centres.size(); ++k) steps.push_back(centres[k] - centres[k - 1]);

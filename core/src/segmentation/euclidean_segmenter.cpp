@@ -339,6 +339,16 @@ void SegmenterConfig::validate() const {
   if (min_normal_neighbours < 3) {
     throw std::invalid_argument("SegmenterConfig.min_normal_neighbours must be >= 3");
   }
+  if (!(range_image_beta_deg > 0.0f && range_image_beta_deg < 90.0f)) {
+    throw std::invalid_argument("SegmenterConfig.range_image_beta_deg must be in (0, 90)");
+  }
+  if (range_image_rows < 0 || range_image_rows > 1024) {
+    throw std::invalid_argument("SegmenterConfig.range_image_rows must be in 0..1024 (0: the sensor's rings)");
+  }
+  if (!(range_image_azimuth_step_deg == 0.0f ||
+        (range_image_azimuth_step_deg >= 0.05f && range_image_azimuth_step_deg <= 10.0f))) {
+    throw std::invalid_argument("SegmenterConfig.range_image_azimuth_step_deg must be 0 (measured) or in [0.05, 10]");
+  }
 }
 
 Segments segment_cloud(const PointCloud& cloud, const SegmenterConfig& config, const std::vector<uint32_t>* labels) {
@@ -349,10 +359,18 @@ Segments segment_cloud(const PointCloud& cloud, const SegmenterConfig& config, c
   if (cloud.empty()) return {};
   detail::Clusters clusters;
   switch (config.type) {
-    case SegmenterType::kEuclidean: clusters = detail::euclidean_clusters(cloud, config); break;
+    case SegmenterType::kEuclidean:
+    case SegmenterType::kRangeImage:  // no scan structure here (segmenter.h)
+      clusters = detail::euclidean_clusters(cloud, config);
+      break;
     case SegmenterType::kRegionGrowing: clusters = detail::region_growing_clusters(cloud, config); break;
     default: throw std::invalid_argument("SegmenterConfig.type is not a known SegmenterType");
   }
+  return detail::build_segments(cloud, clusters, labels);
+}
+
+Segments detail::build_segments(const PointCloud& cloud, const Clusters& clusters,
+                                const std::vector<uint32_t>* labels) {
   Segments segments(clusters.size());
   std::vector<uint32_t> scratch;
   for (size_t s = 0; s < clusters.size(); ++s) {

@@ -24,5 +24,9 @@ Clusters region_growing_clusters(const PointCloud& cloud, const SegmenterConfig&
 Clusters collect_clusters(const std::vector<uint32_t>& order, std::vector<uint32_t> root,
                           const SegmenterConfig& config);
 
+// Segment s holds the points of clusters[s] (input order), their centroid and, with labels,
+// their majority label; ids 0..n-1.
+Segments build_segments(const PointCloud& cloud, const Clusters& clusters, const std::vector<uint32_t>* labels);
+
 }  // namespace detail
 }  // namespace segmatch

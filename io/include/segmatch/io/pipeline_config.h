@@ -9,7 +9,7 @@
 //     "local_cloud": {"radius_m": 60, "min_travel_between_scans_m": 1, "subsample_leaf_m": 0},
 //     "voxel":       {"leaf_m": 0.2, "min_points_per_voxel": 1},
 //     "ground":      {"method": "column_variance" | "height_threshold" | "none", ...},
-//     "segmenter":   {"type": "euclidean" | "region_growing", "cluster_distance_m": 0.4, ...},
+//     "segmenter":   {"type": "euclidean" | "region_growing" | "range_image", "cluster_distance_m": 0.4, ...},
 //     "descriptors": {"compute_eigen": true, "compute_esf": true, "esf_samples": 1000, ...},
 //     "retrieval":   {"k": 200},
 //     "matcher":     {"type": "random_forest" | "l2", "use_shapes": true, "rf_threshold": 0.72, ...},

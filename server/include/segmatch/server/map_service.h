@@ -68,6 +68,9 @@ struct MapLoadOptions {
   // Serve with the wide-prior search (search.enabled) on or off instead of as the map says (a
   // what-if: segmatch-eval localize --search off). Empty: the map's.
   std::optional<bool> search_enabled;
+  // Segment the queries' clouds with this segmenter instead of the map's (a what-if: segmatch-eval
+  // localize / funnel --segmenter range_image). The map's own segments stay as they were built.
+  std::optional<SegmenterType> segmenter;
 };
 
 // Throws (storage::StorageError, io::IoError or std::runtime_error, each naming the file) when

@@ -163,13 +163,16 @@ inline void keep_tracking_reason(const std::string& tracking_reason, Localizatio
 // is in the cloud's frame (the height threshold needs it). Labels, if given, mark each
 // segment with its majority ground-truth label.
 // Once `deadline` has passed, the stages still to run are skipped (the caller checks it).
+// With SegmenterType::kRangeImage and a raw scan that shows rings, the ground-free raw points
+// are segmented in the scan's range image before the voxel grid (segmenter.h).
 Segments extract_segments(const PointCloud& cloud, const Eigen::Vector3f& sensor_position,
                           const SegmentationConfig& config, const std::vector<uint32_t>* labels = nullptr,
                           ModuleTimings* timings = nullptr, const Deadline& deadline = {});
 
 // The same without the voxel grid: ground removal, segmentation and description of an
 // already voxelized cloud (voxel_filter's output, e.g. VoxelAccumulator::crop) with its
-// per-voxel labels. extract_segments(cloud) == extract_segments_from_voxels(voxel_filter(cloud)).
+// per-voxel labels. extract_segments(cloud) == extract_segments_from_voxels(voxel_filter(cloud)), except
+// for kRangeImage on a raw scan (above).
 Segments extract_segments_from_voxels(const PointCloud& voxels, const Eigen::Vector3f& sensor_position,
                                       const SegmentationConfig& config,
                                       const std::vector<uint32_t>* voxel_labels = nullptr,

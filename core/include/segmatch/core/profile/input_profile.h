@@ -102,6 +102,7 @@ struct Rings {
   double share = 0;
   double lowest_deg = 0, highest_deg = 0;        // the outermost rings' elevations
   double bottom_step_deg = 0, top_step_deg = 0;  // and the step next to each
+  std::vector<double> centres_deg;               // every ring's elevation, increasing
   // The rings from lo_deg to hi_deg: those found plus, beyond the outermost, as many as their
   // step fits (steep rings meet the ground nearer than kRingMinRangeM and are not measured).
   double count_between(double lo_deg, double hi_deg) const;
