@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include "support/validation.h"
+
 #include <cmath>
 #include <map>
 #include <stdexcept>
@@ -280,14 +282,7 @@ TEST(RangeImage, CloudWithoutRingsIsClusteredAsEuclidean) {
 }
 
 TEST(RangeImage, ValidationNamesTheField) {
-  const auto message = [](const SegmenterConfig& c) {
-    try {
-      c.validate();
-    } catch (const std::invalid_argument& e) {
-      return std::string(e.what());
-    }
-    return std::string();
-  };
+  const auto message = [](const SegmenterConfig& c) { return test::validation_message(c); };
   SegmenterConfig c = range_image();
   EXPECT_EQ(message(c), "");
   for (const float beta : {0.f, -1.f, 90.f, NAN}) {

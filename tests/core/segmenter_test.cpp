@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include "support/validation.h"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -201,14 +203,7 @@ TEST(Segmenter, RegionGrowingKeepsASmoothCurvedSurfaceWhole) {
 }
 
 TEST(Segmenter, ValidationNamesTheField) {
-  const auto message = [](const SegmenterConfig& c) {
-    try {
-      c.validate();
-    } catch (const std::invalid_argument& e) {
-      return std::string(e.what());
-    }
-    return std::string();
-  };
+  const auto message = [](const SegmenterConfig& c) { return test::validation_message(c); };
   SegmenterConfig c;
   EXPECT_EQ(message(c), "");
   c.cluster_distance_m = 0.f;

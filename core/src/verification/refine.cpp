@@ -127,14 +127,11 @@ PlaneSystem plane_system(const std::vector<Correspondence>& corr, LazyNormals& n
 
 // One linearised point-to-plane step: minimises sum (n . (R p + t - q))^2 over x = [omega, t].
 // False if too few correspondences have normals or the system is singular.
-bool point_to_plane_step(const std::vector<Correspondence>& corr, LazyNormals& normals, Pose3d* delta, double* sq_sum) {
-  // Linearised about the correspondences' centroid, not the target frame's origin: there a turn
-  // of 1e-5 rad moves points hundreds of metres away by millimetres, the rotation and
-  // translation blocks of A differ by the squared lever (badly conditioned), and the step's
-  // translation (the convergence test) stays at a millimetre while the points no longer move.
-  Eigen::Vector3d pivot = Eigen::Vector3d::Zero();
-  for (const Correspondence& c : corr) pivot += c.p;
-  if (!corr.empty()) pivot /= static_cast<double>(corr.size());
+// Linearised about `pivot` (the correspondences' centroid), not the target frame's origin: there
+// a turn of 1e-5 rad moves points hundreds of metres away by millimetres, and the rotation and
+// translation blocks of A differ by the squared lever (badly conditioned).
+bool point_to_plane_step(const std::vector<Correspondence>& corr, LazyNormals& normals, const Eigen::Vector3d& pivot,
+                         Pose3d* delta, double* sq_sum) {
   PlaneSystem s = plane_system(corr, normals, pivot);
   *sq_sum = s.sq;
   if (s.used < kMinCorrespondences) return false;
@@ -160,15 +157,12 @@ constexpr double kCoarseUntil = 0.001;  // metres (and radians) per iteration
 // (a pose left in the coarse phase moved by up to 2 cm with 0.5 mm changes to its input).
 constexpr int kMaxCoarseIterations = 10;
 
-// How far delta moves the centroid of the correspondences' query points: the step's size.
-// delta's own translation also carries the lever of its turn about the target frame's origin
-// (1e-5 rad at 100 m is a millimetre), which would keep a settled estimate from ever passing
-// convergence_m.
-double step_at_centroid(const std::vector<Correspondence>& corr, const Pose3d& delta) {
+// The centroid of the correspondences' query points: where a step is linearised and measured.
+Eigen::Vector3d centroid_of(const std::vector<Correspondence>& corr) {
   Eigen::Vector3d c = Eigen::Vector3d::Zero();
   for (const Correspondence& k : corr) c += k.p;
   if (!corr.empty()) c /= static_cast<double>(corr.size());
-  return (delta * c - c).norm();
+  return c;
 }
 
 // When the fine loop may stop: a step below convergence_m, or a cycle. Cycling: steps of a few
@@ -267,16 +261,20 @@ RefineResult refine_alignment(const PointCloud& query_points, const PointCloud& 
     associate();
     if (corr.size() < kMinCorrespondences) break;
     result.iterations = it + 1;
+    const Eigen::Vector3d centroid = centroid_of(corr);
     Pose3d delta = Pose3d::Identity();
     double plane_sq = -1.0;
     if (config.point_to_plane) {
-      if (!point_to_plane_step(corr, normals, &delta, &plane_sq)) break;
+      if (!point_to_plane_step(corr, normals, centroid, &delta, &plane_sq)) break;
     } else {
       delta = point_to_point_step(corr);
     }
     T = delta * T;
     const double rot = Eigen::AngleAxisd(delta.linear()).angle();
-    const double moved = step_at_centroid(corr, delta);
+    // The step's size where the points are: delta's own translation also carries the lever of
+    // its turn about the target frame's origin (1e-5 rad at 100 m is a millimetre), which would
+    // keep a settled estimate from ever passing convergence_m.
+    const double moved = (delta * centroid - centroid).norm();
     result.last_step_m = static_cast<float>(moved + rot);
     if (every > 1) {
       if ((moved < kCoarseUntil && rot < kCoarseUntil) || it + 1 >= kMaxCoarseIterations) every = 1;
