@@ -56,7 +56,11 @@ inline const TestWorld& test_world() {
     world->folder =
         (std::filesystem::temp_directory_path() / ("segmatch_server_test_" + std::to_string(::getpid()))).string();
     std::filesystem::create_directories(world->folder);
-    const std::filesystem::path tool = test::fixture_root().parent_path() / "make_server_world";
+    // $SEGMATCH_SERVER_WORLD_TOOL: another build's make_server_world. The sanitizer suites use the
+    // optimised build's: the world is their input, not code under test, and slow to build under ASan.
+    const char* other_tool = std::getenv("SEGMATCH_SERVER_WORLD_TOOL");
+    const std::filesystem::path tool =
+        other_tool ? std::filesystem::path(other_tool) : test::fixture_root().parent_path() / "make_server_world";
     const std::filesystem::path cached =
         test::cached_fixture("server-world", {tool}, [&](const std::filesystem::path& dir) {
           const test::CommandResult r = test::run_command(tool.string() + " " + dir.string());
