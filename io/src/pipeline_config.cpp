@@ -39,12 +39,10 @@ const EnumNames<MatcherType>& names(MatcherType*) {
   return n;
 }
 
-// Every field of the pipeline, section by section, in one place: the reader and the writer
-// both walk this list, so the JSON form cannot drift from the structs.
+// The local cloud, its segmentation and description (the paper's III-A and III-B).
 template <class V>
-void visit_fields(V& v, PipelineConfig& c) {
-  LocalizerConfig& l = c.localizer;
-  SegmentationConfig& s = l.segmentation;
+void visit_segmentation(V& v, PipelineConfig& c) {
+  SegmentationConfig& s = c.localizer.segmentation;
   v.section("local_cloud");
   v("radius_m", c.local_cloud.radius_m);
   v("min_travel_between_scans_m", c.local_cloud.min_travel_between_scans_m);
@@ -82,6 +80,12 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("compute_esf", s.descriptors.compute_esf);
   v("esf_samples", s.descriptors.esf_samples);
   v("esf_seed", s.descriptors.esf_seed);
+}
+
+// Retrieval and matching (III-C), geometric verification (III-D) and the pose refinement.
+template <class V>
+void visit_matching(V& v, PipelineConfig& c) {
+  LocalizerConfig& l = c.localizer;
   v.section("retrieval");
   v("k", l.retrieval.k);
   v.section("matcher");
@@ -110,6 +114,12 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("max_segment_points", l.refine.max_segment_points);
   v("recent_window_m", l.refine.recent_window_m);
   v("min_recent_points", l.refine.min_recent_points);
+}
+
+// Registration to the surface layer, its covariance, the newest scans, the search of wide priors and tracking.
+template <class V>
+void visit_registration(V& v, PipelineConfig& c) {
+  LocalizerConfig& l = c.localizer;
   v.section("registration");
   v("enabled", l.registration.enabled);
   v("window_m", l.registration.window_m);
@@ -159,6 +169,12 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("min_support_for_fewer_matched", l.track.min_support_for_fewer_matched);
   v("fine_first_m", l.track.fine_first_m);
   v("fine_first_max_radius_m", l.track.fine_first_max_radius_m);
+}
+
+// Place recognition for cold starts, the localizer's gates, and how the map is built.
+template <class V>
+void visit_places_and_map(V& v, PipelineConfig& c) {
+  LocalizerConfig& l = c.localizer;
   v.section("places");
   v("enabled", l.places.enabled);
   v("rings", l.places.rings);
@@ -201,6 +217,16 @@ void visit_fields(V& v, PipelineConfig& c) {
   v("leaf_m", c.surfaces.leaf_m);
   v("max_range_m", c.surfaces.max_range_m);
   v("tile_m", c.surfaces.tile_m);
+}
+
+// Every field of the pipeline, section by section, in one place: the reader and the writer
+// both walk these lists, so the JSON form cannot drift from the structs.
+template <class V>
+void visit_fields(V& v, PipelineConfig& c) {
+  visit_segmentation(v, c);
+  visit_matching(v, c);
+  visit_registration(v, c);
+  visit_places_and_map(v, c);
 }
 
 class Writer {
