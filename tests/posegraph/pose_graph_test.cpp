@@ -103,7 +103,7 @@ TEST(PoseGraph, LoopsCorrectADriftedOdometry) {
   }
 }
 
-// Issue 21: a wrong loop 3 m off between frames less than 10 m apart, with a real loop's
+// A wrong loop 3 m off between frames less than 10 m apart, with a real loop's
 // information, moves the trajectory by at most 0.5 m and is reported; the true loops still
 // correct the drift.
 TEST(PoseGraph, AWrongLoopIsDownWeightedAndDoesNotBendTheGraph) {
