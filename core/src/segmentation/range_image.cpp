@@ -32,8 +32,7 @@
 namespace segmatch {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180.0;
+constexpr double kDeg = M_PI / 180.0;
 constexpr int kMinFitPoints = 100;  // fewer far points: no rings can be told (measure_rings)
 constexpr size_t kAxisSamples = 2000;
 constexpr size_t kRingSamples = 30000;
@@ -188,8 +187,8 @@ std::vector<float> row_phases(const std::vector<std::vector<double>>& row_azimut
   for (size_t r = 0; r < row_azimuths.size(); ++r) {
     double s = 0.0, c = 0.0;
     for (double az : row_azimuths[r])
-      s += std::sin(2.0 * kPi * az / step_deg), c += std::cos(2.0 * kPi * az / step_deg);
-    if (s != 0.0 || c != 0.0) phase[r] = float(std::atan2(s, c) / (2.0 * kPi));
+      s += std::sin(2.0 * M_PI * az / step_deg), c += std::cos(2.0 * M_PI * az / step_deg);
+    if (s != 0.0 || c != 0.0) phase[r] = float(std::atan2(s, c) / (2.0 * M_PI));
   }
   return phase;
 }
