@@ -7,6 +7,7 @@
 #include <string>
 
 #include "segmatch/core/detail/random.h"
+#include "support/validation.h"
 
 namespace segmatch {
 namespace {
@@ -152,14 +153,7 @@ TEST(LocalCloud, SubsamplesEachScan) {
 }
 
 TEST(LocalCloud, ValidationNamesTheField) {
-  const auto message = [](LocalCloudConfig c) {
-    try {
-      c.validate();
-    } catch (const std::invalid_argument& e) {
-      return std::string(e.what());
-    }
-    return std::string();
-  };
+  const auto message = [](const LocalCloudConfig& c) { return test::validation_message(c); };
   LocalCloudConfig c;
   EXPECT_EQ(message(c), "");
   c.radius_m = 0.0;

@@ -8,19 +8,12 @@
 #include <string>
 
 #include "segmatch/core/detail/random.h"
+#include "support/validation.h"
 
 namespace segmatch {
 namespace {
 
-template <typename Config>
-std::string validation_message(const Config& c) {
-  try {
-    c.validate();
-  } catch (const std::invalid_argument& e) {
-    return e.what();
-  }
-  return "";
-}
+using test::validation_message;
 
 // ---------------------------------------------------------------- voxel grid
 
