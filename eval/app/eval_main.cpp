@@ -206,161 +206,186 @@ SegmenterType segmenter_of(const std::string& name) {
   return name == "range_image" ? SegmenterType::kRangeImage : SegmenterType::kEuclidean;
 }
 
+// Every option of the three subcommands, filled by the command line.
+struct EvalArgs {
+  eval::LocalizationRunConfig lc, fc;  // localize, funnel
+  ClassifierOptions co;
+  std::string server, token_file, out_dir;
+  std::string cloud_poses = "odometry", funnel_cloud_poses = "odometry";
+  float recent_window_m = -1.0f;
+  std::string search = "map", segmenter = "map", track_surfaces = "on";
+  bool segments = false;
+};
+
+CLI::IsMember segmenter_names() { return CLI::IsMember({"map", "euclidean", "region_growing", "range_image"}); }
+
+CLI::App* add_localize(CLI::App& app, EvalArgs& a) {
+  CLI::App* loc = app.add_subcommand("localize", "replay a traversal against a map and score every answer");
+  loc->add_option("--map", a.lc.map_path, "map database")->required();
+  loc->add_option("--query", a.lc.query_folder, "sequence to replay; its poses are the ground truth in the map frame");
+  loc->add_option("--sim", a.lc.sim_dataset, "segmatch-sim folder: replay sequences/01 with its exact ground truth");
+  cli::add_bag_options(*loc, a.lc.bag.points_topic, a.lc.bag.pose_topic, a.lc.bag.map_frame, a.lc.bag.sensor_frame);
+  loc->add_option("--server", a.server, "HOST:PORT of segmatch-server (default: localize in-process)");
+  loc->add_option("--token-file", a.token_file, "file holding the server's shared secret");
+  loc->add_option("--every-m", a.lc.replay.every_m, "one query every this many metres");
+  loc->add_option("--warmup-m", a.lc.replay.warmup_m, "no query before this much driving (default 30)");
+  loc->add_option("--first", a.lc.replay.first, "first scan");
+  loc->add_option("--last", a.lc.replay.last, "last scan");
+  loc->add_option("--stride", a.lc.replay.stride, "use every n-th scan");
+  loc->add_flag(
+      "--single-scan", a.lc.replay.single_scan,
+      "cold start: every query is one raw scan alone, as a vehicle that has just woken up has (no accumulation, "
+      "no warm-up; its newest scans are that scan)");
+  loc->add_option("--mapped-radius-m", a.lc.thresholds.mapped_radius_m,
+                  "a street is mapped within this of the map trajectory");
+  loc->add_flag("!--quiet", a.lc.print_each, "no line per query");
+  loc->add_flag(
+      "--track", a.lc.track,
+      "track between fixes (api::Tracker): each query's prior is the last fix, its radius grows with the distance "
+      "driven since");
+  loc->add_option(
+      "--odometry", a.lc.odometry_path,
+      "the vehicle's odometry poses (KITTI or TUM) that build every query's local cloud (default: the replayed "
+      "sequence's odom_poses.txt)");
+  loc->add_option("--reference", a.lc.reference_path,
+                  "score against this poses file of the query sequence (KITTI or TUM) instead of its poses.txt");
+  loc->add_option("--cloud-poses", a.cloud_poses,
+                  "odometry (default): local clouds from the vehicle's odometry, as on a car; reference: from the "
+                  "sequence's reference poses, a comparison that flatters every figure (the report says so)")
+      ->check(CLI::IsMember({"odometry", "reference"}));
+  loc->add_option("--gnss-sigma-m", a.lc.gnss_sigma_m,
+                  "GNSS-like priors: the true pose plus Gaussian noise of this many metres (seeded), radius 3 sigma");
+  loc->add_option("--gnss-seed", a.lc.gnss_seed, "seed of the GNSS noise (default 1)");
+  loc->add_option("--wrong-prior-m", a.lc.wrong_prior_m,
+                  "a stress test: every query's prior is the true pose moved this many metres in a seeded random "
+                  "horizontal direction (--gnss-seed), with radius --wrong-prior-radius-m; any fix it gives is false");
+  loc->add_option("--wrong-prior-radius-m", a.lc.wrong_prior_radius_m,
+                  "the radius the wrong priors claim (default 3 m)");
+  loc->add_flag("--compare-global", a.lc.compare_global,
+                "also send every query that has a prior without it (not scored) and report both server times");
+  cli::add_output_option(*loc, a.out_dir, "report folder (JSON + PNG)");
+  loc->add_option(
+      "--recent-window-m", a.recent_window_m,
+      "in-process only: localize with this refine.recent_window_m instead of the map's (0: the whole cloud's "
+      "pose); a what-if on a stored map");
+  loc->add_option("--max-scan-age-m", a.lc.max_scan_age_m,
+                  "the vehicle's local cloud holds each scan for this many metres of driving instead of the map's "
+                  "local_cloud.max_scan_age_m (0: until it leaves the cylinder); a what-if");
+  loc->add_option("--newest-m", a.lc.replay.newest_m,
+                  "each query also carries the scans of the last this many metres, to which the server refines its "
+                  "answer (the sensor's pose now; default 10, 0: none)");
+  loc->add_option(
+         "--search", a.search,
+         "in-process only: the wide-prior search (search.enabled) on or off instead of as the map says; a what-if")
+      ->check(CLI::IsMember({"map", "on", "off"}));
+  loc->add_option("--segmenter", a.segmenter,
+                  "in-process only: segment the queries with this segmenter instead of the map's (the map's segments "
+                  "stay); a what-if, e.g. range_image for --single-scan")
+      ->check(segmenter_names());
+  loc->add_flag(
+      "--segments", a.segments,
+      "query by segments (LOCALIZE_SEGMENTS): segment and describe each local cloud here, as a vehicle would, "
+      "and send the segments instead of the cloud");
+  loc->add_option(
+         "--track-surfaces", a.track_surfaces,
+         "with a narrow prior and newest scans, track on the surface layer first (protocol revision 11): the cloud "
+         "path sets LOCALIZE bit 6; --segments sends the tracking request (nearby segments without points, the newest "
+         "scans thinned) and the full one only after TRACKING_LOST (default on)")
+      ->check(CLI::IsMember({"on", "off"}));
+  return loc;
+}
+
+CLI::App* add_funnel(CLI::App& app, EvalArgs& a) {
+  CLI::App* fun =
+      app.add_subcommand("funnel", "where true matches are lost: segments, counterparts, retrieved, classified");
+  fun->add_option("--map", a.fc.map_path, "map database")->required();
+  fun->add_option("--query", a.fc.query_folder, "sequence to replay; its poses are the ground truth in the map frame");
+  fun->add_option("--sim", a.fc.sim_dataset, "segmatch-sim folder: sequences/01 with its exact ground truth");
+  fun->add_option("--every-m", a.fc.replay.every_m, "one query every this many metres");
+  fun->add_option("--warmup-m", a.fc.replay.warmup_m, "no query before this much driving (default 30)");
+  fun->add_option("--first", a.fc.replay.first, "first scan");
+  fun->add_option("--last", a.fc.replay.last, "last scan");
+  fun->add_option("--stride", a.fc.replay.stride, "use every n-th scan");
+  fun->add_flag("--single-scan", a.fc.replay.single_scan, "every query one raw scan alone, as for localize");
+  fun->add_option("--segmenter", a.segmenter,
+                  "segment the queries with this segmenter instead of the map's, as for localize")
+      ->check(segmenter_names());
+  fun->add_option("--odometry", a.fc.odometry_path, "the vehicle's odometry poses (default: QUERY/odom_poses.txt)");
+  fun->add_option("--cloud-poses", a.funnel_cloud_poses, "odometry (default) or reference, as for localize")
+      ->check(CLI::IsMember({"odometry", "reference"}));
+  return fun;
+}
+
+CLI::App* add_classifier(CLI::App& app, EvalArgs& a) {
+  CLI::App* cls = app.add_subcommand(
+      "classifier", "ROC curves of the match classifiers on a held-out simulated city or real stretches");
+  cls->add_option("--model", a.co.model_shapes, "RF_eigen+shapes model file");
+  cls->add_option("--model-eigen", a.co.model_eigen, "RF_eigen model file");
+  cls->add_option("--preset", a.co.preset, "city size: tiny, demo, city");
+  cls->add_option("--seed", a.co.seed, "held-out city seed (not one the models were trained on)");
+  cls->add_option("--config", a.co.config_path, "pipeline config JSON");
+  cls->add_option("--real", a.co.real_dir,
+                  "real keyframe folder instead of a city: every candidate pair of the stretches segmatch-train --real "
+                  "holds out, labelled by centroid distance (default config: the auto profile measured from it)");
+  cli::add_output_option(*cls, a.co.out_dir, "report folder");
+  return cls;
+}
+
+// The in-process what-ifs (--recent-window-m, --search, --segmenter) change the map as loaded;
+// a server serves its own.
+int localize_command(EvalArgs& a) {
+  eval::LocalizationRunConfig& lc = a.lc;
+  if (lc.query_folder.empty() == lc.sim_dataset.empty())
+    throw std::runtime_error("give exactly one of --query and --sim");
+  lc.cloud_poses = io::parse_cloud_poses(a.cloud_poses);
+  server::MapLoadOptions load;
+  if (a.recent_window_m >= 0.0f) {
+    if (!a.server.empty())
+      throw std::runtime_error("--recent-window-m is for in-process runs (the server serves its map's)");
+    load.recent_window_m = a.recent_window_m;
+  }
+  if (a.search != "map") {
+    if (!a.server.empty()) throw std::runtime_error("--search is for in-process runs (the server serves its map's)");
+    load.search_enabled = a.search == "on";
+  }
+  if (a.segmenter != "map") {
+    if (!a.server.empty()) throw std::runtime_error("--segmenter is for in-process runs (the server serves its map's)");
+    load.segmenter = segmenter_of(a.segmenter);
+  }
+  lc.track_surfaces = a.track_surfaces == "on";
+  return run_localize(lc, a.server, a.token_file, a.out_dir, a.segments, lc.track_surfaces, load);
+}
+
+int funnel_command(EvalArgs& a) {
+  eval::LocalizationRunConfig& fc = a.fc;
+  if (fc.query_folder.empty() == fc.sim_dataset.empty())
+    throw std::runtime_error("give exactly one of --query and --sim");
+  server::MapLoadOptions funnel_load;
+  if (a.segmenter != "map") funnel_load.segmenter = segmenter_of(a.segmenter);
+  const auto loaded = server::load_map(fc.map_path, funnel_load);
+  fc.replay.local_cloud = loaded->config.local_cloud;
+  fc.cloud_poses = io::parse_cloud_poses(a.funnel_cloud_poses);
+  fc.replay.voxel = loaded->config.localizer.segmentation.voxel;
+  eval::print_funnel(eval::run_funnel(fc, *loaded->localizer), loaded->config.localizer.verification.min_inliers);
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{"Evaluate SegMatch localization and classifiers against ground truth"};
   app.require_subcommand(1);
-  eval::LocalizationRunConfig lc;
-  std::string server, token_file, out_dir;
-  auto* loc = app.add_subcommand("localize", "replay a traversal against a map and score every answer");
-  loc->add_option("--map", lc.map_path, "map database")->required();
-  loc->add_option("--query", lc.query_folder, "sequence to replay; its poses are the ground truth in the map frame");
-  loc->add_option("--sim", lc.sim_dataset, "segmatch-sim folder: replay sequences/01 with its exact ground truth");
-  cli::add_bag_options(*loc, lc.bag.points_topic, lc.bag.pose_topic, lc.bag.map_frame, lc.bag.sensor_frame);
-  loc->add_option("--server", server, "HOST:PORT of segmatch-server (default: localize in-process)");
-  loc->add_option("--token-file", token_file, "file holding the server's shared secret");
-  loc->add_option("--every-m", lc.replay.every_m, "one query every this many metres");
-  loc->add_option("--warmup-m", lc.replay.warmup_m, "no query before this much driving (default 30)");
-  loc->add_option("--first", lc.replay.first, "first scan");
-  loc->add_option("--last", lc.replay.last, "last scan");
-  loc->add_option("--stride", lc.replay.stride, "use every n-th scan");
-  loc->add_flag(
-      "--single-scan", lc.replay.single_scan,
-      "cold start: every query is one raw scan alone, as a vehicle that has just woken up has (no accumulation, "
-      "no warm-up; its newest scans are that scan)");
-  loc->add_option("--mapped-radius-m", lc.thresholds.mapped_radius_m,
-                  "a street is mapped within this of the map trajectory");
-  loc->add_flag("!--quiet", lc.print_each, "no line per query");
-  loc->add_flag(
-      "--track", lc.track,
-      "track between fixes (api::Tracker): each query's prior is the last fix, its radius grows with the distance "
-      "driven since");
-  loc->add_option(
-      "--odometry", lc.odometry_path,
-      "the vehicle's odometry poses (KITTI or TUM) that build every query's local cloud (default: the replayed "
-      "sequence's odom_poses.txt)");
-  loc->add_option("--reference", lc.reference_path,
-                  "score against this poses file of the query sequence (KITTI or TUM) instead of its poses.txt");
-  std::string cloud_poses = "odometry";
-  loc->add_option("--cloud-poses", cloud_poses,
-                  "odometry (default): local clouds from the vehicle's odometry, as on a car; reference: from the "
-                  "sequence's reference poses, a comparison that flatters every figure (the report says so)")
-      ->check(CLI::IsMember({"odometry", "reference"}));
-  loc->add_option("--gnss-sigma-m", lc.gnss_sigma_m,
-                  "GNSS-like priors: the true pose plus Gaussian noise of this many metres (seeded), radius 3 sigma");
-  loc->add_option("--gnss-seed", lc.gnss_seed, "seed of the GNSS noise (default 1)");
-  loc->add_option("--wrong-prior-m", lc.wrong_prior_m,
-                  "a stress test: every query's prior is the true pose moved this many metres in a seeded random "
-                  "horizontal direction (--gnss-seed), with radius --wrong-prior-radius-m; any fix it gives is false");
-  loc->add_option("--wrong-prior-radius-m", lc.wrong_prior_radius_m, "the radius the wrong priors claim (default 3 m)");
-  loc->add_flag("--compare-global", lc.compare_global,
-                "also send every query that has a prior without it (not scored) and report both server times");
-  cli::add_output_option(*loc, out_dir, "report folder (JSON + PNG)");
-  server::MapLoadOptions load;
-  float recent_window_m = -1.0f;
-  loc->add_option(
-      "--recent-window-m", recent_window_m,
-      "in-process only: localize with this refine.recent_window_m instead of the map's (0: the whole cloud's "
-      "pose); a what-if on a stored map");
-  loc->add_option("--max-scan-age-m", lc.max_scan_age_m,
-                  "the vehicle's local cloud holds each scan for this many metres of driving instead of the map's "
-                  "local_cloud.max_scan_age_m (0: until it leaves the cylinder); a what-if");
-  loc->add_option("--newest-m", lc.replay.newest_m,
-                  "each query also carries the scans of the last this many metres, to which the server refines its "
-                  "answer (the sensor's pose now; default 10, 0: none)");
-  std::string search = "map";
-  loc->add_option(
-         "--search", search,
-         "in-process only: the wide-prior search (search.enabled) on or off instead of as the map says; a what-if")
-      ->check(CLI::IsMember({"map", "on", "off"}));
-  std::string segmenter = "map";
-  const auto segmenter_names = CLI::IsMember({"map", "euclidean", "region_growing", "range_image"});
-  loc->add_option("--segmenter", segmenter,
-                  "in-process only: segment the queries with this segmenter instead of the map's (the map's segments "
-                  "stay); a what-if, e.g. range_image for --single-scan")
-      ->check(segmenter_names);
-  bool segments = false;
-  loc->add_flag(
-      "--segments", segments,
-      "query by segments (LOCALIZE_SEGMENTS): segment and describe each local cloud here, as a vehicle would, "
-      "and send the segments instead of the cloud");
-  std::string track_surfaces = "on";
-  loc->add_option(
-         "--track-surfaces", track_surfaces,
-         "with a narrow prior and newest scans, track on the surface layer first (protocol revision 11): the cloud "
-         "path sets LOCALIZE bit 6; --segments sends the tracking request (nearby segments without points, the newest "
-         "scans thinned) and the full one only after TRACKING_LOST (default on)")
-      ->check(CLI::IsMember({"on", "off"}));
-  eval::LocalizationRunConfig fc;
-  auto* fun =
-      app.add_subcommand("funnel", "where true matches are lost: segments, counterparts, retrieved, classified");
-  fun->add_option("--map", fc.map_path, "map database")->required();
-  fun->add_option("--query", fc.query_folder, "sequence to replay; its poses are the ground truth in the map frame");
-  fun->add_option("--sim", fc.sim_dataset, "segmatch-sim folder: sequences/01 with its exact ground truth");
-  fun->add_option("--every-m", fc.replay.every_m, "one query every this many metres");
-  fun->add_option("--warmup-m", fc.replay.warmup_m, "no query before this much driving (default 30)");
-  fun->add_option("--first", fc.replay.first, "first scan");
-  fun->add_option("--last", fc.replay.last, "last scan");
-  fun->add_option("--stride", fc.replay.stride, "use every n-th scan");
-  fun->add_flag("--single-scan", fc.replay.single_scan, "every query one raw scan alone, as for localize");
-  fun->add_option("--segmenter", segmenter,
-                  "segment the queries with this segmenter instead of the map's, as for localize")
-      ->check(segmenter_names);
-  fun->add_option("--odometry", fc.odometry_path, "the vehicle's odometry poses (default: QUERY/odom_poses.txt)");
-  std::string funnel_cloud_poses = "odometry";
-  fun->add_option("--cloud-poses", funnel_cloud_poses, "odometry (default) or reference, as for localize")
-      ->check(CLI::IsMember({"odometry", "reference"}));
-  ClassifierOptions co;
-  auto* cls = app.add_subcommand("classifier",
-                                 "ROC curves of the match classifiers on a held-out simulated city or real stretches");
-  cls->add_option("--model", co.model_shapes, "RF_eigen+shapes model file");
-  cls->add_option("--model-eigen", co.model_eigen, "RF_eigen model file");
-  cls->add_option("--preset", co.preset, "city size: tiny, demo, city");
-  cls->add_option("--seed", co.seed, "held-out city seed (not one the models were trained on)");
-  cls->add_option("--config", co.config_path, "pipeline config JSON");
-  cls->add_option("--real", co.real_dir,
-                  "real keyframe folder instead of a city: every candidate pair of the stretches segmatch-train --real "
-                  "holds out, labelled by centroid distance (default config: the auto profile measured from it)");
-  cli::add_output_option(*cls, co.out_dir, "report folder");
+  EvalArgs a;
+  const CLI::App* loc = add_localize(app, a);
+  const CLI::App* fun = add_funnel(app, a);
+  add_classifier(app, a);
   cli::add_version_flag(app, "segmatch-eval");
   SEGMATCH_CLI_PARSE(app, argc, argv);
-  if (const int status = cli::check_server("segmatch-eval", server); status >= 0) return status;
+  if (const int status = cli::check_server("segmatch-eval", a.server); status >= 0) return status;
   try {
-    if (*loc) {
-      if (lc.query_folder.empty() == lc.sim_dataset.empty())
-        throw std::runtime_error("give exactly one of --query and --sim");
-      lc.cloud_poses = io::parse_cloud_poses(cloud_poses);
-      if (recent_window_m >= 0.0f) {
-        if (!server.empty())
-          throw std::runtime_error("--recent-window-m is for in-process runs (the server serves its map's)");
-        load.recent_window_m = recent_window_m;
-      }
-      if (search != "map") {
-        if (!server.empty()) throw std::runtime_error("--search is for in-process runs (the server serves its map's)");
-        load.search_enabled = search == "on";
-      }
-      if (segmenter != "map") {
-        if (!server.empty())
-          throw std::runtime_error("--segmenter is for in-process runs (the server serves its map's)");
-        load.segmenter = segmenter_of(segmenter);
-      }
-      lc.track_surfaces = track_surfaces == "on";
-      return run_localize(lc, server, token_file, out_dir, segments, lc.track_surfaces, load);
-    }
-    if (*fun) {
-      if (fc.query_folder.empty() == fc.sim_dataset.empty())
-        throw std::runtime_error("give exactly one of --query and --sim");
-      server::MapLoadOptions funnel_load;
-      if (segmenter != "map") funnel_load.segmenter = segmenter_of(segmenter);
-      const auto loaded = server::load_map(fc.map_path, funnel_load);
-      fc.replay.local_cloud = loaded->config.local_cloud;
-      fc.cloud_poses = io::parse_cloud_poses(funnel_cloud_poses);
-      fc.replay.voxel = loaded->config.localizer.segmentation.voxel;
-      eval::print_funnel(eval::run_funnel(fc, *loaded->localizer), loaded->config.localizer.verification.min_inliers);
-      return 0;
-    }
-    return run_classifier(co);
+    if (*loc) return localize_command(a);
+    if (*fun) return funnel_command(a);
+    return run_classifier(a.co);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "segmatch-eval: %s\n", e.what());
     return 1;

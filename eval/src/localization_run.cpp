@@ -81,6 +81,96 @@ Truth open_truth(const LocalizationRunConfig& c) {
   return {std::move(seq), std::move(truth)};
 }
 
+namespace {
+
+// Where the vehicle's local clouds come from (LocalizationRunConfig::cloud_poses): the replayed
+// sequence with its scans placed by the vehicle's odometry (returned), or by the reference
+// (nothing returned: the truth's own sequence is replayed). Names the poses file in `run`.
+std::optional<io::Sequence> open_cloud_poses(const LocalizationRunConfig& c, const Truth& truth, LocalizationRun& run) {
+  run.cloud_poses = c.cloud_poses;
+  const bool bag = truth.sequence.layout() == io::SequenceLayout::kBag;
+  if (bag && c.cloud_poses == io::CloudPoses::kOdometry && c.odometry_path.empty()) {
+    run.cloud_poses_file = truth.sequence.source_note();  // the bag's poses are the vehicle's
+    return std::nullopt;
+  }
+  if (c.cloud_poses == io::CloudPoses::kOdometry) {
+    io::SequenceOptions so;
+    if (bag) {
+      so.poses_path = c.odometry_path;
+      so.bag.points_topic = c.bag.points_topic;
+    } else {
+      so.poses_path = io::odometry_poses_path(truth.sequence.folder(), c.odometry_path);
+    }
+    run.cloud_poses_file = so.poses_path;
+    return io::Sequence::open(truth.sequence.folder(), so);
+  }
+  if (!c.odometry_path.empty()) throw std::runtime_error("--odometry and --cloud-poses reference exclude each other");
+  run.cloud_poses_file =
+      c.reference_path.empty() ? (fs::path(truth.sequence.folder()) / "poses.txt").string() : c.reference_path;
+  return std::nullopt;
+}
+
+// One query's answer scored against the truth (thresholds, the mapped streets of the map's trajectory).
+QueryOutcome outcome_of(const io::ReplayQuery& q, const api::LocalizeReply& reply, const std::string& mode,
+                        bool rejected, double latency_ms, const Truth& truth, const LocalizationRun& run,
+                        const LocalizationRunConfig& c) {
+  QueryOutcome o;
+  o.latency_ms = latency_ms;
+  o.frame = q.frame;
+  o.odometer_m = q.odometer_m;
+  o.localized = reply.status == api::LocalizeStatus::kLocalized;
+  o.status = api::to_string(reply.status);
+  o.mode = mode;
+  o.rejected = rejected;
+  o.server_ms = reply.timings.server_total;
+  o.inliers = reply.inliers;
+  o.support = reply.support;
+  o.confidence = reply.confidence;
+  if (reply.detail)
+    o.window_warp_m = reply.detail->window_warp_m, o.window_warp_deg = reply.detail->window_warp_deg,
+    o.window_points = reply.detail->window_points;
+  const Pose3d& T_map_sensor_truth = truth.T_map_sensor[q.frame];
+  o.T_map_sensor_truth = T_map_sensor_truth;
+  o.time_s = truth.sequence.times()[q.frame];
+  o.mapped = distance_to(run.map_trajectory, T_map_sensor_truth.translation()) <= c.thresholds.mapped_radius_m;
+  score(o, reply.T_map_local * q.T_odom_sensor, T_map_sensor_truth, c.thresholds);
+  if (reply.detail && reply.detail->estimate) {
+    o.method = api::to_string(static_cast<api::ReplyMethod>(reply.detail->estimate->method));
+    score_covariance(o, api::covariance_matrix(reply.detail->estimate->covariance_upper));
+  }
+  return o;
+}
+
+void print_outcome(const QueryOutcome& o, const api::LocalizeReply& reply) {
+  std::printf(
+      "frame %5zu  %7.1f m  %-8s %-13s %s %-12s inliers %3u support %3u conf %.2f  error %6.3f m %5.2f deg  "
+      "sigma %5.3f m (%4.1f)  warp %5.2f m %4.2f deg  %6.1f ms%s%s\n",
+      o.frame, o.odometer_m, o.mode.c_str(), o.status.c_str(), o.localized ? (o.correct ? "TRUE " : "FALSE") : "     ",
+      o.localized ? o.method.c_str() : "", reply.inliers, reply.support, reply.confidence, o.error_m, o.error_deg,
+      o.sigma_h_m, o.mahalanobis_h, o.window_warp_m, o.window_warp_deg, o.latency_ms,
+      o.mapped ? (o.rejected ? "  (rejected by the tracker)" : "")
+               : (o.rejected ? "  (unmapped street; rejected by the tracker)" : "  (unmapped street)"),
+      reply.reason.empty() ? "" : ("  " + reply.reason).c_str());
+}
+
+// The figures over every outcome: the summary, availability after the first fix (mapped and
+// unmapped streets apart), server time by query mode and per module.
+void summarize_run(const std::map<std::string, std::vector<double>>& timings, LocalizationRun& run) {
+  run.summary = summarize(run.outcomes);
+  std::map<std::string, std::vector<double>> by_mode;
+  bool fixed = false;
+  for (const QueryOutcome& o : run.outcomes) {
+    by_mode[o.mode].push_back(o.server_ms);
+    if (fixed && o.mapped) ++run.after_first_fix, run.localized_after_first_fix += o.localized;
+    if (fixed && !o.mapped) ++run.unmapped_after_first_fix, run.unmapped_localized_after_first_fix += o.localized;
+    fixed = fixed || o.localized;
+  }
+  for (auto& [mode, values] : by_mode) run.server_ms_by_mode[mode] = distribution_of(values);
+  for (auto& [name, values] : timings) run.module_ms[name] = distribution_of(values);
+}
+
+}  // namespace
+
 LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeFn& localize) {
   const storage::MapReader map = storage::MapReader::open(c.map_path);
   LocalizationRun run;
@@ -98,27 +188,7 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
                        : truth.sequence.layout() == io::SequenceLayout::kBag
                            ? truth.sequence.source_note()
                            : (fs::path(c.query_folder) / "poses.txt").string();
-  std::optional<io::Sequence> odometry;  // the replayed sequence, its scans placed by the vehicle's odometry
-  run.cloud_poses = c.cloud_poses;
-  const bool bag = truth.sequence.layout() == io::SequenceLayout::kBag;
-  if (bag && c.cloud_poses == io::CloudPoses::kOdometry && c.odometry_path.empty()) {
-    run.cloud_poses_file = truth.sequence.source_note();  // the bag's poses are the vehicle's
-  } else if (bag && c.cloud_poses == io::CloudPoses::kOdometry) {
-    io::SequenceOptions so;
-    so.poses_path = c.odometry_path;
-    so.bag.points_topic = c.bag.points_topic;
-    run.cloud_poses_file = c.odometry_path;
-    odometry = io::Sequence::open(truth.sequence.folder(), so);
-  } else if (c.cloud_poses == io::CloudPoses::kOdometry) {
-    io::SequenceOptions so;
-    so.poses_path = io::odometry_poses_path(truth.sequence.folder(), c.odometry_path);
-    run.cloud_poses_file = so.poses_path;
-    odometry = io::Sequence::open(truth.sequence.folder(), so);
-  } else {
-    if (!c.odometry_path.empty()) throw std::runtime_error("--odometry and --cloud-poses reference exclude each other");
-    run.cloud_poses_file =
-        c.reference_path.empty() ? (fs::path(truth.sequence.folder()) / "poses.txt").string() : c.reference_path;
-  }
+  const std::optional<io::Sequence> odometry = open_cloud_poses(c, truth, run);
   QueryPriors priors(c, truth.T_map_sensor);
   const double max_track_radius_m = max_tracked_radius_m(parameters.localizer);
   PriorComparison comparison;
@@ -139,43 +209,9 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
             std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
         const bool rejected = priors.update(reply, q);
         if (c.compare_global) comparison.add(request, reply, localize);
-        QueryOutcome o;
-        o.latency_ms = latency_ms;
-        o.frame = q.frame;
-        o.odometer_m = q.odometer_m;
-        o.localized = reply.status == api::LocalizeStatus::kLocalized;
-        o.status = api::to_string(reply.status);
-        o.mode = mode;
-        o.rejected = rejected;
-        o.server_ms = reply.timings.server_total;
-        o.inliers = reply.inliers;
-        o.support = reply.support;
-        o.confidence = reply.confidence;
-        if (reply.detail)
-          o.window_warp_m = reply.detail->window_warp_m, o.window_warp_deg = reply.detail->window_warp_deg,
-          o.window_points = reply.detail->window_points;
-        const Pose3d& T_map_sensor_truth = truth.T_map_sensor[q.frame];
-        o.T_map_sensor_truth = T_map_sensor_truth;
-        o.time_s = truth.sequence.times()[q.frame];
-        o.mapped = distance_to(run.map_trajectory, T_map_sensor_truth.translation()) <= c.thresholds.mapped_radius_m;
-        score(o, reply.T_map_local * q.T_odom_sensor, T_map_sensor_truth, c.thresholds);
-        if (reply.detail && reply.detail->estimate) {
-          o.method = api::to_string(static_cast<api::ReplyMethod>(reply.detail->estimate->method));
-          score_covariance(o, api::covariance_matrix(reply.detail->estimate->covariance_upper));
-        }
+        run.outcomes.push_back(outcome_of(q, reply, mode, rejected, latency_ms, truth, run, c));
         add_timings(timings, reply.timings);
-        if (c.print_each)
-          std::printf(
-              "frame %5zu  %7.1f m  %-8s %-13s %s %-12s inliers %3u support %3u conf %.2f  error %6.3f m %5.2f deg  "
-              "sigma %5.3f m (%4.1f)  warp %5.2f m %4.2f deg  %6.1f ms%s%s\n",
-              q.frame, q.odometer_m, mode.c_str(), o.status.c_str(),
-              o.localized ? (o.correct ? "TRUE " : "FALSE") : "     ", o.localized ? o.method.c_str() : "",
-              reply.inliers, reply.support, reply.confidence, o.error_m, o.error_deg, o.sigma_h_m, o.mahalanobis_h,
-              o.window_warp_m, o.window_warp_deg, o.latency_ms,
-              o.mapped ? (rejected ? "  (rejected by the tracker)" : "")
-                       : (rejected ? "  (unmapped street; rejected by the tracker)" : "  (unmapped street)"),
-              reply.reason.empty() ? "" : ("  " + reply.reason).c_str());
-        run.outcomes.push_back(o);
+        if (c.print_each) print_outcome(run.outcomes.back(), reply);
         return true;
       },
       [&](size_t done, size_t total) {
@@ -183,18 +219,8 @@ LocalizationRun run_localization(const LocalizationRunConfig& c, const LocalizeF
         progress->update(done);
       });
   if (progress) progress->finish();
-  run.summary = summarize(run.outcomes);
-  std::map<std::string, std::vector<double>> by_mode;
-  bool fixed = false;
-  for (const QueryOutcome& o : run.outcomes) {
-    by_mode[o.mode].push_back(o.server_ms);
-    if (fixed && o.mapped) ++run.after_first_fix, run.localized_after_first_fix += o.localized;
-    if (fixed && !o.mapped) ++run.unmapped_after_first_fix, run.unmapped_localized_after_first_fix += o.localized;
-    fixed = fixed || o.localized;
-  }
-  for (auto& [mode, values] : by_mode) run.server_ms_by_mode[mode] = distribution_of(values);
+  summarize_run(timings, run);
   comparison.write_to(run);
-  for (auto& [name, values] : timings) run.module_ms[name] = distribution_of(values);
   return run;
 }
 
