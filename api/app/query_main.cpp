@@ -39,6 +39,29 @@ void print_info(const api::InfoReply& info) {
       info.protocol_version, info.parameters_json.c_str());
 }
 
+// One cloud localized: exit 0 when the answer is LOCALIZED, 3 when it is not (scripts tell a
+// fix from a refusal by the status).
+int localize_one(api::Client& client, const std::string& cloud_path, const std::string& sensor) {
+  api::LocalizeRequest request;
+  request.sensor_position_local = parse_xyz(sensor);
+  request.points = io::read_cloud(cloud_path).points;
+  // Why an answer is refused is what a user asks next: always ask for the typed code. A
+  // server older than revision 5 answers MALFORMED ("reserved bits set"); ask it again without.
+  request.flags |= api::kFlagRefusalCode;
+  auto sent = std::chrono::steady_clock::now();
+  api::LocalizeReply reply;
+  try {
+    reply = client.localize(request);
+  } catch (const api::ClientError& e) {
+    if (e.kind != api::ClientError::Kind::kServer || e.server_code != api::ErrorCode::kMalformed) throw;
+    request.flags &= ~api::kFlagRefusalCode;
+    sent = std::chrono::steady_clock::now();
+    reply = client.localize(request);
+  }
+  query::print_reply(reply, ms_since(sent));
+  return reply.status == api::LocalizeStatus::kLocalized ? 0 : 3;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -110,25 +133,7 @@ int main(int argc, char** argv) {
     } else if (info->parsed()) {
       print_info(client.info());
     } else if (localize->parsed()) {
-      api::LocalizeRequest request;
-      request.sensor_position_local = parse_xyz(sensor);
-      request.points = io::read_cloud(cloud_path).points;
-      // Why an answer is refused is what a user asks next: always ask for the typed code. A
-      // server older than revision 5 answers MALFORMED ("reserved bits set"); ask it again without.
-      request.flags |= api::kFlagRefusalCode;
-      auto sent = std::chrono::steady_clock::now();
-      api::LocalizeReply reply;
-      try {
-        reply = client.localize(request);
-      } catch (const api::ClientError& e) {
-        if (e.kind != api::ClientError::Kind::kServer || e.server_code != api::ErrorCode::kMalformed) throw;
-        request.flags &= ~api::kFlagRefusalCode;
-        sent = std::chrono::steady_clock::now();
-        reply = client.localize(request);
-      }
-      query::print_reply(reply, ms_since(sent));
-      // Scripts tell a fix from a refusal by the status: 3 when the answer is not LOCALIZED.
-      if (reply.status != api::LocalizeStatus::kLocalized) return 3;
+      return localize_one(client, cloud_path, sensor);
     } else {
       return query::replay(client, replay);
     }

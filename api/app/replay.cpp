@@ -69,10 +69,9 @@ double percentile(std::vector<double> v, double p) {
   return v[std::min(v.size() - 1, static_cast<size_t>(p * (v.size() - 1) + 0.5))];
 }
 
-}  // namespace
-
-int replay(api::Client& client, const ReplayOptions& options) {
-  // A vehicle has only its odometry: the sequence's odom_poses.txt when it has one.
+// The sequence with its scans placed as a vehicle places them: by its odometry (the sequence's
+// odom_poses.txt when it has one); says which poses on the first line.
+io::Sequence open_as_a_vehicle(const ReplayOptions& options) {
   io::SequenceOptions so;
   so.poses_path = options.odometry;
   so.bag = options.bag;
@@ -80,10 +79,32 @@ int replay(api::Client& client, const ReplayOptions& options) {
   if (!bag && so.poses_path.empty() &&
       std::filesystem::is_regular_file(std::filesystem::path(options.folder) / "odom_poses.txt"))
     so.poses_path = (std::filesystem::path(options.folder) / "odom_poses.txt").string();
-  const io::Sequence seq = io::Sequence::open(options.folder, so);
+  io::Sequence seq = io::Sequence::open(options.folder, so);
   std::printf("local clouds from %s\n", bag                     ? seq.source_note().c_str()
                                         : so.poses_path.empty() ? "the sequence's poses.txt (it has no odom_poses.txt)"
                                                                 : so.poses_path.c_str());
+  return seq;
+}
+
+api::LocalizeRequest request_of(const io::ReplayQuery& q) {
+  api::LocalizeRequest request;
+  request.request_id = q.frame;
+  if (q.voxelized) request.flags |= api::kFlagVoxelized;
+  request.flags |= api::kFlagDetail;  // the window's warp, printed per reply
+  request.sensor_position_local = q.T_odom_sensor.translation();
+  request.sensor_orientation_local = Eigen::Quaterniond(q.T_odom_sensor.linear()).normalized();
+  request.points = q.cloud_odom;
+  if (!q.newest_odom.empty()) {
+    request.flags |= api::kFlagNewestScans;  // revision 8: the answer is the sensor's pose now
+    request.newest_points = q.newest_odom;
+  }
+  return request;
+}
+
+}  // namespace
+
+int replay(api::Client& client, const ReplayOptions& options) {
+  const io::Sequence seq = open_as_a_vehicle(options);
   io::ReplayConfig config;
   config.every_m = options.every_m;
   config.first = options.first;
@@ -101,17 +122,7 @@ int replay(api::Client& client, const ReplayOptions& options) {
   std::vector<double> latencies_ms;
   api::Tracker tracker;  // --track: the last fix is the next query's prior
   io::replay_sequence(seq, config, [&](const io::ReplayQuery& q) {
-    api::LocalizeRequest request;
-    request.request_id = q.frame;
-    if (q.voxelized) request.flags |= api::kFlagVoxelized;
-    request.flags |= api::kFlagDetail;  // the window's warp, printed per reply
-    request.sensor_position_local = q.T_odom_sensor.translation();
-    request.sensor_orientation_local = Eigen::Quaterniond(q.T_odom_sensor.linear()).normalized();
-    request.points = q.cloud_odom;
-    if (!q.newest_odom.empty()) {
-      request.flags |= api::kFlagNewestScans;  // revision 8: the answer is the sensor's pose now
-      request.newest_points = q.newest_odom;
-    }
+    api::LocalizeRequest request = request_of(q);
     ++queries;
     const api::TrackMode mode = options.track ? tracker.prepare(request, q.odometer_m) : api::TrackMode::kGlobal;
     // Tracked with the newest scans: the server tracks on the surface layer first (revision 11).
