@@ -137,7 +137,7 @@ void add_options(CLI::App& app, ServerOptions& o) {
   app.add_option("--metrics-listen", o.metrics_listen, "address of the metrics endpoint (default loopback)")
       ->capture_default_str();
   app.add_option("--http-port", o.http_port,
-                 "serve the operator's page and its JSON API (docs/o.console.md) over HTTP on this port, with the "
+                 "serve the operator's page and its JSON API (docs/console.md) over HTTP on this port, with the "
                  "token if there is one, and GET /metrics (0: a free port, printed); may equal --metrics-port")
       ->check(CLI::Range(0, 65535));
   app.add_option("--http-listen", o.console.listen_address, "address of the operator's page (default loopback)")
