@@ -19,8 +19,10 @@ if [ "${1:-}" = "--sanitize" ]; then
   # Only the suites built above: the others' whole-suite entries and *_NOT_BUILT placeholders
   # would report "Not Run".
   # The server suites' shared world is input data, not code under test: when the optimised build
-  # has its builder (CI runs the plain suite first), use it instead of building the world under ASan.
+  # has its builder (CI runs the plain suite first), use it, brought up to date with the sources,
+  # instead of building the world under ASan.
   if [ -x "$root/build/tests/make_server_world" ] && [ -z "${SEGMATCH_SERVER_WORLD_TOOL:-}" ]; then
+    cmake --build "$root/build" -j "$jobs" --target make_server_world >/dev/null
     export SEGMATCH_SERVER_WORLD_TOOL="$root/build/tests/make_server_world"
   fi
   export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1

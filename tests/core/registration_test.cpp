@@ -236,7 +236,7 @@ TEST(Registration, TheFineStageSettlesAsWellFarFromTheMapOrigin) {
     EXPECT_LT(((O * kTruth).translation() - r.T_target_query.translation()).norm(), 0.01);
     EXPECT_LT(rotation_error_deg(r.T_target_query, O * kTruth), 0.05);
     if (offset.isZero()) iterations_at_origin = r.iterations;
-    EXPECT_LE(r.iterations, iterations_at_origin + 1);  // 8 and 8 (measuring steps at the origin: 8 and 14)
+    EXPECT_LE(r.iterations, iterations_at_origin + 1);  // steps measured at the origin failed this
   }
 }
 

@@ -19,6 +19,14 @@ import sys
 SCOPE = re.compile(r"\b(namespace|class|struct|enum|union)\b[^()]*$")
 
 
+def digit_separator(text, i):
+    """True when the quote at i separates digits (10'000), not opens a character literal (L'x')."""
+    start = i
+    while start > 0 and (text[start - 1].isalnum() or text[start - 1] == "_"):
+        start -= 1
+    return start < i and text[start].isdigit()
+
+
 def blank_literals(text):
     """The text with comments, strings and character literals replaced by spaces (newlines kept)."""
     out, i, n = [], 0, len(text)
@@ -40,6 +48,9 @@ def blank_literals(text):
             j = n if end < 0 else end + len(m.group(1) if m else "") + 2
             out.append(re.sub(r"[^\n]", " ", text[i:j]))
             i = j
+        elif c == "'" and digit_separator(text, i):
+            out.append(c)
+            i += 1
         elif c in "\"'":
             j = i + 1
             while j < n and text[j] != c and text[j] != "\n":
@@ -88,9 +99,9 @@ struct S {
 };
 const char* braces = "{{{ } //";
 /* void g() { */
-int h(int v) {
+int h(int v = 10'000) {
   auto l = [](int k) {
-    return k + '}';
+    return k + L'}';
   };
   // }
   return l(v) + R"x({)x"[0];
