@@ -8,9 +8,11 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <memory>
+#include <random>
 #include <stdexcept>
 
 namespace segmatch {
@@ -77,6 +79,75 @@ TEST(PlaceRecognition, TheDescriptorTurnsWithTheCloudBySectors) {
   PlaceDescriptor other = place;
   other.sectors = 30;
   EXPECT_THROW(place_distance(place, other), std::invalid_argument);
+}
+
+// Scan Context's distance as its definition reads (Kim & Kim, eq. 5), in double, per shift k
+// (query sector j against place sector j + k): 1 - the mean cosine of the columns occupied in
+// both, 1 where fewer than a sector in six are. The brute-force oracle of place_distance.
+std::vector<double> distances_by_definition(const PlaceDescriptor& q, const PlaceDescriptor& p) {
+  const int R = q.rings, S = q.sectors;
+  auto cell = [S](const PlaceDescriptor& d, int r, int s) { return double(d.cells[size_t(r) * S + s]); };
+  std::vector<double> out(size_t(S), 1.0);
+  for (int k = 0; k < S; ++k) {
+    double sum = 0.0;
+    int shared = 0;
+    for (int j = 0; j < S; ++j) {
+      const int m = (j + k) % S;
+      double ab = 0.0, aa = 0.0, bb = 0.0;
+      for (int r = 0; r < R; ++r) {
+        ab += cell(q, r, j) * cell(p, r, m);
+        aa += cell(q, r, j) * cell(q, r, j);
+        bb += cell(p, r, m) * cell(p, r, m);
+      }
+      if (aa <= 0.0 || bb <= 0.0) continue;
+      sum += ab / std::sqrt(aa * bb);
+      ++shared;
+    }
+    if (shared >= std::max(1, S / 6)) out[size_t(k)] = 1.0 - sum / shared;
+  }
+  return out;
+}
+
+TEST(PlaceRecognition, TheDistanceIsScanContextsDefinition) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> height(0.8f, 3.0f), u(0.f, 1.f);
+  for (const auto& [rings, sectors] : {std::pair{20, 60}, std::pair{7, 13}, std::pair{3, 720}})
+    for (double empty : {0.0, 0.5, 0.9, 0.97, 1.0}) {
+      auto random_descriptor = [&, rings = rings, sectors = sectors] {
+        PlaceDescriptor d;
+        d.rings = rings;
+        d.sectors = sectors;
+        for (int i = 0; i < rings * sectors; ++i) d.cells.push_back(u(rng) < empty ? 0.f : height(rng));
+        return d;
+      };
+      const PlaceDescriptor a = random_descriptor(), b = random_descriptor();
+      const std::vector<double> slow = distances_by_definition(a, b);
+      const double best = *std::min_element(slow.begin(), slow.end());
+      const PlaceDistance fast = place_distance(a, b);
+      EXPECT_NEAR(fast.distance, best, 1e-5) << rings << "x" << sectors << " empty " << empty;
+      // Its shift is the best one, or one the oracle finds as good to float precision.
+      if (best < 1.0) {
+        EXPECT_NEAR(slow[size_t(fast.shift_sectors)], best, 1e-5) << rings << "x" << sectors;
+      }
+    }
+}
+
+// SLAM keyframes lie metres apart: places come every place_spacing_m between them all the same,
+// but not across a gap no street is driven straight (kMaxInterpolatedGapM).
+TEST(PlaceRecognition, PlacesFillTheGapsBetweenSparseKeyframes) {
+  const MappedStreet m;
+  auto near = [&m](const Eigen::Vector3d& c, double r) { return m.surfaces->near(c, r); };
+  auto at = [](double x) {
+    Pose3d T = Pose3d::Identity();
+    T.translation() = Eigen::Vector3d(x, 0.0, 2.0);
+    return T;
+  };
+  const PlaceIndex sparse = build_place_index({at(0.0), at(10.0), at(20.0), at(30.0), at(40.0), at(50.0)}, near, {});
+  EXPECT_EQ(sparse.size(), 26u * 5u);  // a stop every 2 m of the 50, as from a pose every metre
+  for (size_t i = 5; i < sparse.size(); i += 5)
+    EXPECT_NEAR(sparse.pose(i).translation().x() - sparse.pose(i - 5).translation().x(), 2.0, 1e-9) << i;
+  const PlaceIndex jump = build_place_index({at(0.0), at(150.0)}, near, {});
+  EXPECT_EQ(jump.size(), 2u * 5u);
 }
 
 TEST(PlaceRecognition, TheIndexFindsThePlaceAndTheHeadingOfAQueryFromAnotherLane) {
@@ -225,8 +296,12 @@ TEST(PlaceRecognition, ConfigRefusesBadValuesByName) {
   c.rings = 1;
   EXPECT_TRUE(refused_with(c, "PlaceRecognitionConfig.rings"));
   c = {};
-  c.candidates = c.shortlist + 1;
+  c.shortlist = 5;
+  c.candidates = 6;
   EXPECT_TRUE(refused_with(c, "PlaceRecognitionConfig.candidates"));
+  c = {};
+  c.shortlist = -1;
+  EXPECT_TRUE(refused_with(c, "PlaceRecognitionConfig.shortlist"));
   c = {};
   c.max_height_m = c.min_height_m;
   EXPECT_TRUE(refused_with(c, "PlaceRecognitionConfig.max_height_m"));

@@ -75,6 +75,37 @@ TEST(Simd, ComparisonMasksAndSelect) {
     }
 }
 
+// simd::dot's stated order, written out lane by lane: four accumulators over blocks of 16, blocks
+// of 4 into the first, the lanes added in order, then the tail.
+float dot_in_stated_order(const float* a, const float* b, size_t n) {
+  float acc[4][4] = {};
+  size_t i = 0;
+  for (; i + 16 <= n; i += 16)
+    for (int q = 0; q < 4; ++q)
+      for (int l = 0; l < 4; ++l) acc[q][l] = acc[q][l] + a[i + 4 * q + l] * b[i + 4 * q + l];
+  for (; i + 4 <= n; i += 4)
+    for (int l = 0; l < 4; ++l) acc[0][l] = acc[0][l] + a[i + l] * b[i + l];
+  float lanes[4];
+  for (int l = 0; l < 4; ++l) lanes[l] = (acc[0][l] + acc[1][l]) + (acc[2][l] + acc[3][l]);
+  float sum = ((lanes[0] + lanes[1]) + lanes[2]) + lanes[3];
+  for (; i < n; ++i) sum += a[i] * b[i];
+  return sum;
+}
+
+TEST(Simd, DotFollowsItsStatedOrderAndIsADotProduct) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(-2.f, 2.f);
+  for (size_t n : {0, 1, 3, 4, 5, 15, 16, 17, 31, 33, 64, 100, 1200}) {
+    std::vector<float> a(n), b(n);
+    for (size_t i = 0; i < n; ++i) a[i] = u(rng), b[i] = u(rng);
+    const float got = simd::dot(a.data(), b.data(), n);
+    EXPECT_EQ(bits(got), bits(dot_in_stated_order(a.data(), b.data(), n))) << "n " << n;
+    double exact = 0.0;
+    for (size_t i = 0; i < n; ++i) exact += double(a[i]) * b[i];
+    EXPECT_NEAR(got, exact, 1e-4 * (1.0 + std::sqrt(double(n)))) << "n " << n;
+  }
+}
+
 TEST(Simd, MakeSplatZeroAndGet) {
   const simd::F4 m = simd::make(1.f, -2.f, 3.5f, -0.f);
   EXPECT_EQ(simd::get(m, 0), 1.f);
