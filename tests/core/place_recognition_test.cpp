@@ -142,19 +142,21 @@ TEST(PlaceRecognition, PlacesFillTheGapsBetweenSparseKeyframes) {
     T.translation() = Eigen::Vector3d(x, 0.0, 2.0);
     return T;
   };
-  const PlaceIndex sparse = build_place_index({at(0.0), at(10.0), at(20.0), at(30.0), at(40.0), at(50.0)}, near, {});
+  PlaceRecognitionConfig c;
+  c.place_spacing_m = 2.0f;
+  const PlaceIndex sparse = build_place_index({at(0.0), at(10.0), at(20.0), at(30.0), at(40.0), at(50.0)}, near, c);
   EXPECT_EQ(sparse.size(), 26u * 5u);  // a stop every 2 m of the 50, as from a pose every metre
   for (size_t i = 5; i < sparse.size(); i += 5)
     EXPECT_NEAR(sparse.pose(i).translation().x() - sparse.pose(i - 5).translation().x(), 2.0, 1e-9) << i;
-  const PlaceIndex jump = build_place_index({at(0.0), at(150.0)}, near, {});
+  const PlaceIndex jump = build_place_index({at(0.0), at(150.0)}, near, c);
   EXPECT_EQ(jump.size(), 2u * 5u);
 }
 
 TEST(PlaceRecognition, TheIndexFindsThePlaceAndTheHeadingOfAQueryFromAnotherLane) {
   const MappedStreet m;
   const PlaceIndex index = m.places();
-  // Five places a stop (the trajectory's and two lanes either side), a stop every 2 m of the 55.
-  EXPECT_EQ(index.size(), 28u * 5u);
+  // Five places a stop (the trajectory's and two lanes either side), a stop every metre of the 55.
+  EXPECT_EQ(index.size(), 56u * 5u);
   const Eigen::Vector3d truth_map(31.4, 1.3, 2.0);
   const Eigen::Vector3d sensor_query = m.T_query * truth_map;
   const PointCloud scan = crop_cylinder(transformed(m.layer, m.T_query), sensor_query, 40.0);
@@ -282,7 +284,7 @@ TEST(PlaceRecognition, ABuildStopsWhenCancelledAndAReadyFutureHoldsTheIndex) {
   EXPECT_EQ(none.size(), 0u);
   const PlacesFuture ready = ready_places(std::make_shared<const PlaceIndex>(m.places()));
   ASSERT_TRUE(ready.valid());
-  EXPECT_EQ(ready.get()->size(), 28u * 5u);
+  EXPECT_EQ(ready.get()->size(), 56u * 5u);
   const Localizer without(test::street_localizer_config(), {}, nullptr, nullptr, m.surfaces);
   EXPECT_EQ(without.places(), nullptr);
 }

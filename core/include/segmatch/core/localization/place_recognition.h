@@ -34,7 +34,7 @@ struct PlaceRecognitionConfig {
   float max_height_m = 3.0f;
   bool occlusion = true;
   float block_height_m = 2.0f;
-  float place_spacing_m = 2.0f;  // places along the map's trajectory, at least this far apart
+  float place_spacing_m = 1.0f;  // places along the map's trajectory, at least this far apart
   float lateral_step_m = 2.0f;   // ... and beside it, this far apart
   int lateral_steps = 2;         // on each side
   // Places compared in full, the nearest by ring key; 0: every place. The ring key (the share of
@@ -45,9 +45,11 @@ struct PlaceRecognitionConfig {
   int candidates = 10;           // places handed to registration, best first
   // Each candidate is a prior for the surface layer's wide-prior tracking: a disc of this
   // radius (the query may be a lane or two and half a place spacing away) and this heading
-  // tolerance (a sector and a half).
+  // tolerance. The best shift of one sparse scan's bins can be three or four sectors off the
+  // heading its registration settles on (docs/how-defaults-were-chosen.md); the fitness gate,
+  // not the heading, parts true from wrong places.
   float prior_radius_m = 8.0f;
-  float heading_tolerance_deg = 10.0f;
+  float heading_tolerance_deg = 20.0f;
   float max_distance = 0.65f;  // candidates farther than this (0 same, 1 unrelated) are not tried
   // The tracking gates for a cold start, in place of the tracker's. One scan holds a few
   // segments, too few to witness a pose (true and false poses alike had 0-11 landing, 0-3
