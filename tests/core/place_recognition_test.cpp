@@ -130,6 +130,11 @@ TEST(PlaceRecognition, TheDistanceIsScanContextsDefinition) {
         EXPECT_NEAR(slow[size_t(fast.shift_sectors)], best, 1e-5) << rings << "x" << sectors;
       }
     }
+  PlaceDescriptor cut;
+  cut.rings = 20;
+  cut.sectors = 60;
+  cut.cells.assign(20 * 59, 1.f);
+  EXPECT_THROW(place_columns(cut), std::invalid_argument);
 }
 
 // SLAM keyframes lie metres apart: places come every place_spacing_m between them all the same,

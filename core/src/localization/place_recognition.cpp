@@ -116,6 +116,8 @@ PlaceDescriptor describe_place(const PointCloud& points, const Eigen::Vector3d& 
 
 PlaceColumns place_columns(const PlaceDescriptor& d) {
   const int R = d.rings, S = d.sectors;
+  if (R < 1 || S < 1 || d.cells.size() != static_cast<size_t>(R) * S)
+    throw std::invalid_argument("a place descriptor whose cells are not rings x sectors");
   PlaceColumns c;
   c.rings = R;
   c.sectors = S;

@@ -38,18 +38,18 @@ struct PlaceRecognitionConfig {
   float lateral_step_m = 2.0f;   // ... and beside it, this far apart
   int lateral_steps = 2;         // on each side
   // Places compared in full, the nearest by ring key; 0: every place. The ring key (the share of
-  // occupied sectors per ring) counts points: one sparse scan fills a third to a half of the bins
-  // the map's accumulated layer does, so the true place's key ranks anywhere (riverside02: beyond
-  // the 300th of 1,480 for 27 of 59 scans, up to the 1,392nd where its full distance ranked first).
+  // occupied sectors per ring) counts points, and one sparse scan fills far fewer bins than the
+  // map's accumulated layer: the true place's key can rank anywhere
+  // (docs/how-defaults-were-chosen.md).
   int shortlist = 0;
   int candidates = 10;           // places handed to registration, best first
   // Each candidate is a prior for the surface layer's wide-prior tracking: a disc of this
   // radius (the query may be a lane or two and half a place spacing away) and this heading
-  // tolerance. The best shift of one sparse scan's bins can be three or four sectors off the
-  // heading its registration settles on (docs/how-defaults-were-chosen.md); the fitness gate,
-  // not the heading, parts true from wrong places.
+  // tolerance. The best shift of one sparse scan's bins can be several sectors off the heading
+  // its registration settles on (docs/how-defaults-were-chosen.md); the fitness gate, not the
+  // heading, parts true from wrong places.
   float prior_radius_m = 8.0f;
-  float heading_tolerance_deg = 20.0f;
+  float heading_tolerance_deg = 30.0f;
   float max_distance = 0.65f;  // candidates farther than this (0 same, 1 unrelated) are not tried
   // The tracking gates for a cold start, in place of the tracker's. One scan holds a few
   // segments, too few to witness a pose (true and false poses alike had 0-11 landing, 0-3
