@@ -42,7 +42,7 @@ struct PlaceRecognitionConfig {
   // map's accumulated layer: the true place's key can rank anywhere
   // (docs/how-defaults-were-chosen.md).
   int shortlist = 0;
-  int candidates = 10;           // places handed to registration, best first
+  int candidates = 10;  // places handed to registration, best first
   // Each candidate is a prior for the surface layer's wide-prior tracking: a disc of this
   // radius (the query may be a lane or two and half a place spacing away) and this heading
   // tolerance. The best shift of one sparse scan's bins can be several sectors off the heading
