@@ -11,6 +11,7 @@
 // with FMA. tests/core/simd_test.cpp checks the two against each other.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 
 #if !defined(SEGMATCH_SIMD)
@@ -120,9 +121,9 @@ inline float get(F4 a, int k) {
 // sum a[i] * b[i] over n floats: four accumulators of four lanes over blocks of 16 (independent
 // adds keep the pipeline full), then blocks of 4 into the first; the 16 lanes added in a fixed
 // order, then the rest in order. The same bits on both backends.
-inline float dot(const float* a, const float* b, size_t n) {
+inline float dot(const float* a, const float* b, std::size_t n) {
   F4 acc0 = zero(), acc1 = zero(), acc2 = zero(), acc3 = zero();
-  size_t i = 0;
+  std::size_t i = 0;
   for (; i + 16 <= n; i += 16) {
     acc0 = acc0 + load(a + i) * load(b + i);
     acc1 = acc1 + load(a + i + 4) * load(b + i + 4);
