@@ -19,6 +19,7 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -74,6 +75,17 @@ struct SegmentsSide {
   }
 };
 
+// The map's places are described in the background after loading (a city's take seconds on
+// one of the two cores); the queries' server times are those of a server past that, so the
+// replay starts when they are ready.
+void wait_for_places(const server::LoadedMap& loaded) {
+  const auto start = std::chrono::steady_clock::now();
+  if (!loaded.localizer->places()) return;
+  std::fprintf(stderr, "places: %zu described in %.1f s (the replay starts after them)\n",
+               loaded.localizer->places()->size(),
+               std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+}
+
 int run_localize(const eval::LocalizationRunConfig& config, const std::string& server, const std::string& token_file,
                  const std::string& out_dir, bool segments, bool track_surfaces, const server::MapLoadOptions& load) {
   eval::LocalizeFn localize;
@@ -84,6 +96,7 @@ int run_localize(const eval::LocalizationRunConfig& config, const std::string& s
   if (server.empty()) {
     loaded = server::load_map(config.map_path, load);
     for (const std::string& w : loaded->warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+    wait_for_places(*loaded);
     if (segments) {
       side.query = std::make_unique<vehicle::SegmentQuery>(server::info_of(*loaded).parameters_json);
       localize = [&](const api::LocalizeRequest& r) {

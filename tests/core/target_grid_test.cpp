@@ -1,6 +1,7 @@
 // Refinement's nearest-neighbour grid (core/src/detail/target_grid.h) against brute force: the
 // nearest point within the bound (ties to the smaller index) and the k nearest, on random
-// clouds, on points sitting on cell boundaries, with and without a hint.
+// clouds, on points sitting on cell boundaries, with and without a hint; every point within a
+// radius; and NearestCache, which must answer as the grid does for points that keep moving.
 #include "detail/target_grid.h"
 
 #include "segmatch/core/detail/random.h"
@@ -13,6 +14,7 @@
 namespace segmatch {
 namespace {
 
+using detail::NearestCache;
 using detail::TargetGrid;
 
 float sq(const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
@@ -76,6 +78,56 @@ TEST(TargetGridOracle, NearestAndKnnEqualBruteForce) {
       expect_grid_equals_brute_force(target, cell, rng,
                                      "seed " + std::to_string(seed) + (boundaries ? ", on boundaries" : ""));
     }
+}
+
+TEST(TargetGridOracle, WithinFindsEveryPointInTheBall) {
+  Rng rng(7);
+  const PointCloud target = random_cloud(rng, 3000, 5.f, 0.5f, true);
+  const TargetGrid grid(target, 0.5f);
+  for (int q = 0; q < 300; ++q) {
+    const Eigen::Vector3f p(float(rng.uniform(-6, 6)), float(rng.uniform(-6, 6)), float(rng.uniform(-1.5, 1.5)));
+    const float r = float(rng.uniform(0.01, 1.2)), r2 = r * r;
+    std::vector<uint32_t> got, want;
+    grid.within(p, r2, &got);
+    for (uint32_t k = 0; k < grid.size(); ++k)
+      if (sq(grid.point(k), p) <= r2) want.push_back(k);
+    std::sort(got.begin(), got.end());
+    ASSERT_EQ(got, want) << "query " << q << ", radius " << r;
+  }
+}
+
+// Source points walking as an ICP's do: steps of centimetres, then millimetres, now and then a
+// jump past the cache's margin; some far from every target point. Every answer must be the
+// grid's (index and distance bits), and the grid's the brute force's (checked above).
+TEST(TargetGridOracle, NearestCacheAnswersAsTheGrid) {
+  for (uint64_t seed = 1; seed <= 3; ++seed) {
+    Rng rng(seed);
+    const PointCloud target = random_cloud(rng, 3000, 5.f, 0.5f, seed == 2);
+    const TargetGrid grid(target, 0.5f);
+    const size_t n = 200;
+    for (const float max_m : {0.5f, 1.5f}) {
+      NearestCache cache(grid, n, max_m, 0.05f);
+      std::vector<Eigen::Vector3f> p(n);
+      for (auto& x : p) x = {float(rng.uniform(-6, 6)), float(rng.uniform(-6, 6)), float(rng.uniform(-1.5, 1.5))};
+      size_t hits = 0;
+      for (int it = 0; it < 30; ++it) {
+        const double step = it < 5 ? 0.03 : it % 10 == 9 ? 0.2 : 0.002;
+        for (size_t i = 0; i < n; ++i) {
+          p[i] += Eigen::Vector3f(float(rng.uniform(-step, step)), float(rng.uniform(-step, step)),
+                                  float(rng.uniform(-step, step)));
+          uint32_t want = 0, got = 0;
+          float want_d = 0.f, got_d = 0.f;
+          const bool found = grid.nearest(p[i], max_m * max_m, detail::FlatHashMap::kMissing, &want, &want_d);
+          ASSERT_EQ(cache.nearest(i, p[i], &got, &got_d), found) << "seed " << seed << ", point " << i;
+          if (!found) continue;
+          ++hits;
+          ASSERT_EQ(got, want) << "seed " << seed << ", iteration " << it << ", point " << i;
+          ASSERT_EQ(got_d, want_d) << "seed " << seed << ", iteration " << it << ", point " << i;
+        }
+      }
+      EXPECT_GT(hits, n * 10) << "most walkers must have neighbours for the test to say anything";
+    }
+  }
 }
 
 }  // namespace

@@ -121,11 +121,23 @@ class TargetGrid {
     for (size_t i = 0; i < n; ++i) out->push_back(best[i].second);
   }
 
- private:
+  // Every point within sqrt(r2) of p, appended to `out` (cell by cell).
+  void within(const Eigen::Vector3f& p, float r2, std::vector<uint32_t>* out) const {
+    search(
+        p, r2, [r2] { return r2; },
+        [&](uint32_t b, uint32_t e) {
+          for (uint32_t k = b; k < e; ++k)
+            if (sq_dist(k, p) <= r2) out->push_back(k);
+        });
+  }
+
+  // The squared distance every query here compares (this order of operations, these bits).
   float sq_dist(uint32_t k, const Eigen::Vector3f& p) const {
     const float dx = x_[k] - p.x(), dy = y_[k] - p.y(), dz = z_[k] - p.z();
     return dx * dx + dy * dy + dz * dz;
   }
+
+ private:
   // sq_dist of points k..k+3: the same operations in the same order, so the same bits.
   simd::F4 sq_dist4(uint32_t k, const Eigen::Vector3f& p) const {
     const simd::F4 dx = simd::load(&x_[k]) - simd::splat(p.x());
@@ -206,6 +218,71 @@ class TargetGrid {
   int filter_bits_ = 6;
   std::vector<uint64_t> filter_;
   std::vector<float> x_, y_, z_;
+};
+
+// TargetGrid::nearest for points that move a little between calls: the refinement's source
+// points, iteration after iteration, move by millimetres once the estimate settles. A point
+// that has begun to settle keeps the target points within r + 2 * margin_m of where it was
+// last searched on the grid (its anchor; r its nearest distance there, or the bound when it had
+// none). While it stays within margin_m of its anchor, its nearest point within the bound is
+// among them (triangle inequality), and those few are scanned instead of the grid's cells. The
+// answers are TargetGrid::nearest's exactly: the same distances, the same tie rule.
+class NearestCache {
+ public:
+  NearestCache(const TargetGrid& grid, size_t points, float max_m, float margin_m)
+      : grid_(grid),
+        max2_(max_m * max_m),
+        max_m_(max_m),
+        margin_m_(margin_m),
+        margin2_(margin_m * margin_m),
+        entries_(points) {}
+
+  // The nearest target point within max_m of p, for point i: as TargetGrid::nearest.
+  bool nearest(size_t i, const Eigen::Vector3f& p, uint32_t* index, float* d2) {
+    Entry& e = entries_[i];
+    if (e.anchored && (p - e.anchor).squaredNorm() <= margin2_) {
+      float best = std::nextafter(max2_, std::numeric_limits<float>::infinity());
+      uint32_t best_k = FlatHashMap::kMissing;
+      for (uint32_t j = e.begin; j < e.end; ++j) {
+        const uint32_t k = pool_[j];
+        const float d = grid_.sq_dist(k, p);
+        if (d < best || (d == best && k < best_k)) best = d, best_k = k;
+      }
+      *index = e.last = best_k;
+      *d2 = best;
+      return best_k != FlatHashMap::kMissing;
+    }
+    const bool found = grid_.nearest(p, max2_, e.last, index, d2);
+    e.last = found ? *index : FlatHashMap::kMissing;
+    // Gathering costs a few nearest searches: only for a point that has begun to settle (moved
+    // at most half the margin since its last call), not while the estimate still travels.
+    const bool settling = e.called && (p - e.previous).squaredNorm() <= 0.25f * margin2_;
+    e.previous = p;
+    e.called = true;
+    e.anchored = false;
+    if (!settling) return found;
+    // 1 mm over the bound absorbs the float rounding of the distances compared.
+    const float reach = std::min(found ? std::sqrt(*d2) + 2.f * margin_m_ : max_m_ + margin_m_, max_m_ + margin_m_);
+    e.anchor = p;
+    e.anchored = true;
+    e.begin = static_cast<uint32_t>(pool_.size());
+    grid_.within(p, (reach + kSlackM) * (reach + kSlackM), &pool_);
+    e.end = static_cast<uint32_t>(pool_.size());
+    return found;
+  }
+
+ private:
+  static constexpr float kSlackM = 1e-3f;
+  struct Entry {
+    Eigen::Vector3f anchor = Eigen::Vector3f::Zero(), previous = Eigen::Vector3f::Zero();
+    uint32_t begin = 0, end = 0;  // its candidates: pool_[begin, end)
+    uint32_t last = FlatHashMap::kMissing;
+    bool anchored = false, called = false;
+  };
+  const TargetGrid& grid_;
+  float max2_, max_m_, margin_m_, margin2_;
+  std::vector<Entry> entries_;
+  std::vector<uint32_t> pool_;
 };
 
 }  // namespace detail

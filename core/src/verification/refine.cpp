@@ -157,6 +157,11 @@ constexpr double kCoarseUntil = 0.001;  // metres (and radians) per iteration
 // (a pose left in the coarse phase moved by up to 2 cm with 0.5 mm changes to its input).
 constexpr int kMaxCoarseIterations = 10;
 
+// How far a source point may move from where its neighbours were gathered before they are
+// gathered again (detail::NearestCache): the estimate moves centimetres in the first iterations
+// and millimetres after, so most associations scan a few cached points instead of the grid.
+constexpr float kCacheMarginM = 0.05f;
+
 // The centroid of the correspondences' query points: where a step is linearised and measured.
 Eigen::Vector3d centroid_of(const std::vector<Correspondence>& corr) {
   Eigen::Vector3d c = Eigen::Vector3d::Zero();
@@ -236,22 +241,22 @@ RefineResult refine_alignment(const PointCloud& query_points, const PointCloud& 
   // Normal neighbourhoods are capped at twice the correspondence distance (a k-d tree had no
   // cap; neighbours that far apart do not describe one surface anyway).
   LazyNormals normals(grid, 2.f * config.max_correspondence_m);
-  const float max_sq = config.max_correspondence_m * config.max_correspondence_m;
   Pose3d T = initial;
   std::vector<Correspondence> corr;
   corr.reserve(source.size());
   double sq_sum = 0.0;
 
   size_t every = source.size() >= 50 * kCoarse ? kCoarse : 1;
-  std::vector<uint32_t> hint(source.size(), detail::FlatHashMap::kMissing);
+  detail::NearestCache nearest(grid, source.size(), config.max_correspondence_m, kCacheMarginM);
   auto associate = [&]() {
     corr.clear();
     sq_sum = 0.0;
     for (size_t i = 0; i < source.size(); i += every) {
       const Eigen::Vector3d p = T * source[i];
+      uint32_t k = 0;
       float sq = 0.f;
-      if (!grid.nearest(p.cast<float>(), max_sq, hint[i], &hint[i], &sq)) continue;
-      corr.push_back({p, grid.point(hint[i]).cast<double>(), hint[i]});
+      if (!nearest.nearest(i, p.cast<float>(), &k, &sq)) continue;
+      corr.push_back({p, grid.point(k).cast<double>(), k});
       sq_sum += sq;
     }
   };

@@ -10,36 +10,38 @@ namespace segmatch {
 CentroidIndex::CentroidIndex(const Segments& segments, float cell_m) : cell_m_(cell_m) {
   if (!(cell_m > 0.f) || !std::isfinite(cell_m))
     throw std::invalid_argument("CentroidIndex: cell_m must be finite and > 0");
+  PointCloud centroids;
+  centroids.reserve(segments.size());
   centroids_.reserve(segments.size());
-  cells_.reserve(segments.size());
-  for (size_t i = 0; i < segments.size(); ++i) {
-    const Eigen::Vector3f& c = segments[i].centroid;
-    centroids_.push_back(c);
-    cells_.emplace(key(static_cast<int>(std::floor(c.x() / cell_m_)), static_cast<int>(std::floor(c.y() / cell_m_)),
-                       static_cast<int>(std::floor(c.z() / cell_m_))),
-                   static_cast<int>(i));
+  for (const Segment& s : segments) {
+    centroids_.push_back(s.centroid);
+    centroids.push_back(Point{s.centroid.x(), s.centroid.y(), s.centroid.z(), 0.f});
   }
-}
-
-uint64_t CentroidIndex::key(int x, int y, int z) const {
-  return detail::pack21(x, y, z);  // +-1e6 cells, far beyond any map
+  grid_ = std::make_shared<const detail::CellGrid>(
+      detail::CellGrid::build(centroids, cell_m, false, "CentroidIndex cell_m", true));
 }
 
 int CentroidIndex::nearest_within(const Eigen::Vector3f& p, float radius_m) const {
-  if (!p.allFinite()) return -1;
-  const int cx = static_cast<int>(std::floor(p.x() / cell_m_));
-  const int cy = static_cast<int>(std::floor(p.y() / cell_m_));
-  const int cz = static_cast<int>(std::floor(p.z() / cell_m_));
-  const int reach = static_cast<int>(std::ceil(radius_m / cell_m_));
+  if (!grid_ || !p.allFinite()) return -1;
+  const detail::CellGrid& g = *grid_;
+  int64_t c[3];
+  for (int a = 0; a < 3; ++a) {
+    const double q = double(p[a]) / g.frame.cell_m;
+    if (!(std::abs(q) < 1e15)) return -1;  // far outside any map
+    c[a] = static_cast<int64_t>(std::floor(q)) - g.frame.base[a];
+  }
+  const int64_t reach = static_cast<int64_t>(std::ceil(radius_m / cell_m_));
   int best = -1;
   float best_sq = radius_m * radius_m;
-  for (int dx = -reach; dx <= reach; ++dx)
-    for (int dy = -reach; dy <= reach; ++dy)
-      for (int dz = -reach; dz <= reach; ++dz) {
-        const auto range = cells_.equal_range(key(cx + dx, cy + dy, cz + dz));
-        for (auto it = range.first; it != range.second; ++it) {
-          const float sq = (centroids_[it->second] - p).squaredNorm();
-          if (sq <= best_sq) best_sq = sq, best = it->second;
+  for (int64_t dx = -reach; dx <= reach; ++dx)
+    for (int64_t dy = -reach; dy <= reach; ++dy)
+      for (int64_t dz = -reach; dz <= reach; ++dz) {
+        const uint32_t cell = g.cell_at(c[0] + dx, c[1] + dy, c[2] + dz);
+        if (cell == detail::FlatHashMap::kMissing) continue;
+        for (uint32_t k = g.begin[cell]; k < g.begin[cell + 1]; ++k) {
+          const uint32_t i = g.order[k];
+          const float sq = (centroids_[i] - p).squaredNorm();
+          if (sq <= best_sq) best_sq = sq, best = static_cast<int>(i);
         }
       }
   return best;

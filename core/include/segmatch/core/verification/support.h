@@ -10,26 +10,32 @@
 #include "segmatch/core/segmentation/segment.h"
 
 #include <cstdint>
-#include <unordered_map>
+#include <memory>
 #include <vector>
 
 namespace segmatch {
 
-// Hash grid over segment centroids for fixed-radius nearest queries.
+namespace detail {
+struct CellGrid;
+}
+
+// Hash grid over segment centroids for fixed-radius nearest queries: the core's one cell grid
+// (detail::CellGrid, cells in a flat hash table), shared by copies.
 class CentroidIndex {
  public:
   CentroidIndex() = default;
   // cell_m: grid cell edge, at least the largest radius later queried.
   CentroidIndex(const Segments& segments, float cell_m);
-  // Index of the segment whose centroid is nearest to p within radius_m, or -1.
+  // Index of the segment whose centroid is nearest to p within radius_m, or -1. Of centroids
+  // at the same distance, the one met last (neighbour cells in a fixed order, a cell's
+  // segments by index).
   int nearest_within(const Eigen::Vector3f& p, float radius_m) const;
   size_t size() const { return centroids_.size(); }
 
  private:
-  uint64_t key(int x, int y, int z) const;
   float cell_m_ = 1.0f;
   std::vector<Eigen::Vector3f> centroids_;
-  std::unordered_multimap<uint64_t, int> cells_;
+  std::shared_ptr<const detail::CellGrid> grid_;
 };
 
 struct Support {
