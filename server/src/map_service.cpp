@@ -50,7 +50,7 @@ PlacesFuture places_of(const storage::MapReader& reader, std::shared_ptr<const M
                  return std::make_shared<const PlaceIndex>(build_place_index(
                      trajectory,
                      [&surfaces](const Eigen::Vector3d& c, double r) {
-                       return crop_cylinder(surfaces->near(c, r), c, r);
+                       return surfaces->near(c, r);
                      },
                      config, stop.get()));
                } catch (const std::exception&) {

@@ -58,8 +58,15 @@ PointCloud LazySurfaces::near(const Eigen::Vector3d& center, double radius_m) co
     std::sort(tiles.begin(), tiles.end());
   }
   const double r2 = radius_m * radius_m;
+  std::vector<Entry> entries;
+  entries.reserve(tiles.size());
+  size_t most = 0;
   for (int64_t key : tiles) {
-    const Entry points = tile(key);
+    entries.push_back(tile(key));
+    most += entries.back()->size();
+  }
+  out.reserve(most);
+  for (const Entry& points : entries) {
     for (const Point& p : *points) {
       const double dx = double(p.x) - cx, dy = double(p.y) - cy;
       if (dx * dx + dy * dy <= r2) out.push_back(p);

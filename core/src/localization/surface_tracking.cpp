@@ -34,7 +34,7 @@ RegistrationResult register_on_layer(const PointCloud& points, const MapSurfaces
   gates.min_fitness = c.min_fitness;
   const float max_rmse_m = std::max(config.max_refine_rmse_voxels * config.segmentation.voxel.leaf_m, c.leaf_m);
   auto registered = [&](const RegistrationConfig& g, double reach_m) {
-    const PointCloud layer = crop_cylinder(surfaces.near(centre, reach_m), centre, reach_m);
+    const PointCloud layer = surfaces.near(centre, reach_m);
     return register_to_map(points, layer, prior.T_map_query, s, prior.radius_m, prior.max_rotation_deg, max_rmse_m, g,
                            config.refine, config.covariance);
   };
@@ -99,7 +99,7 @@ bool track_over_wide_prior(const PointCloud& points, const Segments& targets, co
   const CorrelativeSearchConfig& search = config.search;
   const Eigen::Vector3d centre = prior.T_map_query * s;
   const double reach_m = config.track.window_m + prior.radius_m + kWindowMarginM;
-  const PointCloud layer = crop_cylinder(surfaces.near(centre, reach_m), centre, reach_m);
+  const PointCloud layer = surfaces.near(centre, reach_m);
   const PointCloud map_objects = remove_ground(layer, config.segmentation.ground, centre.cast<float>());
   const PointCloud query_objects = remove_ground(points, config.segmentation.ground, s.cast<float>());
   const std::vector<SearchCandidate> peaks =

@@ -234,9 +234,10 @@ class TargetPoints {
 class MapSurfaces {
  public:
   virtual ~MapSurfaces() = default;
-  // The layer's points (map frame) within radius_m of center horizontally (more may come: the
-  // caller crops). Called from many queries at once; throws (naming the tile) when they cannot
-  // be read.
+  // Exactly the layer's points (map frame) within radius_m of center horizontally, as
+  // crop_cylinder keeps them ((x - cx)^2 + (y - cy)^2 <= r^2 in double): callers do not crop
+  // again (the layer near a query is 1-2 MB, copied once). Called from many queries at once;
+  // throws (naming the tile) when they cannot be read.
   virtual PointCloud near(const Eigen::Vector3d& center, double radius_m) const = 0;
 };
 
