@@ -39,6 +39,9 @@ TEST(CentroidIndex, NearestWithinEqualsBruteForce) {
     ASSERT_EQ(index.nearest_within(p, 1.0f), expected) << "query " << k;
   }
   EXPECT_EQ(index.nearest_within(Eigen::Vector3f(NAN, 0, 0), 1.0f), -1);
+  EXPECT_EQ(index.nearest_within(Eigen::Vector3f(1e30f, 0, 0), 1.0f), -1);  // far beyond the grid's cells
+  EXPECT_EQ(CentroidIndex().nearest_within(Eigen::Vector3f::Zero(), 1.0f), -1);
+  EXPECT_EQ(CentroidIndex(Segments{}, 1.0f).nearest_within(Eigen::Vector3f::Zero(), 1.0f), -1);
 }
 
 // A street with a pole every 6 m and a few distinct objects (a kiosk, a bus stop, cars).
