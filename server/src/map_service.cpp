@@ -48,10 +48,7 @@ PlacesFuture places_of(const storage::MapReader& reader, std::shared_ptr<const M
              [trajectory = std::move(trajectory), surfaces, config, stop]() -> std::shared_ptr<const PlaceIndex> {
                try {
                  return std::make_shared<const PlaceIndex>(build_place_index(
-                     trajectory,
-                     [&surfaces](const Eigen::Vector3d& c, double r) {
-                       return surfaces->near(c, r);
-                     },
+                     trajectory, [&surfaces](const Eigen::Vector3d& c, double r) { return surfaces->near(c, r); },
                      config, stop.get()));
                } catch (const std::exception&) {
                  return nullptr;

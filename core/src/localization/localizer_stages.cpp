@@ -354,8 +354,7 @@ void refine_to_newest(const PointCloud& newest, const Segments& targets, const T
   }
   const Eigen::Vector3d centre = r.T_map_query * s;
   const double reach = c.window_m + kWindowMarginM;
-  const PointCloud map = surfaces ? surfaces->near(centre, reach)
-                                  : map_points_near(targets, source, centre, reach);
+  const PointCloud map = surfaces ? surfaces->near(centre, reach) : map_points_near(targets, source, centre, reach);
   RegistrationConfig settle = config.registration;  // one stage at the fine distance: the start is an answer
   settle.window_m = c.window_m;
   settle.coarse_correspondence_m = config.refine.max_correspondence_m;
