@@ -7,7 +7,7 @@
 
 namespace segmatch {
 
-CentroidIndex::CentroidIndex(const Segments& segments, float cell_m) : cell_m_(cell_m) {
+CentroidIndex::CentroidIndex(const Segments& segments, float cell_m) {
   if (!(cell_m > 0.f) || !std::isfinite(cell_m))
     throw std::invalid_argument("CentroidIndex: cell_m must be finite and > 0");
   PointCloud centroids;
@@ -26,11 +26,10 @@ int CentroidIndex::nearest_within(const Eigen::Vector3f& p, float radius_m) cons
   const detail::CellGrid& g = *grid_;
   int64_t c[3];
   for (int a = 0; a < 3; ++a) {
-    const double q = double(p[a]) / g.frame.cell_m;
-    if (!(std::abs(q) < 1e15)) return -1;  // far outside any map
-    c[a] = static_cast<int64_t>(std::floor(q)) - g.frame.base[a];
+    if (!(std::abs(double(p[a]) / g.frame.cell_m) < 1e15)) return -1;  // far outside any map
+    c[a] = g.frame.coord(p[a], a);
   }
-  const int64_t reach = static_cast<int64_t>(std::ceil(radius_m / cell_m_));
+  const int64_t reach = static_cast<int64_t>(std::ceil(radius_m / g.frame.cell_m));
   int best = -1;
   float best_sq = radius_m * radius_m;
   for (int64_t dx = -reach; dx <= reach; ++dx)

@@ -33,7 +33,6 @@ class CentroidIndex {
   size_t size() const { return centroids_.size(); }
 
  private:
-  float cell_m_ = 1.0f;
   std::vector<Eigen::Vector3f> centroids_;
   std::shared_ptr<const detail::CellGrid> grid_;
 };
